@@ -1,0 +1,118 @@
+//! The animated avatar: turns commands (blink, gaze, visemes, mood) into a face pose every animation frame.
+
+import { trackCanvasSize } from "../panels/hidpi-canvas.js";
+import { drawFace, restPose } from "./face.js";
+import { BlinkController } from "./blink.js";
+import { GazeController } from "./gaze.js";
+import { expression } from "./moods.js";
+import { mouthShape } from "./visemes.js";
+import { VisemeTrack } from "./viseme-track.js";
+
+const MOOD_TAU_MS = 160;
+const MOUTH_TAU_MS = 30; // co-articulation: shapes blend instead of snapping
+
+export class Avatar {
+  /** `audioClock()` returns the speech player's clock in seconds (the time visemes are scheduled on). */
+  constructor(canvas, audioClock) {
+    this.canvas = canvas;
+    this.ctx = canvas.getContext("2d");
+    this.audioClock = audioClock;
+    this.blinks = new BlinkController();
+    this.gaze = new GazeController();
+    this.track = new VisemeTrack();
+    this.pose = restPose();
+    this.moodName = "neutral";
+    this.moodTarget = expression("neutral");
+    this.mood = { ...this.moodTarget };
+    this.viseme = "sil";
+    this.last = performance.now();
+    this.size = { w: 0, h: 0 };
+    trackCanvasSize(canvas, this.ctx, (w, h) => {
+      this.size = { w, h };
+    });
+    this.frame = this.frame.bind(this);
+    requestAnimationFrame(this.frame);
+  }
+
+  blink(phases, fromServer = true) {
+    this.blinks.blink(performance.now(), phases, fromServer);
+  }
+
+  lookAt(x, y) {
+    this.gaze.look(performance.now(), x, y);
+  }
+
+  setMood(name, intensity = 1) {
+    this.moodName = name;
+    this.moodTarget = expression(name, intensity);
+  }
+
+  /** Schedules viseme `items` of `utterance` whose sample 0 plays at audio time `startS`. */
+  scheduleVisemes(utterance, startS, items) {
+    this.track.add(utterance, startS, items);
+  }
+
+  stopSpeech(utterance) {
+    this.track.clear(utterance);
+  }
+
+  frame(now) {
+    const dt = Math.min(100, Math.max(0, now - this.last));
+    this.last = now;
+    this.step(now, dt);
+    if (this.size.w > 0) drawFace(this.ctx, this.size.w, this.size.h, this.pose);
+    requestAnimationFrame(this.frame);
+  }
+
+  step(now, dt) {
+    const p = this.pose;
+    const km = 1 - Math.exp(-dt / MOOD_TAU_MS);
+    for (const k of Object.keys(this.mood)) {
+      this.mood[k] += (this.moodTarget[k] - this.mood[k]) * km;
+    }
+    const g = this.gaze.update(now, dt);
+    p.eyeX = g.eyeX;
+    p.eyeY = g.eyeY;
+    p.yaw = g.yaw;
+    p.pitch = g.pitch * 0.6;
+    p.roll = this.mood.roll + g.yaw * -0.02;
+    p.breath = Math.sin(now / 900);
+
+    const blink = this.blinks.update(now);
+    // Looking down lowers the upper lid a little; a squint narrows the eye.
+    const lidBase = Math.max(0.1, Math.min(1.08, 1 - this.mood.squint - Math.max(0, g.eyeY) * 0.15));
+    p.lid = blink * lidBase;
+
+    p.browRaise = this.mood.browRaise;
+    p.browInner = this.mood.browInner;
+    p.smile = this.mood.smile;
+    p.blush = this.mood.blush;
+
+    this.viseme = this.track.at(this.audioClock());
+    const shape = mouthShape(this.viseme);
+    const kv = 1 - Math.exp(-dt / MOUTH_TAU_MS);
+    const jawWanted = Math.min(1, shape.jaw + (this.viseme === "sil" ? this.mood.jaw : 0));
+    p.jaw += (jawWanted - p.jaw) * kv;
+    p.mouthWidth += (shape.mouthWidth - p.mouthWidth) * kv;
+    p.round += (shape.round - p.round) * kv;
+    p.teeth += (shape.teeth - p.teeth) * kv;
+    p.tongue += (shape.tongue - p.tongue) * kv;
+    p.lipPress += (shape.lipPress - p.lipPress) * kv;
+  }
+
+  /** A snapshot for `window.agentDebug`. */
+  debugState() {
+    return {
+      eyelid: this.pose.lid,
+      blinks: this.blinks.completed,
+      blinkOwner: this.blinks.owner,
+      gaze: { ...this.gaze.target },
+      gazeCommands: this.gaze.commands,
+      eyeOffset: { x: this.gaze.eye.x, y: this.gaze.eye.y },
+      head: { yaw: this.pose.yaw, pitch: this.pose.pitch },
+      mood: this.moodName,
+      viseme: this.viseme,
+      jaw: this.pose.jaw,
+    };
+  }
+}

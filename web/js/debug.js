@@ -1,0 +1,36 @@
+//! `window.agentDebug`: a read-only view of the page's state for end-to-end tests and for debugging by hand.
+
+export function installDebugHook({ avatar, link, page, camera, mic, spectrum, overlay, rules, speech }) {
+  const hook = {};
+  const define = (name, get) => Object.defineProperty(hook, name, { get, enumerable: true });
+  define("eyelid", () => avatar.debugState().eyelid);
+  define("blinks", () => avatar.debugState().blinks);
+  define("blinkOwner", () => avatar.debugState().blinkOwner);
+  define("gaze", () => avatar.debugState().gaze);
+  define("gazeCommands", () => avatar.debugState().gazeCommands);
+  define("eyeOffset", () => avatar.debugState().eyeOffset);
+  define("head", () => avatar.debugState().head);
+  define("mood", () => avatar.debugState().mood);
+  define("viseme", () => avatar.debugState().viseme);
+  define("role", () => page.role);
+  define("connection", () => link.state);
+  define("sent", () => ({ ...page.sent }));
+  define("received", () => ({ ...link.received }));
+  define("videoFps", () => camera.fps);
+  define("cameraSkipped", () => camera.skipped);
+  define("micRunning", () => mic.running);
+  define("cameraRunning", () => camera.running);
+  define("micLevelDb", () => mic.levelDb);
+  define("spectrumFrames", () => spectrum.frames);
+  define("spectrumPeakHz", () => spectrum.peakHz);
+  define("detections", () => overlay.count);
+  define("rules", () => rules.count);
+  define("speechChunks", () => speech.chunks);
+  define("lastError", () => page.lastError);
+  define("snapshot", () => {
+    const out = {};
+    for (const k of Object.keys(hook)) if (k !== "snapshot") out[k] = hook[k];
+    return out;
+  });
+  Object.defineProperty(window, "agentDebug", { value: Object.freeze(hook), configurable: false });
+}

@@ -1,0 +1,277 @@
+//! Boots the page: connects the link, builds the avatar and panels, and runs the microphone/camera role.
+
+import { Avatar } from "./avatar/avatar.js";
+import { decodeSpeech, KIND } from "./link/frames.js";
+import { Link, SEND_BACKLOG_LIMIT } from "./link/link.js";
+import { audioClock } from "./media/audio-context.js";
+import { Camera } from "./media/camera.js";
+import { Microphone } from "./media/microphone.js";
+import { SpeechPlayer } from "./media/speech.js";
+import { Overlay } from "./panels/overlay.js";
+import { RuleTrace } from "./panels/rules.js";
+import { Spectrum } from "./panels/spectrum.js";
+import { StatusStrip } from "./panels/status.js";
+import { installDebugHook } from "./debug.js";
+
+const params = new URLSearchParams(location.search);
+const autostart = params.get("autostart") === "1";
+const $ = (id) => document.getElementById(id);
+
+const link = new Link({ autostart });
+const avatar = new Avatar($("avatar"), audioClock);
+const overlay = new Overlay($("overlay"));
+const spectrum = new Spectrum($("spectrum"));
+const rules = new RuleTrace($("rules"), $("rules-meta"));
+const strip = new StatusStrip(document);
+
+const pendingVisemes = new Map(); // utterance -> items waiting for their audio
+const speech = new SpeechPlayer((utterance, startS) => {
+  const items = pendingVisemes.get(utterance);
+  if (items) {
+    pendingVisemes.delete(utterance);
+    avatar.scheduleVisemes(utterance, startS, items);
+  }
+});
+
+const page = {
+  role: "none", // none | pending | holder | busy
+  wantMic: false,
+  wantCam: false,
+  sent: { audio: 0, video: 0 },
+  serverDrops: 0,
+  lastError: null,
+  videoFps: 15,
+};
+
+const mic = new Microphone(
+  (pcm) => {
+    if (page.role === "holder" && link.sendMedia(KIND.AUDIO, pcm)) page.sent.audio += 1;
+  },
+  { echoCancellation: params.get("aec") !== "0" },
+);
+const camera = new Camera(
+  $("camera"),
+  (jpeg) => {
+    if (page.role === "holder" && link.sendMedia(KIND.VIDEO, jpeg)) page.sent.video += 1;
+  },
+  () => link.backlog < SEND_BACKLOG_LIMIT,
+);
+
+// ---- user controls -------------------------------------------------------------------------------------------
+
+$("mic-btn").addEventListener("click", () => toggle("mic"));
+$("cam-btn").addEventListener("click", () => toggle("cam"));
+
+function toggle(which) {
+  clearNotice();
+  if (which === "mic") page.wantMic = !page.wantMic;
+  else page.wantCam = !page.wantCam;
+  if (which === "mic" && !page.wantMic) mic.stop();
+  if (which === "cam" && !page.wantCam) camera.stop();
+  syncRole();
+  refreshButtons();
+}
+
+/** Claims the role when the page wants media, releases it when it wants none, starts what the role allows. */
+function syncRole() {
+  const wants = page.wantMic || page.wantCam;
+  if (wants && page.role === "none" && link.isOpen) {
+    page.role = "pending";
+    link.sendJson({ type: "claim" });
+  } else if (!wants && (page.role === "holder" || page.role === "pending" || page.role === "busy")) {
+    page.role = "none";
+    link.sendJson({ type: "release" });
+    showBanner(null);
+  }
+  if (page.role === "holder") startWanted();
+  else reportMedia();
+}
+
+async function startWanted() {
+  const tasks = [];
+  if (page.wantMic && !mic.running) tasks.push(startDevice(mic, "mic"));
+  if (page.wantCam && !camera.running) tasks.push(startDevice(camera, "cam"));
+  await Promise.all(tasks);
+  reportMedia();
+  refreshButtons();
+  // Both devices failed: give the role back so someone else can talk to the agent.
+  if (!page.wantMic && !page.wantCam) syncRole();
+}
+
+async function startDevice(device, which) {
+  try {
+    await device.start();
+  } catch (err) {
+    if (which === "mic") page.wantMic = false;
+    else page.wantCam = false;
+    showNotice(err.message);
+  }
+}
+
+let reported = { audio: null, video: null };
+function reportMedia() {
+  const now = { audio: page.role === "holder" && mic.running, video: page.role === "holder" && camera.running };
+  if (now.audio !== reported.audio || now.video !== reported.video) {
+    if (link.sendJson({ type: "media", ...now })) reported = now;
+  }
+  $("cam-meta").textContent = camera.running ? `${camera.fps} fps` : "off";
+  $("preview-empty").hidden = camera.running;
+}
+
+function refreshButtons() {
+  const set = (id, on, what) => {
+    const b = $(id);
+    b.dataset.on = String(on);
+    b.querySelector(".btn-label").textContent = `${on ? "Stop" : "Start"} ${what}`;
+  };
+  set("mic-btn", page.wantMic, "microphone");
+  set("cam-btn", page.wantCam, "camera");
+}
+
+// ---- link events ---------------------------------------------------------------------------------------------
+
+link.addEventListener("state", (ev) => {
+  if (ev.detail.state !== "open") {
+    page.role = "none";
+    reported = { audio: null, video: null };
+  }
+});
+
+link.addEventListener("welcome", (ev) => {
+  spectrum.configure(ev.detail.fft);
+  if (autostart) {
+    page.wantMic = true;
+    page.wantCam = true;
+    refreshButtons();
+  }
+  syncRole();
+});
+
+link.addEventListener("role", (ev) => {
+  const state = ev.detail.state;
+  if (state === "granted") {
+    page.role = "holder";
+    showBanner(null);
+    startWanted();
+  } else if (state === "busy") {
+    page.role = "busy";
+    showBanner("Someone else is talking to the agent. You will take over when they leave.");
+    mic.stop();
+    camera.stop();
+    reportMedia();
+  } else if (state === "free" || state === "released") {
+    if (page.role !== "none") page.role = "none";
+    showBanner(null);
+    syncRole();
+  }
+});
+
+link.addEventListener("avatar", (ev) => handleAvatar(ev.detail.data));
+link.addEventListener("detections", (ev) => overlay.show(ev.detail.data));
+link.addEventListener("rules", (ev) => rules.add(ev.detail.data));
+link.addEventListener("spectrum", (ev) => spectrum.push(ev.detail.body));
+link.addEventListener("speech", (ev) => {
+  const s = decodeSpeech(ev.detail.body);
+  if (s) speech.play(s.utterance, s.offset, s.pcm);
+});
+link.addEventListener("status", (ev) => {
+  const st = ev.detail;
+  const d = st.dropped ?? {};
+  page.serverDrops = (d.video_queue ?? 0) + (d.to_page ?? 0);
+  const fps = st.advice?.video_fps;
+  if (Number.isFinite(fps)) {
+    page.videoFps = fps;
+    camera.setFps(fps);
+  }
+});
+link.addEventListener("error", (ev) => {
+  page.lastError = ev.detail.message ?? ev.detail.code ?? "error";
+  console.warn("link:", page.lastError);
+});
+
+function handleAvatar(cmd) {
+  if (!cmd || typeof cmd.cmd !== "string") return;
+  switch (cmd.cmd) {
+    case "blink":
+      avatar.blink(cmd, true);
+      break;
+    case "gaze":
+      if (Number.isFinite(cmd.x) && Number.isFinite(cmd.y)) avatar.lookAt(cmd.x, cmd.y);
+      break;
+    case "mood":
+      avatar.setMood(String(cmd.mood ?? "neutral"), Number.isFinite(cmd.intensity) ? cmd.intensity : 1);
+      break;
+    case "visemes": {
+      const utterance = Number.isInteger(cmd.utterance) ? cmd.utterance : 0;
+      const items = Array.isArray(cmd.items) ? cmd.items : [];
+      const anchor = speech.anchorOf(utterance);
+      if (anchor !== undefined && (utterance !== 0 || speech.speaking)) avatar.scheduleVisemes(utterance, anchor, items);
+      else pendingVisemes.set(utterance, items);
+      break;
+    }
+    case "speech_stop":
+      speech.stop();
+      avatar.stopSpeech();
+      pendingVisemes.clear();
+      showCaption(null);
+      break;
+    case "say":
+      showCaption(typeof cmd.text === "string" ? cmd.text : null);
+      break;
+    default:
+      console.info("avatar: unknown command", cmd.cmd);
+  }
+}
+
+// ---- notices, banner, caption --------------------------------------------------------------------------------
+
+function showNotice(text) {
+  page.lastError = text;
+  $("notice").textContent = text;
+  $("notice").hidden = false;
+}
+
+function clearNotice() {
+  $("notice").hidden = true;
+}
+
+function showBanner(text) {
+  $("role-banner").hidden = !text;
+  $("role-banner").textContent = text ?? "";
+}
+
+let captionTimer = null;
+function showCaption(text) {
+  clearTimeout(captionTimer);
+  $("caption").hidden = !text;
+  $("caption").textContent = text ?? "";
+  if (text) {
+    const hideWhenQuiet = () => {
+      captionTimer = setTimeout(() => (speech.speaking ? hideWhenQuiet() : showCaption(null)), 1500);
+    };
+    hideWhenQuiet();
+  }
+}
+
+// ---- status strip --------------------------------------------------------------------------------------------
+
+setInterval(() => {
+  strip.update(
+    {
+      connection: link.state,
+      role: page.role,
+      sentVideo: page.sent.video,
+      sentAudio: page.sent.audio,
+      received: link.receivedTotal,
+      levelDb: mic.levelDb,
+      drops: page.serverDrops + camera.skipped,
+      rttMs: link.rttMs,
+    },
+    performance.now(),
+  );
+  reportMedia();
+}, 500);
+
+installDebugHook({ avatar, link, page, camera, mic, spectrum, overlay, rules, speech });
+refreshButtons();
+link.start();

@@ -1,0 +1,108 @@
+//! The detection overlay on the camera preview: boxes, polygons and points with labels, in frame coordinates.
+//
+// Detections arrive in the camera frame's pixels (640x360); the preview is mirrored (like a mirror, so moving
+// right moves right on screen) and scaled to the card's size, so each point is mapped through the same transform.
+
+import { trackCanvasSize } from "./hidpi-canvas.js";
+
+const FADE_MS = 500;
+const COLOURS = { face: "#5fd4c4", motion: "#f2b86b", motion_centre: "#f2b86b", code: "#7aa2ff" };
+
+export class Overlay {
+  constructor(canvas) {
+    this.canvas = canvas;
+    this.ctx = canvas.getContext("2d");
+    this.last = null;
+    this.lastAt = 0;
+    this.count = 0;
+    this.w = 0;
+    this.h = 0;
+    trackCanvasSize(canvas, this.ctx, (w, h) => {
+      this.w = w;
+      this.h = h;
+    });
+    this.draw = this.draw.bind(this);
+    requestAnimationFrame(this.draw);
+  }
+
+  show(data) {
+    if (!data || !Array.isArray(data.items)) return;
+    this.last = data;
+    this.lastAt = performance.now();
+    this.count += 1;
+  }
+
+  draw(now) {
+    requestAnimationFrame(this.draw);
+    const ctx = this.ctx;
+    ctx.clearRect(0, 0, this.w, this.h);
+    if (!this.last) return;
+    const age = now - this.lastAt;
+    if (age > FADE_MS * 2) return;
+    ctx.globalAlpha = age < FADE_MS ? 1 : 1 - (age - FADE_MS) / FADE_MS;
+    const fw = this.last.frame?.width || 640;
+    const fh = this.last.frame?.height || 360;
+    // object-fit: cover, mirrored horizontally.
+    const s = Math.max(this.w / fw, this.h / fh);
+    const ox = (this.w - fw * s) / 2;
+    const oy = (this.h - fh * s) / 2;
+    const map = (x, y) => [this.w - (ox + x * s), oy + y * s];
+    ctx.lineWidth = 2;
+    ctx.font = "600 12px Inter, Segoe UI, Arial, sans-serif";
+    for (const item of this.last.items) {
+      const colour = COLOURS[item.kind] ?? "#e6e6e6";
+      ctx.strokeStyle = colour;
+      ctx.fillStyle = colour;
+      let labelAt = null;
+      if (Array.isArray(item.box) && item.box.length === 4) {
+        const [x, y, w, h] = item.box.map(Number);
+        const [ax, ay] = map(x, y);
+        const [bx, by] = map(x + w, y + h);
+        const left = Math.min(ax, bx);
+        roundRect(ctx, left, ay, Math.abs(bx - ax), by - ay, 6);
+        ctx.stroke();
+        labelAt = [left, ay];
+      } else if (Array.isArray(item.polygon) && item.polygon.length >= 2) {
+        ctx.beginPath();
+        item.polygon.forEach(([x, y], i) => {
+          const [px, py] = map(Number(x), Number(y));
+          if (i === 0) ctx.moveTo(px, py);
+          else ctx.lineTo(px, py);
+        });
+        ctx.closePath();
+        ctx.stroke();
+        const pts = item.polygon.map(([x, y]) => map(Number(x), Number(y)));
+        labelAt = [Math.min(...pts.map((p) => p[0])), Math.min(...pts.map((p) => p[1]))];
+      } else if (Array.isArray(item.point) && item.point.length === 2) {
+        const [px, py] = map(Number(item.point[0]), Number(item.point[1]));
+        ctx.beginPath();
+        ctx.arc(px, py, 6, 0, Math.PI * 2);
+        ctx.stroke();
+        ctx.beginPath();
+        ctx.moveTo(px - 11, py);
+        ctx.lineTo(px + 11, py);
+        ctx.moveTo(px, py - 11);
+        ctx.lineTo(px, py + 11);
+        ctx.stroke();
+        labelAt = [px + 8, py - 8];
+      }
+      if (labelAt && item.label) label(ctx, String(item.label), labelAt[0], labelAt[1], colour);
+    }
+    ctx.globalAlpha = 1;
+  }
+}
+
+function roundRect(ctx, x, y, w, h, r) {
+  ctx.beginPath();
+  ctx.roundRect(x, y, w, h, Math.min(r, Math.abs(w) / 2, Math.abs(h) / 2));
+}
+
+function label(ctx, text, x, y, colour) {
+  const shown = text.length > 40 ? `${text.slice(0, 39)}…` : text;
+  const w = ctx.measureText(shown).width + 10;
+  const top = Math.max(0, y - 18);
+  ctx.fillStyle = "rgba(8, 12, 18, 0.78)";
+  ctx.fillRect(x, top, w, 17);
+  ctx.fillStyle = colour;
+  ctx.fillText(shown, x + 5, top + 13);
+}
