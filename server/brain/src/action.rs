@@ -1,0 +1,70 @@
+//! What the engine asks the host to do: plain action values, and the effects that start, stop or fire them.
+
+use std::fmt;
+
+use serde::Serialize;
+
+use crate::value::{Quoted, Value};
+
+/// An instantiated action; the engine performs no I/O, the host executes these.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "action", rename_all = "lowercase")]
+pub enum Action {
+    /// Speak the text (through the TTS module).
+    Say { text: String },
+    /// Publish a JSON payload on a stream channel.
+    Publish { channel: String, payload: Value },
+    /// Call a service channel; the host asserts `reply(service, text)` or `failed(service, reason)` when it ends.
+    Call { service: String, payload: Value },
+    /// Run a whitelisted command by name; the host asserts `output(command, text)` or `failed(command, reason)`.
+    Run { command: String },
+    /// Set a pair-database value.
+    Set { key: String, value: Value },
+    /// Stop what the agent is saying (and any speech queued).
+    Cancel,
+}
+
+impl fmt::Display for Action {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Action::Say { text } => write!(f, "say({text:?})"),
+            Action::Publish { channel, payload } => {
+                write!(f, "publish({channel:?}, {})", Quoted(payload))
+            }
+            Action::Call { service, payload } => {
+                write!(f, "call({service:?}, {})", Quoted(payload))
+            }
+            Action::Run { command } => write!(f, "run({command:?})"),
+            Action::Set { key, value } => write!(f, "set({key:?}, {})", Quoted(value)),
+            Action::Cancel => f.write_str("cancel"),
+        }
+    }
+}
+
+/// A change the host must make: start a durative action when its rule becomes active, stop it when the rule
+/// stops being active, or fire a discrete action once on entry.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "effect", content = "do", rename_all = "lowercase")]
+pub enum Effect {
+    Start(Action),
+    Stop(Action),
+    Fire(Action),
+}
+
+impl Effect {
+    pub fn action(&self) -> &Action {
+        match self {
+            Effect::Start(action) | Effect::Stop(action) | Effect::Fire(action) => action,
+        }
+    }
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Effect::Start(action) => write!(f, "start {action}"),
+            Effect::Stop(action) => write!(f, "stop {action}"),
+            Effect::Fire(action) => write!(f, "fire {action}"),
+        }
+    }
+}
