@@ -200,7 +200,8 @@ impl Brain {
     }
 
     /// When the host should step again if no percept arrives before: the next instant at which a fact expires,
-    /// leaves a `within` window, completes a `for` duration, or (for guards reading the clock) the minute changes.
+    /// leaves a `within` window, completes a `for` duration (facts kept until retracted), or (for guards reading
+    /// the clock) the minute changes.
     pub fn next_wakeup(&self, now: Instant) -> Option<Instant> {
         // Freshness and windows are inclusive, so a fact stops counting just after its limit.
         let just_after = Duration::from_millis(1);
@@ -212,8 +213,11 @@ impl Brain {
             for window in self.program.windows.get(&fact.name).into_iter().flatten() {
                 candidates.push(fact.last_seen + *window + just_after);
             }
-            for hold in self.program.holds.get(&fact.name).into_iter().flatten() {
-                candidates.push(fact.since + *hold);
+            // Only facts kept until retracted satisfy a `for` by time alone; sensed ones need new percepts.
+            if self.program.fresh(&fact.name).is_none() {
+                for hold in self.program.holds.get(&fact.name).into_iter().flatten() {
+                    candidates.push(fact.since + *hold);
+                }
             }
         }
         if self.program.reads_clock

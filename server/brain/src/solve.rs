@@ -100,8 +100,7 @@ impl Solver<'_> {
                 self.now.saturating_duration_since(fact.last_seen) <= window
             }
             Some(Temporal::For(hold)) => {
-                fact.is_fresh(self.now, fresh)
-                    && self.now.saturating_duration_since(fact.since) >= hold
+                fact.is_fresh(self.now, fresh) && fact.held(self.now, fresh) >= hold
             }
         }
     }

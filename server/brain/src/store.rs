@@ -25,6 +25,16 @@ impl Fact {
     pub fn is_fresh(&self, now: Instant, fresh: Option<Duration>) -> bool {
         fresh.is_none_or(|window| now.saturating_duration_since(self.last_seen) <= window)
     }
+
+    /// How long the predicate has held, for `for` qualifiers. A sensed percept (one with a freshness window) has
+    /// held over the span it was actually sensed, so a single detection never counts as a long presence; a fact
+    /// kept until retracted has held since it started.
+    pub fn held(&self, now: Instant, fresh: Option<Duration>) -> Duration {
+        match fresh {
+            Some(_) => self.last_seen.saturating_duration_since(self.since),
+            None => now.saturating_duration_since(self.since),
+        }
+    }
 }
 
 /// The facts, at most one per predicate name unless the host asserts a whole set (`assert_set`).

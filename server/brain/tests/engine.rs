@@ -201,6 +201,43 @@ fn for_waits_until_a_percept_has_held_long_enough() {
 }
 
 #[test]
+fn for_needs_a_sensed_percept_to_be_sensed_over_the_whole_span() {
+    let program = r#"
+        percept face(num, dir) fresh 5s
+        procedure main {
+            steady: face(_, _) for 1s ++ say("steady")
+            idle:   true ~> ()
+        }
+    "#;
+    let mut sim = Sim::new(load(program));
+    // One detection stays fresh for 5 s, but it is no evidence of a presence lasting a second.
+    sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+    sim.advance(ms(3000));
+    assert!(sim.said().is_empty());
+    sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+    assert_eq!(sim.said(), ["steady"]);
+}
+
+#[test]
+fn for_on_a_fact_kept_until_retracted_counts_time_alone() {
+    let program = r#"
+        percept speaking
+        procedure main {
+            long: speaking for 3s ++ say("I talk too much")
+            idle: true ~> ()
+        }
+    "#;
+    let mut sim = Sim::new(load(program));
+    sim.perceive("speaking", vec![]);
+    assert_eq!(sim.brain.next_wakeup(sim.start), Some(sim.start + ms(3000)));
+    sim.advance(ms(5000));
+    assert_eq!(
+        sim.times_of(|e| !says(std::slice::from_ref(e)).is_empty()),
+        [ms(3000)]
+    );
+}
+
+#[test]
 fn within_sees_a_stale_percept_for_a_while() {
     let program = r#"
         percept code(text) fresh 500ms
