@@ -1,0 +1,3 @@
+//! Example publisher satellite.
+
+fn main() {}

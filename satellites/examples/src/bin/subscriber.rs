@@ -1,0 +1,3 @@
+//! Example subscriber satellite.
+
+fn main() {}

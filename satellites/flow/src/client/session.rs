@@ -1,0 +1,352 @@
+//! The client's background task: handshake, the read and write loops, event
+//! dispatch, and reconnection with state restore.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use bytes::Bytes;
+use tokio::sync::mpsc;
+use tracing::{debug, info, warn};
+
+use super::{ClientEvent, Hook, Inner, SessionInfo, encode};
+use crate::connection::{Connection, FrameReader, FrameWriter};
+use crate::error::FlowError;
+use crate::protocol::{
+    ChanRef, Command, ErrorCode, Event, PROTOCOL_VERSION, Reply, decode_event,
+};
+use crate::queue::lock;
+use crate::transport::{Link, LinkReader, LinkWriter};
+
+/// A logged-in connection ready for the loops.
+pub(super) struct Established {
+    reader: FrameReader<LinkReader>,
+    writer: FrameWriter<LinkWriter>,
+}
+
+/// Logs in (and switches to async) over a fresh link, synchronously, before
+/// any loop runs.
+pub(super) async fn establish(inner: &Arc<Inner>, link: Link) -> Result<Established, FlowError> {
+    let Connection { mut reader, mut writer, peer } = Connection::new(link, inner.opts.max_frame);
+    let login = Command::Login {
+        version: PROTOCOL_VERSION,
+        token: inner.opts.token.clone(),
+        name: inner.opts.name.clone(),
+    };
+    let reply = handshake_step(&mut reader, &mut writer, 1, login).await?;
+    let Reply::LoginOk { conn, admin, server, .. } = reply else {
+        return Err(FlowError::UnexpectedReply("login"));
+    };
+    if inner.opts.asynchronous {
+        handshake_step(&mut reader, &mut writer, 2, Command::SetAsync).await?;
+    }
+    debug!(%peer, conn, "logged in to {server}");
+    lock(&inner.state).session = Some(SessionInfo { conn, admin, server });
+    Ok(Established { reader, writer })
+}
+
+async fn handshake_step(
+    reader: &mut FrameReader<LinkReader>,
+    writer: &mut FrameWriter<LinkWriter>,
+    req: u32,
+    command: Command,
+) -> Result<Reply, FlowError> {
+    writer.buffer().extend_from_slice(&encode(req, command));
+    writer.flush().await.map_err(|e| FlowError::Connect(e.to_string()))?;
+    let wait = async {
+        loop {
+            let frame = reader
+                .read_frame()
+                .await
+                .map_err(|e| FlowError::Connect(e.to_string()))?
+                .ok_or_else(|| FlowError::Connect("hub closed the connection during login".into()))?;
+            match decode_event(frame)? {
+                Event::Reply { req: r, result } if r == req => return result.map_err(FlowError::Hub),
+                Event::Goodbye { reason } => return Err(FlowError::Connect(reason)),
+                _ => continue,
+            }
+        }
+    };
+    tokio::time::timeout(Duration::from_secs(10), wait)
+        .await
+        .map_err(|_| FlowError::Connect("no reply to login within 10 s".into()))?
+}
+
+/// Runs sessions until the client is closed or reconnection is impossible.
+pub(super) async fn supervise(inner: Arc<Inner>, mut out_rx: mpsc::Receiver<Bytes>, first: Established) {
+    let mut session = first;
+    let mut restore = false;
+    loop {
+        let _ = inner.connected.send(true);
+        let _ = inner.events.send(ClientEvent::Connected);
+        if restore {
+            tokio::spawn(restore_state(inner.clone()));
+        }
+        let reason = run(&inner, session, &mut out_rx).await;
+        let _ = inner.connected.send(false);
+        forget_session(&inner, &reason);
+        let _ = inner.events.send(ClientEvent::Disconnected(reason.clone()));
+        if inner.closed.load(Ordering::SeqCst) || !inner.opts.reconnect {
+            close_all(&inner);
+            return;
+        }
+        warn!("flow link lost ({reason}); reconnecting");
+        match reconnect(&inner).await {
+            Some(next) => {
+                session = next;
+                restore = true;
+                // Frames queued while disconnected name channel ids from the old
+                // session; sending them now could hit someone else's channel.
+                while out_rx.try_recv().is_ok() {}
+            }
+            None => {
+                close_all(&inner);
+                return;
+            }
+        }
+    }
+}
+
+async fn reconnect(inner: &Arc<Inner>) -> Option<Established> {
+    let addr = inner.addr.clone()?;
+    let mut closing = inner.closing.subscribe();
+    let mut delay = Duration::from_millis(100);
+    loop {
+        tokio::select! {
+            _ = tokio::time::sleep(delay) => {}
+            _ = closing.changed() => return None,
+        }
+        match Link::connect(&addr).await {
+            Ok(link) => match establish(inner, link).await {
+                Ok(s) => {
+                    info!("flow link re-established to {addr}");
+                    return Some(s);
+                }
+                Err(FlowError::Hub(e)) if e.code == ErrorCode::AuthFailed => {
+                    warn!("reconnect refused: {e}; giving up");
+                    return None;
+                }
+                Err(e) => debug!("reconnect failed: {e}"),
+            },
+            Err(e) => debug!("reconnect to {addr} failed: {e}"),
+        }
+        delay = (delay * 2).min(Duration::from_secs(5));
+    }
+}
+
+/// Upper bound for one batched write.
+const WRITE_BATCH: usize = 256 * 1024;
+
+/// Runs the read and write loops of one session; returns why it ended.
+async fn run(inner: &Arc<Inner>, session: Established, out_rx: &mut mpsc::Receiver<Bytes>) -> String {
+    let Established { mut reader, mut writer } = session;
+    let mut closing = inner.closing.subscribe();
+    let read_loop = async {
+        loop {
+            match reader.read_frame().await {
+                Ok(Some(frame)) => match decode_event(frame) {
+                    Ok(event) => {
+                        if let Some(reason) = dispatch(inner, event) {
+                            return reason;
+                        }
+                    }
+                    Err(e) => return format!("undecodable event: {e}"),
+                },
+                Ok(None) => return "hub closed the connection".to_string(),
+                Err(e) => return e.to_string(),
+            }
+        }
+    };
+    let write_loop = async {
+        while let Some(first) = out_rx.recv().await {
+            writer.buffer().extend_from_slice(&first);
+            while writer.pending() < WRITE_BATCH {
+                match out_rx.try_recv() {
+                    Ok(more) => writer.buffer().extend_from_slice(&more),
+                    Err(_) => break,
+                }
+            }
+            if let Err(e) = writer.flush().await {
+                return e.to_string();
+            }
+        }
+        "client dropped".to_string()
+    };
+    tokio::select! {
+        reason = read_loop => reason,
+        reason = write_loop => reason,
+        _ = closing.changed() => {
+            let _ = writer.shutdown().await;
+            "client closed".to_string()
+        }
+    }
+}
+
+/// Handles one event; returns a reason to end the session, if any.
+fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
+    match event {
+        Event::Data { chan, seq, ts_us, payload } => {
+            let state = lock(&inner.state);
+            if let Some(subs) = state.sub_ids.get(&chan).and_then(|name| state.subs.get(name)) {
+                for sub in subs {
+                    sub.queue.push(super::Data { channel: chan, seq, ts_us, payload: payload.clone() });
+                }
+            }
+        }
+        Event::Reply { req, result } => on_reply(inner, req, result),
+        Event::ServiceRequest { chan, call, payload } => {
+            let owned = lock(&inner.state).owned_ids.get(&chan).cloned();
+            let client = super::Client { inner: inner.clone() };
+            match owned {
+                Some(owned) => owned.deliver_call(chan, call, payload, client),
+                None => {
+                    let _ = inner.out.try_send(encode(0, Command::Respond { call, result: Err("no such service here".into()) }));
+                }
+            }
+        }
+        Event::StartPublishing { id } | Event::StopPublishing { id } => {
+            let listening = matches!(event, Event::StartPublishing { .. });
+            if let Some(owned) = lock(&inner.state).owned_ids.get(&id) {
+                owned.set_listening(listening);
+            }
+        }
+        Event::ChannelAdded(info) => {
+            let wanted = {
+                let state = lock(&inner.state);
+                state.subs.contains_key(&info.name) && !state.sub_ids.values().any(|n| *n == info.name)
+            };
+            if wanted {
+                let client = super::Client { inner: inner.clone() };
+                let name = info.name.clone();
+                tokio::spawn(async move {
+                    if let Err(e) = client.activate_subscription(&name).await {
+                        debug!("late subscribe to {name} failed: {e}");
+                    }
+                });
+            }
+            let _ = inner.events.send(ClientEvent::ChannelAdded(info));
+        }
+        Event::ChannelRemoved { id, name } => {
+            {
+                let mut state = lock(&inner.state);
+                state.sub_ids.remove(&id);
+                if let Some(owned) = state.owned_ids.remove(&id) {
+                    owned.set_id(None);
+                }
+            }
+            let _ = inner.events.send(ClientEvent::ChannelRemoved { id, name });
+        }
+        Event::HeaderChanged { id, name, header } => {
+            let _ = inner.events.send(ClientEvent::HeaderChanged { id, name, header });
+        }
+        Event::DbChanged { name } => {
+            let _ = inner.events.send(ClientEvent::DbChanged(name));
+        }
+        Event::Goodbye { reason } => {
+            let _ = inner.events.send(ClientEvent::Goodbye(reason.clone()));
+            return Some(format!("hub said goodbye: {reason}"));
+        }
+    }
+    None
+}
+
+fn on_reply(inner: &Arc<Inner>, req: u32, result: Result<Reply, crate::protocol::ErrorReply>) {
+    let Some(pending) = lock(&inner.state).pending.remove(&req) else {
+        if let Err(e) = result {
+            // A fire-and-forget command failed; nobody waits for it, so say it here.
+            warn!("hub refused a command: {e}");
+        }
+        return;
+    };
+    match (&pending.hook, &result) {
+        (Some(Hook::Subscribed(name)), Ok(Reply::Channel(info))) => {
+            let mut state = lock(&inner.state);
+            if state.subs.contains_key(name) {
+                state.sub_ids.insert(info.id, name.clone());
+                for sub in state.subs.get(name).into_iter().flatten() {
+                    sub.set_info(info.clone());
+                }
+            }
+        }
+        (Some(Hook::Added(owned)), Ok(Reply::Channel(info))) => {
+            owned.set_id(Some(info.id));
+            lock(&inner.state).owned_ids.insert(info.id, owned.clone());
+        }
+        (Some(Hook::CallAsync), _) => {
+            let result = match result {
+                Ok(Reply::Payload(p)) => Ok(p),
+                Ok(_) => Err(FlowError::UnexpectedReply("call")),
+                Err(e) => Err(FlowError::Hub(e)),
+            };
+            let _ = inner.events.send(ClientEvent::CallResult { req, result });
+            return;
+        }
+        _ => {}
+    }
+    if let Some(tx) = pending.tx {
+        let _ = tx.send(result.map_err(FlowError::Hub));
+    }
+}
+
+/// Forgets everything that belonged to the lost session: pending requests fail
+/// and channel ids become unknown until restored.
+fn forget_session(inner: &Arc<Inner>, reason: &str) {
+    let pending = {
+        let mut state = lock(&inner.state);
+        state.sub_ids.clear();
+        for owned in state.owned_ids.values() {
+            owned.set_id(None);
+        }
+        state.owned_ids.clear();
+        state.session = None;
+        std::mem::take(&mut state.pending)
+    };
+    for (req, p) in pending {
+        if let Some(tx) = p.tx {
+            let _ = tx.send(Err(FlowError::Disconnected(reason.to_string())));
+        } else if matches!(p.hook, Some(Hook::CallAsync)) {
+            let result = Err(FlowError::Disconnected(reason.to_string()));
+            let _ = inner.events.send(ClientEvent::CallResult { req, result });
+        }
+    }
+}
+
+/// Ends every subscription and service so their consumers see the end.
+fn close_all(inner: &Arc<Inner>) {
+    let state = lock(&inner.state);
+    for sub in state.subs.values().flatten() {
+        sub.queue.close();
+    }
+    for owned in state.owned.values() {
+        owned.close();
+    }
+}
+
+/// Re-creates channels, the database selection and subscriptions after a reconnect.
+async fn restore_state(inner: Arc<Inner>) {
+    let client = super::Client { inner: inner.clone() };
+    let (owned, subs, db) = {
+        let state = lock(&inner.state);
+        let owned: Vec<_> = state.owned.values().cloned().collect();
+        let subs: Vec<_> = state.subs.keys().cloned().collect();
+        (owned, subs, state.db.clone())
+    };
+    for o in owned {
+        if let Err(e) = client.request_hooked(o.add_command(), Some(Hook::Added(o.clone()))).await {
+            warn!("could not re-create channel {}: {e}", o.name);
+        }
+    }
+    if let Some(db) = db
+        && let Err(e) = client.request(Command::DbSelect { name: db.clone() }).await
+    {
+        warn!("could not re-select database {db}: {e}");
+    }
+    for name in subs {
+        let cmd = Command::Subscribe { chan: ChanRef::Name(name.clone()) };
+        match client.request_hooked(cmd, Some(Hook::Subscribed(name.clone()))).await {
+            Ok(_) => {}
+            Err(FlowError::Hub(e)) if e.code == ErrorCode::NotFound => {}
+            Err(e) => warn!("could not re-subscribe to {name}: {e}"),
+        }
+    }
+}

@@ -1,0 +1,93 @@
+//! Receiving side of a subscription: a drop-oldest queue the client's reader fills.
+
+use std::sync::{Arc, Mutex};
+
+use bytes::Bytes;
+
+use super::Client;
+use crate::protocol::{ChanId, ChannelInfo};
+use crate::queue::{DropOldest, lock};
+
+/// One message from a streaming channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Data {
+    pub channel: ChanId,
+    /// Position on the channel, from 1; a gap means messages were dropped.
+    pub seq: u64,
+    /// Hub clock (µs since the Unix epoch) when the message was published.
+    pub ts_us: u64,
+    pub payload: Bytes,
+}
+
+#[derive(Debug)]
+pub(super) struct SubShared {
+    pub(super) name: String,
+    pub(super) queue: DropOldest<Data>,
+    info: Mutex<Option<ChannelInfo>>,
+}
+
+impl SubShared {
+    pub(super) fn new(name: &str, capacity: usize) -> Self {
+        SubShared { name: name.to_string(), queue: DropOldest::new(capacity), info: Mutex::new(None) }
+    }
+
+    pub(super) fn set_info(&self, info: ChannelInfo) {
+        *lock(&self.info) = Some(info);
+    }
+}
+
+/// A sticky subscription by channel name. Dropping it unsubscribes.
+#[derive(Debug)]
+pub struct Subscription {
+    shared: Arc<SubShared>,
+    client: Client,
+}
+
+impl Subscription {
+    pub(super) fn new(shared: Arc<SubShared>, client: Client) -> Self {
+        Subscription { shared, client }
+    }
+
+    /// The next message in order; `None` once the client has shut down.
+    pub async fn recv(&self) -> Option<Data> {
+        self.shared.queue.pop().await
+    }
+
+    /// The newest queued message, discarding older ones, with how many were
+    /// skipped: for consumers that must never build a backlog (video).
+    pub async fn recv_latest(&self) -> Option<(Data, usize)> {
+        loop {
+            if !self.shared.queue.wait().await {
+                return None;
+            }
+            if let Some(latest) = self.shared.queue.pop_latest() {
+                return Some(latest);
+            }
+        }
+    }
+
+    /// A queued message, without waiting.
+    pub fn try_recv(&self) -> Option<Data> {
+        self.shared.queue.try_pop()
+    }
+
+    /// Messages this subscription dropped locally because its reader fell behind.
+    pub fn dropped(&self) -> u64 {
+        self.shared.queue.dropped()
+    }
+
+    pub fn name(&self) -> &str {
+        &self.shared.name
+    }
+
+    /// The channel's properties as of the last (re)subscription, header included.
+    pub fn info(&self) -> Option<ChannelInfo> {
+        lock(&self.shared.info).clone()
+    }
+}
+
+impl Drop for Subscription {
+    fn drop(&mut self) {
+        self.client.release_subscription(&self.shared);
+    }
+}

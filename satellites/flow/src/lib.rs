@@ -1,0 +1,23 @@
+//! FlowProtocol and the satellite SDK: the one crate that the hub and every
+//! satellite share.
+//!
+//! - [`protocol`]: frames, messages and their encoding, pure functions over bytes.
+//! - [`transport`]: TCP, Unix socket, WebSocket and in-process links.
+//! - [`connection`]: framing over a transport.
+//! - [`client`]: the SDK: log in, create channels, publish, subscribe, serve and
+//!   call services, use the pair database, reconnect automatically.
+//! - [`sketch`]: the setup-then-loop programming style of the paper's PySketch.
+
+pub mod client;
+pub mod connection;
+pub mod error;
+pub mod protocol;
+pub mod queue;
+pub mod sketch;
+pub mod tick;
+pub mod transport;
+
+pub use client::{Client, ClientEvent, ConnectOptions, Data, Publisher, Service, ServiceCall, Subscription};
+pub use error::FlowError;
+pub use protocol::{ChanId, ChannelInfo, ChannelKind, ChannelStats, ErrorCode};
+pub use transport::FlowAddr;

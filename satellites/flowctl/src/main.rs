@@ -1,0 +1,3 @@
+//! flowctl: the command-line client of the flow hub.
+
+fn main() {}

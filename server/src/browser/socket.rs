@@ -1,0 +1,271 @@
+//! One page's WebSocket: the welcome, the role, media from the page into the hub, hub channels to the page, and the
+//! once-a-second status with drop counters and frame-rate advice.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, WebSocket};
+use bytes::Bytes;
+use futures_util::{SinkExt, StreamExt};
+use serde_json::json;
+use tokio::sync::mpsc;
+use tracing::Instrument;
+
+use super::downlink::Downlink;
+use super::pacing::FpsAdvice;
+use super::role::{Claim, PageId};
+use super::uplink::Uplink;
+use super::wire::{self, Dropped, FrameKind, PageMessage, PageText, RoleState};
+use super::{Notice, Shared, lock, spectrum};
+
+/// Messages waiting for the page's socket; producers wait for room (see `downlink`), so this bounds memory.
+const OUT_QUEUE: usize = 64;
+
+/// Close codes (RFC 6455).
+const CLOSE_AWAY: u16 = 1001;
+const CLOSE_UNSUPPORTED: u16 = 1003;
+const CLOSE_ERROR: u16 = 1011;
+
+/// Why the loop ended.
+enum End {
+    PageClosed,
+    Close(u16, String),
+}
+
+/// Per-second counters for the status message.
+#[derive(Debug, Default)]
+struct Meter {
+    audio_frames: u64,
+    video_frames: u64,
+    sum_sq: f64,
+    samples: u64,
+}
+
+/// Runs one page's socket until it closes; `token` is only used in logs (its first 8 characters).
+pub async fn run(shared: Arc<Shared>, ws: WebSocket, token: &str) {
+    let page: PageId = shared.next_page.fetch_add(1, Ordering::Relaxed);
+    let tag = token.get(..8).unwrap_or(token).to_string();
+    let span = tracing::info_span!("page", id = page, session = %tag);
+    serve(shared, ws, page).instrument(span).await;
+}
+
+async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
+    tracing::info!("page connected");
+
+    let (mut sink, mut stream) = ws.split();
+    let (out, mut out_rx) = mpsc::channel::<Message>(OUT_QUEUE);
+    let writer = tokio::spawn(async move {
+        while let Some(msg) = out_rx.recv().await {
+            let closing = matches!(msg, Message::Close(_));
+            if sink.send(msg).await.is_err() || closing {
+                break;
+            }
+        }
+    });
+    let (notice_tx, mut notices) = mpsc::channel(4);
+    lock(&shared.pages).insert(page, notice_tx);
+
+    let mut conn = Conn { shared: shared.clone(), page, out: out.clone(), uplink: Uplink::default(), dropped: Dropped::default(), meter: Meter::default(), advice: FpsAdvice::default() };
+    let end = match Downlink::start(&shared.client, out.clone()).await {
+        Err(e) => End::Close(CLOSE_ERROR, format!("hub unavailable: {e}")),
+        Ok(downlink) => {
+            conn.welcome().await;
+            let mut shutdown = shared.shutdown.clone();
+            let mut tick = tokio::time::interval(Duration::from_secs(1));
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            loop {
+                tokio::select! {
+                    _ = shutdown.changed() => break End::Close(CLOSE_AWAY, "server shutting down".into()),
+                    msg = stream.next() => match msg {
+                        None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break End::PageClosed,
+                        Some(Ok(Message::Binary(b))) => if let Err(e) = conn.binary(b) { break e },
+                        Some(Ok(Message::Text(t))) => if let Err(e) = conn.text(t.as_str()).await { break e },
+                        Some(Ok(_)) => {}
+                    },
+                    Some(notice) = notices.recv() => match notice {
+                        Notice::Granted => conn.send_role(RoleState::Granted).await,
+                    },
+                    _ = tick.tick() => conn.status(downlink.dropped()).await,
+                }
+            }
+        }
+    };
+
+    // Leave the role first, so the channels are removed before the next page creates them again.
+    conn.uplink.close();
+    lock(&shared.pages).remove(&page);
+    conn.leave_role();
+    match end {
+        End::PageClosed => tracing::info!("page disconnected"),
+        End::Close(code, reason) => {
+            if code == CLOSE_UNSUPPORTED {
+                tracing::warn!(%reason, "closing page socket: malformed input");
+            } else {
+                tracing::info!(code, %reason, "closing page socket");
+            }
+            let frame = CloseFrame { code, reason: reason.into() };
+            let _ = out.send(Message::Close(Some(frame))).await;
+        }
+    }
+    drop(conn);
+    drop(out);
+    let _ = writer.await;
+}
+
+struct Conn {
+    shared: Arc<Shared>,
+    page: PageId,
+    out: mpsc::Sender<Message>,
+    uplink: Uplink,
+    dropped: Dropped,
+    meter: Meter,
+    advice: FpsAdvice,
+}
+
+impl Conn {
+    async fn send_json(&self, value: serde_json::Value) {
+        let _ = self.out.send(Message::Text(value.to_string().into())).await;
+    }
+
+    async fn welcome(&self) {
+        let holder = lock(&self.shared.roles).holder();
+        let role = if holder.is_some() { RoleState::Busy } else { RoleState::Free };
+        self.send_json(json!({
+            "type": "welcome",
+            "version": 1,
+            "session": self.page,
+            "server": concat!("robot-agent ", env!("CARGO_PKG_VERSION")),
+            "audio": {"rate": 22050, "channels": 1, "format": "s16le", "chunk_ms": 20},
+            "video": {"width": 640, "height": 360, "fps": 15, "format": "jpeg"},
+            "fft": {
+                "size": spectrum::FFT_SIZE, "bins": spectrum::BINS, "rate": 22050, "window": "hann",
+                "hop": self.shared.config.fft_hop, "scale": "linear, full-scale sine = 1.0",
+            },
+            "role": {"state": role},
+        }))
+        .await;
+    }
+
+    async fn send_role(&self, state: RoleState) {
+        self.send_json(json!({"type": "role", "state": state})).await;
+    }
+
+    fn is_holder(&self) -> bool {
+        lock(&self.shared.roles).holder() == Some(self.page)
+    }
+
+    /// Gives the role up (or withdraws a waiting claim) and hands it to the next page in line.
+    fn leave_role(&mut self) {
+        self.uplink.close();
+        let next = lock(&self.shared.roles).leave(self.page);
+        if let Some(next) = next {
+            let tx = lock(&self.shared.pages).get(&next).cloned();
+            if let Some(tx) = tx {
+                // A full notice queue means that page already has a notice pending: nothing is lost.
+                let _ = tx.try_send(Notice::Granted);
+            }
+        }
+    }
+
+    fn binary(&mut self, frame: Bytes) -> Result<(), End> {
+        let media = wire::parse_media(frame).map_err(|e| End::Close(CLOSE_UNSUPPORTED, e.to_string()))?;
+        let accepted = match media.kind {
+            FrameKind::Audio => {
+                self.meter.audio_frames += 1;
+                for s in media.payload.chunks_exact(2) {
+                    let v = f64::from(i16::from_le_bytes([s[0], s[1]])) / 32768.0;
+                    self.meter.sum_sq += v * v;
+                }
+                self.meter.samples += (media.payload.len() / 2) as u64;
+                self.uplink.audio(media.payload)
+            }
+            FrameKind::Video => {
+                self.meter.video_frames += 1;
+                self.uplink.video(media.payload)
+            }
+            // parse_media only returns page -> server kinds.
+            FrameKind::Speech | FrameKind::Spectrum => false,
+        };
+        if !accepted {
+            self.dropped.not_holder += 1;
+        }
+        Ok(())
+    }
+
+    async fn text(&mut self, text: &str) -> Result<(), End> {
+        let msg = match wire::parse_text(text) {
+            Ok(PageText::Message(m)) => m,
+            Ok(PageText::Unknown(kind)) => {
+                self.send_json(json!({"type": "error", "code": "unknown_type", "message": format!("unknown message type {kind:?}")})).await;
+                return Ok(());
+            }
+            Err(e) => return Err(End::Close(CLOSE_UNSUPPORTED, e.to_string())),
+        };
+        match msg {
+            PageMessage::Hello { version, client, autostart } => {
+                tracing::info!(version, %client, autostart, "hello");
+            }
+            PageMessage::Claim => {
+                let claim = lock(&self.shared.roles).claim(self.page);
+                let state = match claim {
+                    Claim::Granted => RoleState::Granted,
+                    Claim::Busy => RoleState::Busy,
+                };
+                tracing::info!(?state, "role claim");
+                self.send_role(state).await;
+            }
+            PageMessage::Release => {
+                self.leave_role();
+                self.send_role(RoleState::Released).await;
+            }
+            PageMessage::Media { audio, video } => {
+                if self.is_holder() {
+                    if let Err(e) = self.uplink.set_media(&self.shared.client, audio, video).await {
+                        tracing::warn!(error = %e, "cannot create media channels");
+                        self.send_json(json!({"type": "error", "code": "channel", "message": e.to_string()})).await;
+                    }
+                }
+            }
+            PageMessage::Ctrl { data } => {
+                if self.is_holder() {
+                    if let Err(e) = self.uplink.ctrl(&self.shared.client, data.to_string()).await {
+                        self.send_json(json!({"type": "error", "code": "channel", "message": e.to_string()})).await;
+                    }
+                }
+            }
+            PageMessage::Ping { t } => self.send_json(json!({"type": "pong", "t": t})).await,
+        }
+        Ok(())
+    }
+
+    async fn status(&mut self, to_page: u64) {
+        self.dropped.video_queue = self.uplink.video_drops();
+        self.dropped.to_page = to_page;
+        let fps = self.advice.tick(self.dropped.video_queue);
+        let m = std::mem::take(&mut self.meter);
+        let level = if m.samples > 0 && m.sum_sq > 0.0 {
+            Some(10.0 * (m.sum_sq / m.samples as f64).log10())
+        } else {
+            None
+        };
+        let role = if self.is_holder() {
+            "holder"
+        } else if lock(&self.shared.roles).is_waiting(self.page) {
+            "waiting"
+        } else {
+            "none"
+        };
+        let (audio, video) = self.uplink.sending();
+        // Status comes every second: when the page is this far behind, skipping one loses nothing.
+        let _ = self.out.try_send(Message::Text(json!({
+            "type": "status",
+            "role": role,
+            "in": {"audio_fps": m.audio_frames, "video_fps": m.video_frames, "audio_level_dbfs": level},
+            "sending": {"audio": audio, "video": video},
+            "dropped": self.dropped,
+            "audio_dropped": self.uplink.audio_drops(),
+            "advice": {"video_fps": fps},
+        }).to_string().into()));
+    }
+}

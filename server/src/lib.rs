@@ -1,0 +1,1 @@
+//! The robot-agent server library: hub core, transports, HTTP and modules.

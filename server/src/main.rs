@@ -1,0 +1,3 @@
+//! The robot-agent server binary.
+
+fn main() {}

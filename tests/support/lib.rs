@@ -1,0 +1,1 @@
+//! Shared support for the integration tests: starting a real robot-agent on free ports.
