@@ -10,6 +10,7 @@
 mod action;
 mod check;
 mod clock;
+mod echo;
 mod engine;
 mod error;
 mod expr;
@@ -25,6 +26,7 @@ mod value;
 
 pub use action::{Action, Effect};
 pub use clock::WallClock;
+pub use echo::EchoFilter;
 pub use engine::{Brain, Now, Step};
 pub use error::{LoadError, PerceptError};
 pub use expr::{NoPairDb, PairDb};
