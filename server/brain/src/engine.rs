@@ -254,6 +254,9 @@ impl Brain {
         let first_changed = (0..levels.len().max(self.active.len()))
             .find(|&i| levels.get(i) != self.active.get(i))
             .filter(|_| levels != self.active);
+        // The trace is taken before any belief update, so that it shows the facts the guards matched even when
+        // the rule then forgets them (`forget(heard)`).
+        let trace = first_changed.map(|_| self.trace(now, &chosen, &levels));
 
         let mut new_durative = Vec::new();
         let mut discrete = Vec::new();
@@ -332,9 +335,10 @@ impl Brain {
             )
         });
 
-        if first_changed.is_some() {
-            step.traces
-                .push(self.trace(now, &chosen, &levels, effects.clone(), updates.clone()));
+        if let Some(mut trace) = trace {
+            trace.effects = effects.clone();
+            trace.updates = updates.clone();
+            step.traces.push(trace);
         }
         step.effects.extend(effects);
         self.active = levels;
@@ -418,14 +422,8 @@ impl Brain {
         }
     }
 
-    fn trace(
-        &self,
-        now: &Now,
-        chosen: &[Chosen],
-        levels: &[Level],
-        effects: Vec<Effect>,
-        updates: Vec<String>,
-    ) -> Trace {
+    /// The trace of a change of path, without its effects and updates yet.
+    fn trace(&self, now: &Now, chosen: &[Chosen], levels: &[Level]) -> Trace {
         let mut because = Vec::new();
         for id in chosen.iter().flat_map(|c| &c.proof.support) {
             if let Some(fact) = self.store.fact(*id) {
@@ -461,8 +459,8 @@ impl Brain {
             reentered,
             because,
             bindings,
-            effects,
-            updates,
+            effects: Vec::new(),
+            updates: Vec::new(),
         }
     }
 }

@@ -356,3 +356,16 @@ fn hot_reload_of_the_file_keeps_state() {
         ]
     );
 }
+
+#[test]
+fn the_trace_names_the_transcript_even_though_the_rule_forgets_it() {
+    let mut sim = assistant();
+    sim.hear("What time is it?");
+    let Some(trace) = sim.traces.iter().find(|t| t.path.len() == 2) else {
+        panic!("no trace into `answer`")
+    };
+    let path: Vec<String> = trace.path.iter().map(ToString::to_string).collect();
+    assert_eq!(path, ["main.converse", "answer.time"]);
+    assert_eq!(trace.because[0].fact, r#"heard("What time is it?")"#);
+    assert_eq!(trace.updates, ["remember(greeted)", "forget(heard)"]);
+}
