@@ -1,6 +1,7 @@
 //! Static checks of a parsed program: declarations, arities, variables bound before use, actions in their place,
 //! commands on the host's whitelist, no recursive procedures. Every error names the line and column.
 
+use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::clock;
@@ -19,12 +20,16 @@ pub(crate) struct Checked {
     pub decls: BTreeMap<String, Decl>,
     pub procedures: Vec<Procedure>,
     pub main: usize,
+    /// The pair-database keys the program reads with `db("key")`.
+    pub db_keys: BTreeSet<String>,
 }
 
 pub(crate) struct Checker<'a> {
     capabilities: &'a Capabilities,
     decls: BTreeMap<String, Decl>,
     procedures: BTreeMap<String, (usize, Pos)>,
+    /// Filled while expressions are checked (hence a cell: the checks only read everything else).
+    db_keys: RefCell<BTreeSet<String>>,
 }
 
 type Bound = BTreeSet<String>;
@@ -35,6 +40,7 @@ impl<'a> Checker<'a> {
             capabilities,
             decls: BTreeMap::new(),
             procedures: BTreeMap::new(),
+            db_keys: RefCell::default(),
         }
     }
 
@@ -83,6 +89,7 @@ impl<'a> Checker<'a> {
             decls: self.decls,
             procedures: parsed.procedures,
             main,
+            db_keys: self.db_keys.into_inner(),
         })
     }
 
@@ -275,6 +282,16 @@ impl<'a> Checker<'a> {
                             args.len()
                         ),
                     ));
+                }
+                if name == "db" {
+                    let Expr::Lit(Value::Text(key), _) = &args[0] else {
+                        return Err(Diagnostic::new(
+                            args[0].pos(),
+                            "`db` takes the key as a plain string, such as `db(\"agent.mode\")`, so that the \
+                             host knows which keys to keep up to date",
+                        ));
+                    };
+                    self.db_keys.borrow_mut().insert(key.clone());
                 }
                 args.iter().try_for_each(|arg| self.expr(arg, bound))
             }

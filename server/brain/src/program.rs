@@ -39,6 +39,7 @@ pub struct Program {
     pub(crate) holds: BTreeMap<String, Vec<Duration>>,
     /// Whether any guard reads `time.*` or `date.*`, which then needs a re-evaluation each minute.
     pub(crate) reads_clock: bool,
+    db_keys: BTreeSet<String>,
 }
 
 impl Program {
@@ -60,6 +61,7 @@ impl Program {
             windows: BTreeMap::new(),
             holds: BTreeMap::new(),
             reads_clock: false,
+            db_keys: checked.db_keys,
         };
         program.index();
         Ok(program)
@@ -73,6 +75,11 @@ impl Program {
     /// The declaration of a predicate (including the implicit `said(text)` belief).
     pub fn decl(&self, name: &str) -> Option<&Decl> {
         self.decls.get(name)
+    }
+
+    /// The pair-database keys the program reads (`db("key")`), which the host keeps up to date.
+    pub fn db_keys(&self) -> impl Iterator<Item = &str> {
+        self.db_keys.iter().map(String::as_str)
     }
 
     /// How many rules the program has, over all procedures.

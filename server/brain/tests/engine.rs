@@ -376,6 +376,10 @@ fn pair_database_values_are_read_through_the_lookup() {
         brain.step(&now, &db).effects,
         vec![Effect::Start(say("chatty"))]
     );
+    assert_eq!(
+        brain.program().db_keys().collect::<Vec<_>>(),
+        ["agent.mode"]
+    );
     db.insert("agent.mode".to_owned(), Value::from("quiet"));
     assert_eq!(
         brain.step(&now, &db).effects,

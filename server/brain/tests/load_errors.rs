@@ -189,6 +189,12 @@ fn meaning_errors() {
         "empty phrase",
     );
     expect(
+        &with_main("  a: heard(T) & db(T) = 1 ++ say(T)"),
+        5,
+        "db(^T)",
+        "plain string",
+    );
+    expect(
         &with_main("  a: plural(1) > 0 ++ say(\"x\")"),
         5,
         "^plural",
