@@ -8,9 +8,7 @@ use axum::response::{IntoResponse, Response};
 use rust_embed::RustEmbed;
 
 #[derive(RustEmbed)]
-#[folder = "$CARGO_MANIFEST_DIR/../web/"]
-#[exclude = "node_modules/*"]
-#[exclude = "*.md"]
+#[folder = "../web/"]
 struct Web;
 
 /// The response for asset `path` (no leading slash; empty means the page itself).
@@ -30,7 +28,10 @@ pub fn serve(path: &str) -> Response {
     }
     // The page and its modules change with the binary: always revalidate (cheap, thanks to the ETag).
     headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
-    headers.insert(header::X_CONTENT_TYPE_OPTIONS, HeaderValue::from_static("nosniff"));
+    headers.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
     res
 }
 

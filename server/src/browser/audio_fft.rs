@@ -2,38 +2,49 @@
 //!
 //! Like `video_y`, it subscribes to its source only while someone subscribes to its output.
 
-use std::time::Duration;
-
-use tokio::sync::watch;
-
-use super::channels;
 use super::spectrum::{BINS, FFT_SIZE, SpectrumAnalyser, to_le_bytes};
+use super::{channels, on_demand};
+use crate::module::{Module, ModuleContext, ModuleFuture};
 
-pub async fn run(client: flow::Client, hop: usize, mut shutdown: watch::Receiver<bool>) {
+/// The `audio_fft` module.
+#[derive(Debug)]
+pub struct AudioFft {
+    pub hop: usize,
+}
+
+impl Module for AudioFft {
+    fn name(&self) -> &'static str {
+        "audio_fft"
+    }
+
+    fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
+        Box::pin(async move {
+            run(ctx.client.clone(), self.hop, ctx.shutdown.clone()).await;
+            Ok(())
+        })
+    }
+}
+
+/// Runs until shutdown.
+pub async fn run(
+    client: flow::Client,
+    hop: usize,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
+) {
     let header = serde_json::json!({
         "format": "f32le", "size": FFT_SIZE, "bins": BINS, "rate": 22050, "window": "hann", "hop": hop,
         "scale": "linear, full-scale sine = 1.0",
     })
     .to_string();
-    let publisher = loop {
-        match client.publisher(channels::AUDIO_FFT, &header).await {
-            Ok(p) => break p,
-            Err(e) => {
-                tracing::warn!(error = %e, "cannot create {}; retrying", channels::AUDIO_FFT);
-                tokio::select! {
-                    _ = shutdown.changed() => return,
-                    _ = tokio::time::sleep(Duration::from_secs(2)) => {}
-                }
-            }
-        }
+    let Some(publisher) =
+        on_demand::output(&client, channels::AUDIO_FFT, &header, &mut shutdown).await
+    else {
+        return;
     };
     let mut listening = publisher.subscribers();
     loop {
-        while !*listening.borrow_and_update() {
-            tokio::select! {
-                _ = shutdown.changed() => return,
-                r = listening.changed() => if r.is_err() { return },
-            }
+        if !on_demand::until_listened(&mut listening, &mut shutdown).await {
+            return;
         }
         let source = match client.subscribe(channels::AUDIO).await {
             Ok(s) => s,
@@ -47,10 +58,7 @@ pub async fn run(client: flow::Client, hop: usize, mut shutdown: watch::Receiver
         loop {
             tokio::select! {
                 _ = shutdown.changed() => return,
-                r = listening.changed() => {
-                    if r.is_err() { return }
-                    if !*listening.borrow_and_update() { break }
-                }
+                _ = on_demand::unlistened(&mut listening) => break,
                 got = source.recv() => {
                     let Some(data) = got else { return };
                     let mut spectra = Vec::new();

@@ -6,7 +6,6 @@
 //! pages.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use axum::extract::ws::Message;
 use bytes::Bytes;
@@ -39,21 +38,24 @@ const ROUTES: [(&str, Route); 5] = [
 pub struct Downlink {
     tasks: Vec<JoinHandle<()>>,
     subscriptions: Vec<Arc<flow::Subscription>>,
-    /// Messages that could not be forwarded (malformed JSON on a channel).
-    pub rejected: Arc<AtomicU64>,
 }
 
 impl Downlink {
-    pub async fn start(client: &flow::Client, out: mpsc::Sender<Message>) -> Result<Downlink, flow::FlowError> {
-        let rejected = Arc::new(AtomicU64::new(0));
+    pub async fn start(
+        client: &flow::Client,
+        out: mpsc::Sender<Message>,
+    ) -> Result<Downlink, flow::FlowError> {
         let mut tasks = Vec::new();
         let mut subscriptions = Vec::new();
         for (name, route) in ROUTES {
             let sub = Arc::new(client.subscribe(name).await?);
             subscriptions.push(sub.clone());
-            tasks.push(tokio::spawn(forward(sub, route, out.clone(), rejected.clone())));
+            tasks.push(tokio::spawn(forward(sub, route, out.clone())));
         }
-        Ok(Downlink { tasks, subscriptions, rejected })
+        Ok(Downlink {
+            tasks,
+            subscriptions,
+        })
     }
 
     /// Messages dropped because this page read too slowly, over all channels.
@@ -70,24 +72,33 @@ impl Drop for Downlink {
     }
 }
 
-async fn forward(sub: Arc<flow::Subscription>, route: Route, out: mpsc::Sender<Message>, rejected: Arc<AtomicU64>) {
+async fn forward(sub: Arc<flow::Subscription>, route: Route, out: mpsc::Sender<Message>) {
     let mut seq: u32 = 0;
+    let mut rejected: u64 = 0;
     let mut speech = SpeechFraming::default();
     while let Some(data) = sub.recv().await {
         let msg = match route {
             Route::Json(kind) => match wrap_json(kind, &data.payload) {
                 Some(text) => Message::Text(text.into()),
                 None => {
-                    let n = rejected.fetch_add(1, Ordering::Relaxed);
-                    if n == 0 {
-                        tracing::warn!(channel = sub.name(), "payload is not JSON; not forwarded to pages");
+                    rejected += 1;
+                    if rejected.is_power_of_two() {
+                        tracing::warn!(
+                            channel = sub.name(),
+                            rejected,
+                            "payload is not JSON; not forwarded to pages"
+                        );
                     }
                     continue;
                 }
             },
-            Route::Spectrum => Message::Binary(encode_frame(FrameKind::Spectrum, seq, &[&data.payload])),
+            Route::Spectrum => {
+                Message::Binary(encode_frame(FrameKind::Spectrum, seq, &[&data.payload]))
+            }
             Route::Speech => {
-                let framed = sub.info().is_some_and(|i| i.header.contains("utterance-offset"));
+                let framed = sub
+                    .info()
+                    .is_some_and(|i| i.header.contains("utterance-offset"));
                 Message::Binary(speech.frame(seq, framed, &data.payload))
             }
         };
@@ -119,7 +130,11 @@ impl SpeechFraming {
         }
         let offset = self.offset;
         self.offset = self.offset.wrapping_add((payload.len() / 2) as u32);
-        encode_frame(FrameKind::Speech, seq, &[&0u32.to_le_bytes(), &offset.to_le_bytes(), payload])
+        encode_frame(
+            FrameKind::Speech,
+            seq,
+            &[&0u32.to_le_bytes(), &offset.to_le_bytes(), payload],
+        )
     }
 }
 
@@ -129,7 +144,10 @@ mod tests {
 
     #[test]
     fn json_is_wrapped_and_garbage_refused() {
-        assert_eq!(wrap_json("avatar", br#"{"cmd":"blink"}"#).as_deref(), Some(r#"{"type":"avatar","data":{"cmd":"blink"}}"#));
+        assert_eq!(
+            wrap_json("avatar", br#"{"cmd":"blink"}"#).as_deref(),
+            Some(r#"{"type":"avatar","data":{"cmd":"blink"}}"#)
+        );
         assert_eq!(wrap_json("avatar", b"{\"cmd\":"), None);
         assert_eq!(wrap_json("avatar", b"\xff\xfe"), None);
     }
@@ -142,7 +160,11 @@ mod tests {
         let b = f.frame(1, false, &Bytes::from_static(&[3, 0]));
         assert_eq!(&b[8..16], &[0, 0, 0, 0, 2, 0, 0, 0]);
         assert_eq!(&b[16..], &[3, 0]);
-        let framed = f.frame(2, true, &Bytes::from_static(&[7, 0, 0, 0, 9, 0, 0, 0, 5, 0]));
+        let framed = f.frame(
+            2,
+            true,
+            &Bytes::from_static(&[7, 0, 0, 0, 9, 0, 0, 0, 5, 0]),
+        );
         assert_eq!(&framed[8..], &[7, 0, 0, 0, 9, 0, 0, 0, 5, 0]);
     }
 }

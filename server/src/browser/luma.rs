@@ -28,7 +28,11 @@ pub enum LumaError {
     #[error("frame is not a decodable JPEG: {0}")]
     Decode(String),
     #[error("decoded {got} luma bytes for a {width}x{height} frame")]
-    Size { got: usize, width: usize, height: usize },
+    Size {
+        got: usize,
+        width: usize,
+        height: usize,
+    },
     #[error("grey JPEG encoding failed: {0}")]
     Encode(#[from] image::ImageError),
 }
@@ -40,15 +44,35 @@ pub fn grey_jpeg(jpeg: &[u8], quality: u8) -> Result<GreyFrame, LumaError> {
         .set_max_width(MAX_SIDE)
         .set_max_height(MAX_SIDE);
     let mut decoder = JpegDecoder::new_with_options(Cursor::new(jpeg), options);
-    let pixels = decoder.decode().map_err(|e| LumaError::Decode(format!("{e:?}")))?;
-    let (width, height) = decoder.dimensions().ok_or_else(|| LumaError::Decode("no dimensions".into()))?;
+    let pixels = decoder
+        .decode()
+        .map_err(|e| LumaError::Decode(format!("{e:?}")))?;
+    let (width, height) = decoder
+        .dimensions()
+        .ok_or_else(|| LumaError::Decode("no dimensions".into()))?;
     if pixels.len() != width * height {
-        return Err(LumaError::Size { got: pixels.len(), width, height });
+        return Err(LumaError::Size {
+            got: pixels.len(),
+            width,
+            height,
+        });
     }
-    let (w, h) = (u32::try_from(width).unwrap_or(0), u32::try_from(height).unwrap_or(0));
+    let (w, h) = (
+        u32::try_from(width).unwrap_or(0),
+        u32::try_from(height).unwrap_or(0),
+    );
     let mut out = Vec::with_capacity(pixels.len() / 8);
-    JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100)).encode(&pixels, w, h, ExtendedColorType::L8)?;
-    Ok(GreyFrame { jpeg: out, width: w, height: h })
+    JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100)).encode(
+        &pixels,
+        w,
+        h,
+        ExtendedColorType::L8,
+    )?;
+    Ok(GreyFrame {
+        jpeg: out,
+        width: w,
+        height: h,
+    })
 }
 
 #[cfg(test)]
@@ -60,11 +84,17 @@ mod tests {
         let mut rgb = Vec::with_capacity(64 * 36 * 3);
         for _y in 0..36 {
             for x in 0..64 {
-                rgb.extend_from_slice(if x < 32 { &[220, 30, 30] } else { &[30, 30, 220] });
+                rgb.extend_from_slice(if x < 32 {
+                    &[220, 30, 30]
+                } else {
+                    &[30, 30, 220]
+                });
             }
         }
         let mut out = Vec::new();
-        JpegEncoder::new_with_quality(&mut out, 90).encode(&rgb, 64, 36, ExtendedColorType::Rgb8).expect("encode");
+        JpegEncoder::new_with_quality(&mut out, 90)
+            .encode(&rgb, 64, 36, ExtendedColorType::Rgb8)
+            .expect("encode");
         out
     }
 
@@ -84,7 +114,10 @@ mod tests {
 
     #[test]
     fn garbage_is_an_error_not_a_panic() {
-        assert!(matches!(grey_jpeg(&[0xFF, 0xD8, 0x00, 0x01], 80), Err(LumaError::Decode(_))));
+        assert!(matches!(
+            grey_jpeg(&[0xFF, 0xD8, 0x00, 0x01], 80),
+            Err(LumaError::Decode(_))
+        ));
         assert!(grey_jpeg(b"hello", 80).is_err());
     }
 }

@@ -5,9 +5,10 @@
 //! `flow::Client`, like any satellite, so a robot body or a test can stand in for the browser.
 
 mod assets;
-mod audio_fft;
+pub mod audio_fft;
 mod downlink;
 mod luma;
+mod on_demand;
 mod origin;
 mod pacing;
 mod role;
@@ -16,18 +17,22 @@ mod session;
 mod socket;
 mod spectrum;
 mod uplink;
-mod video_y;
+pub mod video_y;
 mod wire;
 
 use std::collections::HashMap;
 use std::sync::atomic::AtomicU64;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::time::Duration;
 
+use serde::Deserialize;
 use tokio::sync::{mpsc, watch};
-use tokio::task::JoinHandle;
 
-pub use origin::OriginPolicy;
-pub use session::SessionLimits;
+use crate::config::Config;
+use crate::module::{Module, ModuleContext, ModuleFuture};
+
+use origin::OriginPolicy;
+use session::SessionLimits;
 
 use role::{PageId, RoleBoard};
 use session::SessionStore;
@@ -45,22 +50,69 @@ pub mod channels {
     pub const RULES: &str = "Agent.rules";
 }
 
-/// Settings of the browser link (the `[browser]` table of the config).
-#[derive(Debug, Clone)]
+/// Settings of the browser link, from `[modules.browser]` (and `[modules.video_y]` / `[modules.audio_fft]`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct BrowserConfig {
+    /// Whether the link runs at all (`false`: the page is still served, its WebSocket is refused).
+    pub enabled: bool,
     /// Host names besides loopback names and IP literals that the page may be opened under.
     pub extra_hosts: Vec<String>,
-    /// JPEG quality of `Agent.video.y` frames.
-    pub y_quality: u8,
-    /// Samples between two spectra on `Agent.audio.fft` (1024 = no overlap).
-    pub fft_hop: usize,
-    pub sessions: SessionLimits,
+    /// Seconds a fresh session token may wait for its WebSocket.
+    pub session_ttl_s: u64,
 }
 
 impl Default for BrowserConfig {
     fn default() -> Self {
-        BrowserConfig { extra_hosts: Vec::new(), y_quality: 80, fft_hop: spectrum::FFT_SIZE, sessions: SessionLimits::default() }
+        BrowserConfig {
+            enabled: true,
+            extra_hosts: Vec::new(),
+            session_ttl_s: 60,
+        }
     }
+}
+
+/// `[modules.video_y]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct VideoYConfig {
+    enabled: bool,
+    /// JPEG quality of the grey frames, 1..=100.
+    quality: u8,
+}
+
+impl Default for VideoYConfig {
+    fn default() -> Self {
+        VideoYConfig {
+            enabled: true,
+            quality: 80,
+        }
+    }
+}
+
+/// `[modules.audio_fft]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct AudioFftConfig {
+    enabled: bool,
+    /// Samples between two spectra (1024 = no overlap), 1..=1024.
+    hop: usize,
+}
+
+impl Default for AudioFftConfig {
+    fn default() -> Self {
+        AudioFftConfig {
+            enabled: true,
+            hop: spectrum::FFT_SIZE,
+        }
+    }
+}
+
+/// Parses `[modules.NAME]` into `T`, naming the key and the reason on failure.
+fn section<T: serde::de::DeserializeOwned>(config: &Config, name: &str) -> anyhow::Result<T> {
+    let value = config.module(name);
+    serde_path_to_error::deserialize(value)
+        .map_err(|e| anyhow::anyhow!("[modules.{name}] {}: {}", e.path(), e.inner()))
 }
 
 /// What one page's socket task is told by others.
@@ -73,13 +125,15 @@ enum Notice {
 /// State shared by the HTTP handlers and every page's socket task.
 #[derive(Debug)]
 struct Shared {
-    client: flow::Client,
-    config: BrowserConfig,
+    /// The link's hub connection, set when the `browser` module starts.
+    client: OnceLock<flow::Client>,
     origin: OriginPolicy,
     sessions: Mutex<SessionStore>,
+    session_ttl_s: u64,
     roles: Mutex<RoleBoard>,
     pages: Mutex<HashMap<PageId, mpsc::Sender<Notice>>>,
     next_page: AtomicU64,
+    fft_hop: usize,
     shutdown: watch::Receiver<bool>,
 }
 
@@ -89,30 +143,58 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// The browser link, ready to be mounted into the HTTP app.
+/// The browser link, ready to be mounted into the HTTP app and started as modules.
 #[derive(Debug, Clone)]
 pub struct BrowserLink {
     shared: Arc<Shared>,
+    video_y: VideoYConfig,
+    audio_fft: AudioFftConfig,
 }
 
 impl BrowserLink {
-    /// `client` is the link's own hub connection (its login name owns `Agent.audio`/`Agent.video` while a page
-    /// holds the role); `shutdown` turning true closes every page socket.
-    pub fn new(client: flow::Client, config: BrowserConfig, shutdown: watch::Receiver<bool>) -> Self {
-        let origin = OriginPolicy { extra_hosts: config.extra_hosts.clone() };
-        let sessions = Mutex::new(SessionStore::new(config.sessions));
-        BrowserLink {
+    /// Reads `[modules.browser]`, `[modules.video_y]` and `[modules.audio_fft]`; `shutdown` turning true closes
+    /// every page socket.
+    pub fn from_config(config: &Config, shutdown: watch::Receiver<bool>) -> anyhow::Result<Self> {
+        let browser: BrowserConfig = section(config, "browser")?;
+        let video_y: VideoYConfig = section(config, "video_y")?;
+        let audio_fft: AudioFftConfig = section(config, "audio_fft")?;
+        if !(1..=100).contains(&video_y.quality) {
+            anyhow::bail!(
+                "[modules.video_y] quality: {} is outside 1..=100",
+                video_y.quality
+            );
+        }
+        if !(1..=spectrum::FFT_SIZE).contains(&audio_fft.hop) {
+            anyhow::bail!(
+                "[modules.audio_fft] hop: {} is outside 1..={}",
+                audio_fft.hop,
+                spectrum::FFT_SIZE
+            );
+        }
+        if browser.session_ttl_s == 0 {
+            anyhow::bail!("[modules.browser] session_ttl_s: must be at least 1");
+        }
+        let limits = SessionLimits {
+            unused_ttl: Duration::from_secs(browser.session_ttl_s),
+            ..SessionLimits::default()
+        };
+        Ok(BrowserLink {
             shared: Arc::new(Shared {
-                client,
-                config,
-                origin,
-                sessions,
+                client: OnceLock::new(),
+                origin: OriginPolicy {
+                    extra_hosts: browser.extra_hosts,
+                },
+                sessions: Mutex::new(SessionStore::new(limits)),
+                session_ttl_s: browser.session_ttl_s,
                 roles: Mutex::new(RoleBoard::default()),
                 pages: Mutex::new(HashMap::new()),
                 next_page: AtomicU64::new(1),
+                fft_hop: audio_fft.hop,
                 shutdown,
             }),
-        }
+            video_y,
+            audio_fft,
+        })
     }
 
     /// Routes: `/` and the page's assets, `POST /api/session`, `GET /link` (the WebSocket).
@@ -120,11 +202,47 @@ impl BrowserLink {
         routes::router(self.shared.clone())
     }
 
-    /// Starts the `Agent.video.y` and `Agent.audio.fft` modules on `client` (they work while someone subscribes).
-    pub fn spawn_modules(client: flow::Client, config: &BrowserConfig, shutdown: watch::Receiver<bool>) -> Vec<JoinHandle<()>> {
+    /// Gives the link its hub connection (the `browser` module does this; tests and tools may do it themselves).
+    /// Returns false if it already has one.
+    pub fn attach(&self, client: flow::Client) -> bool {
+        self.shared.client.set(client).is_ok()
+    }
+
+    /// The modules to start: `browser` (the link's hub connection), `video_y` and `audio_fft`. Each can be turned
+    /// off with `enabled = false` in its section.
+    pub fn modules(&self) -> Vec<Box<dyn Module>> {
         vec![
-            tokio::spawn(video_y::run(client.clone(), config.y_quality, shutdown.clone())),
-            tokio::spawn(audio_fft::run(client, config.fft_hop, shutdown)),
+            Box::new(LinkModule {
+                shared: self.shared.clone(),
+            }),
+            Box::new(video_y::VideoY {
+                quality: self.video_y.quality,
+            }),
+            Box::new(audio_fft::AudioFft {
+                hop: self.audio_fft.hop,
+            }),
         ]
+    }
+}
+
+/// The `browser` module: gives the link its hub connection and holds it until shutdown.
+struct LinkModule {
+    shared: Arc<Shared>,
+}
+
+impl Module for LinkModule {
+    fn name(&self) -> &'static str {
+        "browser"
+    }
+
+    fn run(self: Box<Self>, mut ctx: ModuleContext) -> ModuleFuture {
+        Box::pin(async move {
+            if self.shared.client.set(ctx.client.clone()).is_err() {
+                // Someone attached a client by hand; two would fight over the media channels.
+                anyhow::bail!("the browser module was started twice");
+            }
+            ctx.stopped().await;
+            Ok(())
+        })
     }
 }

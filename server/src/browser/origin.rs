@@ -21,7 +21,9 @@ impl OriginPolicy {
         match origin {
             None => !require_origin,
             Some(origin) => {
-                let rest = origin.strip_prefix("http://").or_else(|| origin.strip_prefix("https://"));
+                let rest = origin
+                    .strip_prefix("http://")
+                    .or_else(|| origin.strip_prefix("https://"));
                 rest.is_some_and(|authority| authority.eq_ignore_ascii_case(host))
             }
         }
@@ -32,7 +34,9 @@ impl OriginPolicy {
         if name.eq_ignore_ascii_case("localhost") || name.parse::<std::net::IpAddr>().is_ok() {
             return true;
         }
-        self.extra_hosts.iter().any(|h| h.eq_ignore_ascii_case(name))
+        self.extra_hosts
+            .iter()
+            .any(|h| h.eq_ignore_ascii_case(name))
     }
 }
 
@@ -57,7 +61,11 @@ mod tests {
         assert!(p.allows(Some("127.0.0.1:8080"), Some("http://127.0.0.1:8080"), true));
         assert!(p.allows(Some("localhost:8080"), Some("http://localhost:8080"), true));
         assert!(p.allows(Some("[::1]:8080"), Some("http://[::1]:8080"), true));
-        assert!(p.allows(Some("192.168.1.20:8080"), Some("https://192.168.1.20:8080"), true));
+        assert!(p.allows(
+            Some("192.168.1.20:8080"),
+            Some("https://192.168.1.20:8080"),
+            true
+        ));
     }
 
     #[test]
@@ -69,13 +77,23 @@ mod tests {
         assert!(!p.allows(Some("127.0.0.1:8080"), None, true));
         assert!(!p.allows(None, Some("http://127.0.0.1:8080"), true));
         // DNS rebinding: Host and Origin agree, but the name is not ours.
-        assert!(!p.allows(Some("evil.example:8080"), Some("http://evil.example:8080"), true));
+        assert!(!p.allows(
+            Some("evil.example:8080"),
+            Some("http://evil.example:8080"),
+            true
+        ));
     }
 
     #[test]
     fn configured_names_and_originless_requests() {
-        let p = OriginPolicy { extra_hosts: vec!["robot.local".into()] };
-        assert!(p.allows(Some("robot.local:8080"), Some("http://robot.local:8080"), true));
+        let p = OriginPolicy {
+            extra_hosts: vec!["robot.local".into()],
+        };
+        assert!(p.allows(
+            Some("robot.local:8080"),
+            Some("http://robot.local:8080"),
+            true
+        ));
         assert!(p.allows(Some("127.0.0.1:8080"), None, false));
     }
 }

@@ -17,7 +17,11 @@ pub struct FpsAdvice {
 
 impl Default for FpsAdvice {
     fn default() -> Self {
-        FpsAdvice { fps: MAX_FPS, quiet_seconds: 0, last_drops: 0 }
+        FpsAdvice {
+            fps: MAX_FPS,
+            quiet_seconds: 0,
+            last_drops: 0,
+        }
     }
 }
 
@@ -36,10 +40,6 @@ impl FpsAdvice {
                 self.quiet_seconds = 0;
             }
         }
-        self.fps
-    }
-
-    pub fn fps(&self) -> u32 {
         self.fps
     }
 }

@@ -31,14 +31,16 @@ async fn asset(Path(path): Path<String>, headers: HeaderMap) -> Response {
 }
 
 fn asset_response(path: &str, headers: &HeaderMap) -> Response {
-    let inm = headers.get(header::IF_NONE_MATCH).and_then(|v| v.to_str().ok());
+    let inm = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok());
     if inm.is_some_and(|v| assets::not_modified(path, v)) {
         return StatusCode::NOT_MODIFIED.into_response();
     }
     assets::serve(path)
 }
 
-fn header<'a>(headers: &'a HeaderMap, name: header::HeaderName) -> Option<&'a str> {
+fn header(headers: &HeaderMap, name: header::HeaderName) -> Option<&str> {
     headers.get(name).and_then(|v| v.to_str().ok())
 }
 
@@ -54,7 +56,7 @@ async fn new_session(State(shared): State<Arc<Shared>>, headers: HeaderMap) -> R
     let body = serde_json::json!({
         "session": token,
         "link": "/link",
-        "expires_in_s": shared.config.sessions.unused_ttl.as_secs(),
+        "expires_in_s": shared.session_ttl_s,
     });
     ([(header::CACHE_CONTROL, "no-store")], axum::Json(body)).into_response()
 }
@@ -76,6 +78,13 @@ async fn link(
         tracing::warn!(?host, ?origin, "link refused: not our own origin");
         return (StatusCode::FORBIDDEN, "forbidden origin").into_response();
     }
+    if shared.client.get().is_none() {
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the browser link is not running",
+        )
+            .into_response();
+    }
     let Some(token) = q.session else {
         return (StatusCode::FORBIDDEN, "missing session").into_response();
     };
@@ -83,8 +92,13 @@ async fn link(
         tracing::warn!(error = %e, "link refused");
         return (StatusCode::FORBIDDEN, e.to_string()).into_response();
     }
+    let failed = (shared.clone(), token.clone());
     upgrade
         .max_message_size(wire::HEADER_BYTES + wire::MAX_VIDEO_BYTES)
+        .on_failed_upgrade(move |e| {
+            tracing::warn!(error = %e, "WebSocket upgrade failed");
+            lock(&failed.0.sessions).unbind(&failed.1, Instant::now());
+        })
         .on_upgrade(move |ws| async move {
             socket::run(shared.clone(), ws, &token).await;
             lock(&shared.sessions).unbind(&token, Instant::now());

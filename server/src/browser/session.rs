@@ -17,7 +17,11 @@ pub struct SessionLimits {
 
 impl Default for SessionLimits {
     fn default() -> Self {
-        SessionLimits { unused_ttl: Duration::from_secs(60), idle_ttl: Duration::from_secs(600), capacity: 64 }
+        SessionLimits {
+            unused_ttl: Duration::from_secs(60),
+            idle_ttl: Duration::from_secs(600),
+            capacity: 64,
+        }
     }
 }
 
@@ -48,14 +52,21 @@ pub struct SessionStore {
 
 impl SessionStore {
     pub fn new(limits: SessionLimits) -> Self {
-        SessionStore { limits, entries: HashMap::new() }
+        SessionStore {
+            limits,
+            entries: HashMap::new(),
+        }
     }
 
     /// Issues a fresh token.
     pub fn issue(&mut self, now: Instant) -> String {
         self.expire(now);
         while self.entries.len() >= self.limits.capacity.max(1) {
-            let oldest = self.entries.iter().filter(|(_, e)| !e.bound).min_by_key(|(_, e)| e.since);
+            let oldest = self
+                .entries
+                .iter()
+                .filter(|(_, e)| !e.bound)
+                .min_by_key(|(_, e)| e.since);
             match oldest.map(|(k, _)| k.clone()) {
                 Some(k) => {
                     self.entries.remove(&k);
@@ -65,7 +76,14 @@ impl SessionStore {
             }
         }
         let token = format!("{:032x}", rand::random::<u128>());
-        self.entries.insert(token.clone(), Entry { bound: false, used: false, since: now });
+        self.entries.insert(
+            token.clone(),
+            Entry {
+                bound: false,
+                used: false,
+                since: now,
+            },
+        );
         token
     }
 
@@ -92,7 +110,11 @@ impl SessionStore {
     fn expire(&mut self, now: Instant) {
         let limits = self.limits;
         self.entries.retain(|_, e| {
-            let ttl = if e.used { limits.idle_ttl } else { limits.unused_ttl };
+            let ttl = if e.used {
+                limits.idle_ttl
+            } else {
+                limits.unused_ttl
+            };
             e.bound || now.duration_since(e.since) < ttl
         });
     }
@@ -103,7 +125,11 @@ mod tests {
     use super::*;
 
     fn limits() -> SessionLimits {
-        SessionLimits { unused_ttl: Duration::from_secs(60), idle_ttl: Duration::from_secs(600), capacity: 3 }
+        SessionLimits {
+            unused_ttl: Duration::from_secs(60),
+            idle_ttl: Duration::from_secs(600),
+            capacity: 3,
+        }
     }
 
     #[test]
@@ -124,7 +150,10 @@ mod tests {
         let t0 = Instant::now();
         let mut s = SessionStore::new(limits());
         let tok = s.issue(t0);
-        assert_eq!(s.bind(&tok, t0 + Duration::from_secs(61)), Err(SessionError::Unknown));
+        assert_eq!(
+            s.bind(&tok, t0 + Duration::from_secs(61)),
+            Err(SessionError::Unknown)
+        );
     }
 
     #[test]
@@ -136,7 +165,11 @@ mod tests {
         s.bind(&a, t0).expect("bind a");
         let _c = s.issue(t0 + Duration::from_millis(2));
         let _d = s.issue(t0 + Duration::from_millis(3));
-        assert_eq!(s.bind(&b, t0), Err(SessionError::Unknown), "b was the oldest unbound");
+        assert_eq!(
+            s.bind(&b, t0),
+            Err(SessionError::Unknown),
+            "b was the oldest unbound"
+        );
         s.unbind(&a, t0);
         assert_eq!(s.bind(&a, t0), Ok(()), "a bound token is never evicted");
     }

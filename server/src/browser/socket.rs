@@ -51,6 +51,10 @@ pub async fn run(shared: Arc<Shared>, ws: WebSocket, token: &str) {
 }
 
 async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
+    let Some(client) = shared.client.get().cloned() else {
+        // The route checks this before upgrading; the module cannot unset it.
+        return;
+    };
     tracing::info!("page connected");
 
     let (mut sink, mut stream) = ws.split();
@@ -66,8 +70,17 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
     let (notice_tx, mut notices) = mpsc::channel(4);
     lock(&shared.pages).insert(page, notice_tx);
 
-    let mut conn = Conn { shared: shared.clone(), page, out: out.clone(), uplink: Uplink::default(), dropped: Dropped::default(), meter: Meter::default(), advice: FpsAdvice::default() };
-    let end = match Downlink::start(&shared.client, out.clone()).await {
+    let mut conn = Conn {
+        shared: shared.clone(),
+        client: client.clone(),
+        page,
+        out: out.clone(),
+        uplink: Uplink::default(),
+        dropped: Dropped::default(),
+        meter: Meter::default(),
+        advice: FpsAdvice::default(),
+    };
+    let end = match Downlink::start(&client, out.clone()).await {
         Err(e) => End::Close(CLOSE_ERROR, format!("hub unavailable: {e}")),
         Ok(downlink) => {
             conn.welcome().await;
@@ -104,7 +117,10 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
             } else {
                 tracing::info!(code, %reason, "closing page socket");
             }
-            let frame = CloseFrame { code, reason: reason.into() };
+            let frame = CloseFrame {
+                code,
+                reason: reason.into(),
+            };
             let _ = out.send(Message::Close(Some(frame))).await;
         }
     }
@@ -115,6 +131,7 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
 
 struct Conn {
     shared: Arc<Shared>,
+    client: flow::Client,
     page: PageId,
     out: mpsc::Sender<Message>,
     uplink: Uplink,
@@ -130,7 +147,11 @@ impl Conn {
 
     async fn welcome(&self) {
         let holder = lock(&self.shared.roles).holder();
-        let role = if holder.is_some() { RoleState::Busy } else { RoleState::Free };
+        let role = if holder.is_some() {
+            RoleState::Busy
+        } else {
+            RoleState::Free
+        };
         self.send_json(json!({
             "type": "welcome",
             "version": 1,
@@ -140,7 +161,7 @@ impl Conn {
             "video": {"width": 640, "height": 360, "fps": 15, "format": "jpeg"},
             "fft": {
                 "size": spectrum::FFT_SIZE, "bins": spectrum::BINS, "rate": 22050, "window": "hann",
-                "hop": self.shared.config.fft_hop, "scale": "linear, full-scale sine = 1.0",
+                "hop": self.shared.fft_hop, "scale": "linear, full-scale sine = 1.0",
             },
             "role": {"state": role},
         }))
@@ -148,7 +169,8 @@ impl Conn {
     }
 
     async fn send_role(&self, state: RoleState) {
-        self.send_json(json!({"type": "role", "state": state})).await;
+        self.send_json(json!({"type": "role", "state": state}))
+            .await;
     }
 
     fn is_holder(&self) -> bool {
@@ -169,7 +191,8 @@ impl Conn {
     }
 
     fn binary(&mut self, frame: Bytes) -> Result<(), End> {
-        let media = wire::parse_media(frame).map_err(|e| End::Close(CLOSE_UNSUPPORTED, e.to_string()))?;
+        let media =
+            wire::parse_media(frame).map_err(|e| End::Close(CLOSE_UNSUPPORTED, e.to_string()))?;
         let accepted = match media.kind {
             FrameKind::Audio => {
                 self.meter.audio_frames += 1;
@@ -203,7 +226,11 @@ impl Conn {
             Err(e) => return Err(End::Close(CLOSE_UNSUPPORTED, e.to_string())),
         };
         match msg {
-            PageMessage::Hello { version, client, autostart } => {
+            PageMessage::Hello {
+                version,
+                client,
+                autostart,
+            } => {
                 tracing::info!(version, %client, autostart, "hello");
             }
             PageMessage::Claim => {
@@ -220,18 +247,26 @@ impl Conn {
                 self.send_role(RoleState::Released).await;
             }
             PageMessage::Media { audio, video } => {
-                if self.is_holder() {
-                    if let Err(e) = self.uplink.set_media(&self.shared.client, audio, video).await {
-                        tracing::warn!(error = %e, "cannot create media channels");
-                        self.send_json(json!({"type": "error", "code": "channel", "message": e.to_string()})).await;
-                    }
+                if !self.is_holder() {
+                    return Ok(());
+                }
+                if let Err(e) = self.uplink.set_media(&self.client, audio, video).await {
+                    tracing::warn!(error = %e, "cannot create media channels");
+                    self.send_json(
+                        json!({"type": "error", "code": "channel", "message": e.to_string()}),
+                    )
+                    .await;
                 }
             }
             PageMessage::Ctrl { data } => {
-                if self.is_holder() {
-                    if let Err(e) = self.uplink.ctrl(&self.shared.client, data.to_string()).await {
-                        self.send_json(json!({"type": "error", "code": "channel", "message": e.to_string()})).await;
-                    }
+                if !self.is_holder() {
+                    return Ok(());
+                }
+                if let Err(e) = self.uplink.ctrl(&self.client, data.to_string()).await {
+                    self.send_json(
+                        json!({"type": "error", "code": "channel", "message": e.to_string()}),
+                    )
+                    .await;
                 }
             }
             PageMessage::Ping { t } => self.send_json(json!({"type": "pong", "t": t})).await,
@@ -258,14 +293,18 @@ impl Conn {
         };
         let (audio, video) = self.uplink.sending();
         // Status comes every second: when the page is this far behind, skipping one loses nothing.
-        let _ = self.out.try_send(Message::Text(json!({
-            "type": "status",
-            "role": role,
-            "in": {"audio_fps": m.audio_frames, "video_fps": m.video_frames, "audio_level_dbfs": level},
-            "sending": {"audio": audio, "video": video},
-            "dropped": self.dropped,
-            "audio_dropped": self.uplink.audio_drops(),
-            "advice": {"video_fps": fps},
-        }).to_string().into()));
+        let _ = self.out.try_send(Message::Text(
+            json!({
+                "type": "status",
+                "role": role,
+                "in": {"audio_fps": m.audio_frames, "video_fps": m.video_frames, "audio_level_dbfs": level},
+                "sending": {"audio": audio, "video": video},
+                "dropped": self.dropped,
+                "audio_dropped": self.uplink.audio_drops(),
+                "advice": {"video_fps": fps},
+            })
+            .to_string()
+            .into(),
+        ));
     }
 }

@@ -25,7 +25,10 @@ pub struct SpectrumAnalyser {
 
 impl std::fmt::Debug for SpectrumAnalyser {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SpectrumAnalyser").field("hop", &self.hop).field("pending", &self.pending.len()).finish()
+        f.debug_struct("SpectrumAnalyser")
+            .field("hop", &self.hop)
+            .field("pending", &self.pending.len())
+            .finish()
     }
 }
 
@@ -54,13 +57,21 @@ impl SpectrumAnalyser {
 
     /// Adds s16le PCM bytes (a trailing odd byte is ignored) and calls `emit` with each spectrum that completes.
     pub fn push_pcm(&mut self, pcm: &[u8], mut emit: impl FnMut(&[f32])) {
-        self.pending.extend(pcm.chunks_exact(2).map(|b| f32::from(i16::from_le_bytes([b[0], b[1]])) / 32768.0));
+        self.pending.extend(
+            pcm.chunks_exact(2)
+                .map(|b| f32::from(i16::from_le_bytes([b[0], b[1]])) / 32768.0),
+        );
         let mut mags = [0f32; BINS];
         while self.pending.len() >= FFT_SIZE {
-            for (slot, (s, w)) in self.buf.iter_mut().zip(self.pending.iter().zip(&self.window)) {
+            for (slot, (s, w)) in self
+                .buf
+                .iter_mut()
+                .zip(self.pending.iter().zip(&self.window))
+            {
                 *slot = Complex::new(s * w, 0.0);
             }
-            self.fft.process_with_scratch(&mut self.buf, &mut self.scratch);
+            self.fft
+                .process_with_scratch(&mut self.buf, &mut self.scratch);
             for (m, c) in mags.iter_mut().zip(&self.buf) {
                 *m = c.norm() * self.norm;
             }
@@ -98,9 +109,14 @@ mod tests {
         }
         assert_eq!(spectra.len(), 22050 / FFT_SIZE);
         let s = &spectra[5];
-        let peak = (0..BINS).max_by(|&i, &j| s[i].total_cmp(&s[j])).expect("bins");
+        let peak = (0..BINS)
+            .max_by(|&i, &j| s[i].total_cmp(&s[j]))
+            .expect("bins");
         let peak_hz = peak as f32 * 22050.0 / FFT_SIZE as f32;
-        assert!((peak_hz - 1000.0).abs() < 22050.0 / FFT_SIZE as f32, "peak at {peak_hz} Hz");
+        assert!(
+            (peak_hz - 1000.0).abs() < 22050.0 / FFT_SIZE as f32,
+            "peak at {peak_hz} Hz"
+        );
         // Between bins the Hann window loses up to ~1.4 dB; a 0.5 sine reads 0.42..0.5.
         assert!(s[peak] > 0.42 && s[peak] < 0.51, "magnitude {}", s[peak]);
         let far = s[peak + 20];

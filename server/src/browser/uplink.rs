@@ -20,7 +20,8 @@ const AUDIO_QUEUE: usize = 50;
 
 pub const AUDIO_HEADER: &str =
     r#"{"format":"s16le","rate":22050,"channels":1,"chunk_ms":20,"source":"browser"}"#;
-pub const VIDEO_HEADER: &str = r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;
+pub const VIDEO_HEADER: &str =
+    r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;
 const CTRL_HEADER: &str = r#"{"format":"json","source":"browser"}"#;
 
 #[derive(Debug)]
@@ -30,7 +31,12 @@ struct Lane {
 }
 
 impl Lane {
-    async fn open(client: &flow::Client, name: &str, header: &str, capacity: usize) -> Result<Lane, flow::FlowError> {
+    async fn open(
+        client: &flow::Client,
+        name: &str,
+        header: &str,
+        capacity: usize,
+    ) -> Result<Lane, flow::FlowError> {
         let publisher = client.publisher(name, header).await?;
         let queue = Arc::new(DropOldest::new(capacity));
         let rx = queue.clone();
@@ -68,7 +74,12 @@ pub struct Uplink {
 
 impl Uplink {
     /// Opens or closes lanes to match what the page says it sends.
-    pub async fn set_media(&mut self, client: &flow::Client, audio: bool, video: bool) -> Result<(), flow::FlowError> {
+    pub async fn set_media(
+        &mut self,
+        client: &flow::Client,
+        audio: bool,
+        video: bool,
+    ) -> Result<(), flow::FlowError> {
         if !audio {
             self.close_audio();
         }
@@ -76,10 +87,12 @@ impl Uplink {
             self.close_video();
         }
         if audio && self.audio.is_none() {
-            self.audio = Some(Lane::open(client, channels::AUDIO, AUDIO_HEADER, AUDIO_QUEUE).await?);
+            self.audio =
+                Some(Lane::open(client, channels::AUDIO, AUDIO_HEADER, AUDIO_QUEUE).await?);
         }
         if video && self.video.is_none() {
-            self.video = Some(Lane::open(client, channels::VIDEO, VIDEO_HEADER, VIDEO_QUEUE).await?);
+            self.video =
+                Some(Lane::open(client, channels::VIDEO, VIDEO_HEADER, VIDEO_QUEUE).await?);
         }
         Ok(())
     }
@@ -114,7 +127,11 @@ impl Uplink {
     }
 
     /// Publishes a control message on `Agent.ctrl`, creating the channel on first use.
-    pub async fn ctrl(&mut self, client: &flow::Client, json: String) -> Result<(), flow::FlowError> {
+    pub async fn ctrl(
+        &mut self,
+        client: &flow::Client,
+        json: String,
+    ) -> Result<(), flow::FlowError> {
         if self.ctrl.is_none() {
             self.ctrl = Some(client.publisher(channels::CTRL, CTRL_HEADER).await?);
         }

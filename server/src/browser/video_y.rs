@@ -4,38 +4,65 @@
 //! `Agent.video` and costs nothing. When conversion is slower than the camera it converts the newest frame and
 //! skips the rest (counted), so it never builds a backlog.
 
-use std::time::Duration;
+use std::time::Instant;
 
+use serde_json::json;
 use tokio::sync::watch;
 
-use super::channels;
 use super::luma::grey_jpeg;
+use super::{channels, on_demand};
+use crate::module::{Module, ModuleContext, ModuleFuture};
 
-const HEADER: &str = r#"{"format":"jpeg","colour":"grey","width":640,"height":360,"source":"Agent.video"}"#;
+const HEADER: &str =
+    r#"{"format":"jpeg","colour":"grey","width":640,"height":360,"source":"Agent.video"}"#;
 
-pub async fn run(client: flow::Client, quality: u8, mut shutdown: watch::Receiver<bool>) {
-    let publisher = loop {
-        match client.publisher(channels::VIDEO_Y, HEADER).await {
-            Ok(p) => break p,
-            Err(e) => {
-                tracing::warn!(error = %e, "cannot create {}; retrying", channels::VIDEO_Y);
-                tokio::select! {
-                    _ = shutdown.changed() => return,
-                    _ = tokio::time::sleep(Duration::from_secs(2)) => {}
-                }
-            }
-        }
+/// The `video_y` module.
+#[derive(Debug)]
+pub struct VideoY {
+    pub quality: u8,
+}
+
+impl Module for VideoY {
+    fn name(&self) -> &'static str {
+        "video_y"
+    }
+
+    fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
+        Box::pin(async move {
+            let (client, shutdown) = (ctx.client.clone(), ctx.shutdown.clone());
+            run(client, self.quality, shutdown, move |figures| {
+                ctx.report(figures)
+            })
+            .await;
+            Ok(())
+        })
+    }
+}
+
+/// Conversion figures, reported at `/api/status` every this many frames.
+const REPORT_EVERY: u64 = 30;
+
+/// Runs until shutdown; `report` receives the conversion figures now and then.
+pub async fn run(
+    client: flow::Client,
+    quality: u8,
+    mut shutdown: watch::Receiver<bool>,
+    report: impl Fn(serde_json::Value),
+) {
+    let Some(publisher) =
+        on_demand::output(&client, channels::VIDEO_Y, HEADER, &mut shutdown).await
+    else {
+        return;
     };
     let mut listening = publisher.subscribers();
     let mut skipped: u64 = 0;
     let mut failures: u64 = 0;
+    let mut converted: u64 = 0;
+    let mut busy_us: u64 = 0;
     loop {
         // Idle until someone subscribes.
-        while !*listening.borrow_and_update() {
-            tokio::select! {
-                _ = shutdown.changed() => return,
-                r = listening.changed() => if r.is_err() { return },
-            }
+        if !on_demand::until_listened(&mut listening, &mut shutdown).await {
+            return;
         }
         let source = match client.subscribe(channels::VIDEO).await {
             Ok(s) => s,
@@ -48,19 +75,25 @@ pub async fn run(client: flow::Client, quality: u8, mut shutdown: watch::Receive
         loop {
             tokio::select! {
                 _ = shutdown.changed() => return,
-                r = listening.changed() => {
-                    if r.is_err() { return }
-                    if !*listening.borrow_and_update() { break }
-                }
+                _ = on_demand::unlistened(&mut listening) => break,
                 got = source.recv_latest() => {
                     let Some((data, older)) = got else { return };
                     skipped += older as u64;
                     // Decoding and encoding take milliseconds of CPU: keep them off the async workers.
                     let jpeg = data.payload;
-                    let converted = tokio::task::spawn_blocking(move || grey_jpeg(&jpeg, quality)).await;
-                    match converted {
+                    let started = Instant::now();
+                    let result = tokio::task::spawn_blocking(move || grey_jpeg(&jpeg, quality)).await;
+                    busy_us += started.elapsed().as_micros() as u64;
+                    match result {
                         Ok(Ok(grey)) => {
                             if publisher.publish(grey.jpeg).await.is_err() { return }
+                            converted += 1;
+                            if converted.is_multiple_of(REPORT_EVERY) {
+                                report(json!({
+                                    "converted": converted, "skipped": skipped, "failed": failures,
+                                    "mean_ms": busy_us as f64 / 1000.0 / converted as f64,
+                                }));
+                            }
                         }
                         Ok(Err(e)) => {
                             failures += 1;

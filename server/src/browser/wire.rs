@@ -45,7 +45,9 @@ pub enum WireError {
     Version(u8),
     #[error("binary frame kind 0x{0:02x} is not one a page may send")]
     Kind(u8),
-    #[error("audio payload of {0} bytes is not whole s16 samples within 2..={MAX_AUDIO_BYTES} bytes")]
+    #[error(
+        "audio payload of {0} bytes is not whole s16 samples within 2..={MAX_AUDIO_BYTES} bytes"
+    )]
     Audio(usize),
     #[error("video payload of {0} bytes is not a JPEG within 2..={MAX_VIDEO_BYTES} bytes")]
     Video(usize),
@@ -67,13 +69,17 @@ pub fn parse_media(frame: Bytes) -> Result<MediaFrame, WireError> {
     let payload = frame.slice(HEADER_BYTES..);
     let kind = match frame[0] {
         0x01 => {
-            if payload.len() < 2 || payload.len() > MAX_AUDIO_BYTES || payload.len() % 2 != 0 {
+            if payload.len() < 2
+                || payload.len() > MAX_AUDIO_BYTES
+                || !payload.len().is_multiple_of(2)
+            {
                 return Err(WireError::Audio(payload.len()));
             }
             FrameKind::Audio
         }
         0x02 => {
-            if payload.len() < 2 || payload.len() > MAX_VIDEO_BYTES || payload[..2] != [0xFF, 0xD8] {
+            if payload.len() < 2 || payload.len() > MAX_VIDEO_BYTES || payload[..2] != [0xFF, 0xD8]
+            {
                 return Err(WireError::Video(payload.len()));
             }
             FrameKind::Video
@@ -120,9 +126,6 @@ pub enum PageMessage {
     Ctrl {
         data: serde_json::Value,
     },
-    Subscribe {
-        channels: Vec<String>,
-    },
     Ping {
         t: f64,
     },
@@ -141,17 +144,27 @@ pub fn parse_text(text: &str) -> Result<PageText, WireError> {
     if text.len() > MAX_TEXT_BYTES {
         return Err(WireError::TextTooLong(text.len()));
     }
-    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| WireError::Json(e.to_string()))?;
-    let kind = value.get("type").and_then(|t| t.as_str()).unwrap_or_default().to_string();
+    let value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| WireError::Json(e.to_string()))?;
+    let kind = value
+        .get("type")
+        .and_then(|t| t.as_str())
+        .unwrap_or_default()
+        .to_string();
     match serde_json::from_value::<PageMessage>(value) {
         Ok(msg) => Ok(PageText::Message(msg)),
         Err(_) if !is_known_type(&kind) => Ok(PageText::Unknown(kind)),
-        Err(e) => Err(WireError::Json(format!("malformed \"{kind}\" message: {e}"))),
+        Err(e) => Err(WireError::Json(format!(
+            "malformed \"{kind}\" message: {e}"
+        ))),
     }
 }
 
 fn is_known_type(kind: &str) -> bool {
-    matches!(kind, "hello" | "claim" | "release" | "media" | "ctrl" | "subscribe" | "ping")
+    matches!(
+        kind,
+        "hello" | "claim" | "release" | "media" | "ctrl" | "ping"
+    )
 }
 
 /// The role states the server reports to a page.
@@ -192,12 +205,30 @@ mod tests {
 
     #[test]
     fn broken_frames_are_refused_with_a_reason() {
-        assert_eq!(parse_media(Bytes::from_static(&[1, 1, 0])), Err(WireError::Short(3)));
-        assert_eq!(parse_media(frame(0x01, 2, &[0, 0])), Err(WireError::Version(2)));
-        assert_eq!(parse_media(frame(0x81, 1, &[0, 0])), Err(WireError::Kind(0x81)));
-        assert_eq!(parse_media(frame(0x01, 1, &[0, 0, 0])), Err(WireError::Audio(3)));
-        assert_eq!(parse_media(frame(0x01, 1, &vec![0; MAX_AUDIO_BYTES + 2])), Err(WireError::Audio(8822)));
-        assert_eq!(parse_media(frame(0x02, 1, &[0x89, 0x50, 0x4E])), Err(WireError::Video(3)));
+        assert_eq!(
+            parse_media(Bytes::from_static(&[1, 1, 0])),
+            Err(WireError::Short(3))
+        );
+        assert_eq!(
+            parse_media(frame(0x01, 2, &[0, 0])),
+            Err(WireError::Version(2))
+        );
+        assert_eq!(
+            parse_media(frame(0x81, 1, &[0, 0])),
+            Err(WireError::Kind(0x81))
+        );
+        assert_eq!(
+            parse_media(frame(0x01, 1, &[0, 0, 0])),
+            Err(WireError::Audio(3))
+        );
+        assert_eq!(
+            parse_media(frame(0x01, 1, &vec![0; MAX_AUDIO_BYTES + 2])),
+            Err(WireError::Audio(8822))
+        );
+        assert_eq!(
+            parse_media(frame(0x02, 1, &[0x89, 0x50, 0x4E])),
+            Err(WireError::Video(3))
+        );
         let e = parse_media(frame(0x02, 1, &[1])).expect_err("one byte is no JPEG");
         assert!(e.to_string().contains("not a JPEG"), "{e}");
     }
@@ -210,15 +241,29 @@ mod tests {
 
     #[test]
     fn text_messages_parse_and_unknown_types_are_tolerated() {
-        assert_eq!(parse_text(r#"{"type":"claim"}"#), Ok(PageText::Message(PageMessage::Claim)));
+        assert_eq!(
+            parse_text(r#"{"type":"claim"}"#),
+            Ok(PageText::Message(PageMessage::Claim))
+        );
         assert_eq!(
             parse_text(r#"{"type":"media","audio":true}"#),
-            Ok(PageText::Message(PageMessage::Media { audio: true, video: false }))
+            Ok(PageText::Message(PageMessage::Media {
+                audio: true,
+                video: false
+            }))
         );
-        assert_eq!(parse_text(r#"{"type":"dance"}"#), Ok(PageText::Unknown("dance".into())));
+        assert_eq!(
+            parse_text(r#"{"type":"dance"}"#),
+            Ok(PageText::Unknown("dance".into()))
+        );
         assert!(matches!(parse_text("not json"), Err(WireError::Json(_))));
-        assert!(matches!(parse_text(r#"{"type":"ping","t":"x"}"#), Err(WireError::Json(m)) if m.contains("ping")));
-        let long = format!(r#"{{"type":"ctrl","data":"{}"}}"#, "x".repeat(MAX_TEXT_BYTES));
+        assert!(
+            matches!(parse_text(r#"{"type":"ping","t":"x"}"#), Err(WireError::Json(m)) if m.contains("ping"))
+        );
+        let long = format!(
+            r#"{{"type":"ctrl","data":"{}"}}"#,
+            "x".repeat(MAX_TEXT_BYTES)
+        );
         assert!(matches!(parse_text(&long), Err(WireError::TextTooLong(_))));
     }
 }

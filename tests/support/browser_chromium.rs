@@ -1,0 +1,295 @@
+//! Drives Debian's headless Chromium for the browser tests over the Chrome DevTools Protocol (CDP).
+//!
+//! CDP is the protocol WebDriver implementations and playwright themselves use underneath; speaking it directly
+//! over one WebSocket (tokio-tungstenite, already in the workspace) needs no driver binary of a matching version
+//! and no browser download. Chromium runs with fake media devices fed from files, so the page's real capture path
+//! (getUserMedia, AudioWorklet, canvas JPEG encoding) runs on recorded fixtures.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::process::Stdio;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{Context, anyhow, bail};
+use base64::Engine;
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio::io::{AsyncBufReadExt, BufReader};
+use tokio::process::{Child, Command};
+use tokio::sync::{mpsc, oneshot};
+use tokio_tungstenite::tungstenite::Message;
+
+/// What the fake microphone and camera play (both loop).
+#[derive(Debug, Clone)]
+pub struct FakeMedia {
+    pub audio_wav: PathBuf,
+    pub video_y4m: PathBuf,
+}
+
+type Pending = Arc<Mutex<HashMap<u64, oneshot::Sender<Result<Value, String>>>>>;
+
+/// A running headless Chromium and its DevTools connection; killed on drop.
+#[derive(Debug)]
+pub struct Chromium {
+    child: Child,
+    out: mpsc::Sender<String>,
+    pending: Pending,
+    next_id: AtomicU64,
+    _profile: TempProfile,
+}
+
+/// One tab, attached with a flat CDP session.
+#[derive(Debug, Clone)]
+pub struct Tab {
+    pub target_id: String,
+    session_id: String,
+}
+
+impl Chromium {
+    /// Starts `chromium` (or `$CHROMIUM`) headless with fake media devices playing `media`.
+    pub async fn launch(media: &FakeMedia) -> anyhow::Result<Chromium> {
+        let exe = std::env::var("CHROMIUM").unwrap_or_else(|_| "chromium".into());
+        let profile = TempProfile::new()?;
+        let mut child = Command::new(&exe)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--no-first-run",
+                "--no-default-browser-check",
+                "--disable-background-timer-throttling",
+                "--disable-renderer-backgrounding",
+                "--disable-backgrounding-occluded-windows",
+                "--autoplay-policy=no-user-gesture-required",
+                "--use-fake-ui-for-media-stream",
+                "--use-fake-device-for-media-stream",
+                "--window-size=1400,860",
+                "--remote-debugging-port=0",
+            ])
+            .arg(format!("--user-data-dir={}", profile.0.display()))
+            .arg(format!(
+                "--use-file-for-fake-audio-capture={}",
+                media.audio_wav.display()
+            ))
+            .arg(format!(
+                "--use-file-for-fake-video-capture={}",
+                media.video_y4m.display()
+            ))
+            .arg("about:blank")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .kill_on_drop(true)
+            .spawn()
+            .with_context(|| format!("starting {exe} (apt-get install chromium)"))?;
+        let stderr = child.stderr.take().context("chromium stderr")?;
+        let url = devtools_url(stderr).await?;
+        let (ws, _) = tokio_tungstenite::connect_async(url.as_str())
+            .await
+            .context("connecting to DevTools")?;
+        let (mut sink, mut stream) = ws.split();
+        let (out, mut out_rx) = mpsc::channel::<String>(64);
+        tokio::spawn(async move {
+            while let Some(text) = out_rx.recv().await {
+                if sink.send(Message::Text(text.into())).await.is_err() {
+                    break;
+                }
+            }
+        });
+        let pending: Pending = Arc::default();
+        let routes = pending.clone();
+        tokio::spawn(async move {
+            while let Some(Ok(msg)) = stream.next().await {
+                let Message::Text(text) = msg else { continue };
+                let Ok(v) = serde_json::from_str::<Value>(text.as_str()) else {
+                    continue;
+                };
+                // Events carry no id; only replies are routed.
+                let Some(id) = v.get("id").and_then(Value::as_u64) else {
+                    continue;
+                };
+                let tx = routes.lock().unwrap_or_else(|p| p.into_inner()).remove(&id);
+                if let Some(tx) = tx {
+                    let result = match v.get("error") {
+                        Some(e) => Err(e.to_string()),
+                        None => Ok(v.get("result").cloned().unwrap_or(Value::Null)),
+                    };
+                    let _ = tx.send(result);
+                }
+            }
+        });
+        Ok(Chromium {
+            child,
+            out,
+            pending,
+            next_id: AtomicU64::new(1),
+            _profile: profile,
+        })
+    }
+
+    async fn command(
+        &self,
+        session: Option<&str>,
+        method: &str,
+        params: Value,
+    ) -> anyhow::Result<Value> {
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let mut msg = json!({"id": id, "method": method, "params": params});
+        if let Some(s) = session {
+            msg["sessionId"] = json!(s);
+        }
+        let (tx, rx) = oneshot::channel();
+        self.pending
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(id, tx);
+        self.out
+            .send(msg.to_string())
+            .await
+            .map_err(|_| anyhow!("DevTools connection closed"))?;
+        let reply = tokio::time::timeout(Duration::from_secs(30), rx)
+            .await
+            .map_err(|_| anyhow!("{method}: no reply within 30 s"))?
+            .map_err(|_| anyhow!("{method}: DevTools connection closed"))?;
+        reply.map_err(|e| anyhow!("{method}: {e}"))
+    }
+
+    /// Opens `url` in a new tab.
+    pub async fn open(&self, url: &str) -> anyhow::Result<Tab> {
+        let created = self
+            .command(None, "Target.createTarget", json!({"url": url}))
+            .await?;
+        let target_id = created["targetId"]
+            .as_str()
+            .context("createTarget: no targetId")?
+            .to_string();
+        let attached = self
+            .command(
+                None,
+                "Target.attachToTarget",
+                json!({"targetId": target_id, "flatten": true}),
+            )
+            .await?;
+        let session_id = attached["sessionId"]
+            .as_str()
+            .context("attachToTarget: no sessionId")?
+            .to_string();
+        Ok(Tab {
+            target_id,
+            session_id,
+        })
+    }
+
+    /// Evaluates `expression` in the tab (promises are awaited) and returns its JSON value.
+    pub async fn eval(&self, tab: &Tab, expression: &str) -> anyhow::Result<Value> {
+        let r = self
+            .command(
+                Some(&tab.session_id),
+                "Runtime.evaluate",
+                json!({"expression": expression, "returnByValue": true, "awaitPromise": true}),
+            )
+            .await?;
+        if let Some(ex) = r.get("exceptionDetails") {
+            bail!("page threw evaluating {expression:?}: {ex}");
+        }
+        Ok(r["result"].get("value").cloned().unwrap_or(Value::Null))
+    }
+
+    /// Polls `expression` every 100 ms until it is `true`, for at most `timeout`.
+    pub async fn wait_for(
+        &self,
+        tab: &Tab,
+        expression: &str,
+        timeout: Duration,
+    ) -> anyhow::Result<()> {
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            // Early in a page's life the hook may not exist yet: an exception is "not yet".
+            if let Ok(Value::Bool(true)) = self.eval(tab, expression).await {
+                return Ok(());
+            }
+            if tokio::time::Instant::now() >= deadline {
+                bail!("timed out after {timeout:?} waiting for `{expression}`");
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    /// A PNG screenshot of the tab.
+    pub async fn screenshot(&self, tab: &Tab) -> anyhow::Result<Vec<u8>> {
+        let r = self
+            .command(
+                Some(&tab.session_id),
+                "Page.captureScreenshot",
+                json!({"format": "png"}),
+            )
+            .await?;
+        let data = r["data"].as_str().context("captureScreenshot: no data")?;
+        Ok(base64::engine::general_purpose::STANDARD.decode(data)?)
+    }
+
+    /// Closes a tab (its page unloads: sockets close, devices stop).
+    pub async fn close(&self, tab: &Tab) -> anyhow::Result<()> {
+        self.command(
+            None,
+            "Target.closeTarget",
+            json!({"targetId": tab.target_id}),
+        )
+        .await
+        .map(drop)
+    }
+
+    /// Stops the browser.
+    pub async fn quit(mut self) {
+        let _ = self.child.kill().await;
+    }
+}
+
+/// Reads Chromium's stderr until it prints its DevTools address; keeps draining it afterwards.
+async fn devtools_url(stderr: tokio::process::ChildStderr) -> anyhow::Result<String> {
+    let mut lines = BufReader::new(stderr).lines();
+    let found = tokio::time::timeout(Duration::from_secs(30), async {
+        while let Ok(Some(line)) = lines.next_line().await {
+            if let Some(pos) = line.find("ws://") {
+                return Some(line[pos..].trim().to_string());
+            }
+        }
+        None
+    })
+    .await
+    .map_err(|_| anyhow!("chromium printed no DevTools address within 30 s"))?;
+    let url = found.context("chromium exited before printing its DevTools address")?;
+    // A full stderr pipe would block the browser: keep reading it.
+    tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
+    Ok(url)
+}
+
+/// A fresh profile directory per browser, removed afterwards.
+#[derive(Debug)]
+struct TempProfile(PathBuf);
+
+impl TempProfile {
+    fn new() -> anyhow::Result<TempProfile> {
+        let dir = std::env::temp_dir().join(format!(
+            "agent-chromium-{}-{}",
+            std::process::id(),
+            rand_suffix()
+        ));
+        std::fs::create_dir_all(&dir)?;
+        Ok(TempProfile(dir))
+    }
+}
+
+impl Drop for TempProfile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn rand_suffix() -> u64 {
+    use std::hash::{BuildHasher, RandomState};
+    RandomState::new().hash_one(std::time::SystemTime::now())
+}
