@@ -1,1 +1,18 @@
-//! The robot-agent server library: hub core, transports, HTTP and modules.
+//! The robot-agent server: the flow hub (channels, services, pair database,
+//! pulses), its transports (TCP, Unix socket, WebSocket), the HTTP edge and
+//! the internal modules. See ARCHITECTURE.md for the map.
+
+pub mod config;
+pub mod http;
+pub mod hub;
+pub mod module;
+pub mod modules;
+pub mod net;
+pub mod pairdb;
+pub mod pulse;
+pub mod server;
+pub mod session;
+pub mod tokens;
+
+pub use config::Config;
+pub use server::{RunningServer, Shared, start};

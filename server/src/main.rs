@@ -1,3 +1,86 @@
-//! The robot-agent server binary.
+//! The robot-agent server binary: parse options, load the configuration, run
+//! until Ctrl-C or SIGTERM, shut down cleanly.
 
-fn main() {}
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Parser;
+use robot_agent::Config;
+use tracing_subscriber::EnvFilter;
+
+/// The robot agent: flow hub, avatar web UI and internal modules.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Args {
+    /// Configuration file layered over the embedded defaults.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// HTTP address (UI, /api, /flow WebSocket).
+    #[arg(long)]
+    http: Option<String>,
+    /// FlowProtocol TCP address ("" disables).
+    #[arg(long)]
+    flow_tcp: Option<String>,
+    /// FlowProtocol Unix socket path ("" disables).
+    #[arg(long)]
+    flow_unix: Option<String>,
+    /// Directory for tokens, the pair database and the socket.
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+}
+
+#[tokio::main]
+async fn main() {
+    if let Err(e) = run(Args::parse()).await {
+        eprintln!("robot-agent: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
+    let mut config = match Config::load(args.config.as_deref()) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("robot-agent: invalid configuration: {e}");
+            std::process::exit(2);
+        }
+    };
+    if let Some(v) = args.http {
+        config.server.http = v;
+    }
+    if let Some(v) = args.flow_tcp {
+        config.server.flow_tcp = v;
+    }
+    if let Some(v) = args.flow_unix {
+        config.server.flow_unix = v;
+    }
+    if let Some(v) = args.data_dir {
+        config.server.data_dir = v;
+    }
+    let filter =
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
+    tracing_subscriber::fmt().with_env_filter(filter).init();
+
+    let server = robot_agent::start(config)
+        .await
+        .context("starting robot-agent")?;
+    println!("robot-agent ready: open http://{}/", server.http);
+    if let Some(tcp) = server.flow_tcp {
+        println!("flow hub: tcp://{tcp}  ws://{}/flow", server.http);
+    }
+    if let Some(unix) = &server.flow_unix {
+        println!("flow hub: unix:{}", unix.display());
+    }
+    wait_for_signal().await?;
+    server.shutdown().await;
+    Ok(())
+}
+
+async fn wait_for_signal() -> anyhow::Result<()> {
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    tokio::select! {
+        r = tokio::signal::ctrl_c() => r?,
+        _ = term.recv() => {}
+    }
+    Ok(())
+}

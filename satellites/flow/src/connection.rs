@@ -32,7 +32,11 @@ pub struct FrameReader<R> {
 
 impl<R: TransportRead> FrameReader<R> {
     pub fn new(io: R, max_frame: usize) -> Self {
-        FrameReader { io, buf: BytesMut::with_capacity(64 * 1024), max_frame }
+        FrameReader {
+            io,
+            buf: BytesMut::with_capacity(64 * 1024),
+            max_frame,
+        }
     }
 
     /// The next frame, or `None` when the peer closed cleanly between frames.
@@ -42,7 +46,11 @@ impl<R: TransportRead> FrameReader<R> {
                 return Ok(Some(frame));
             }
             if self.io.read_into(&mut self.buf).await? == 0 {
-                return if self.buf.is_empty() { Ok(None) } else { Err(ConnError::TruncatedFrame) };
+                return if self.buf.is_empty() {
+                    Ok(None)
+                } else {
+                    Err(ConnError::TruncatedFrame)
+                };
             }
         }
     }
@@ -69,7 +77,10 @@ pub struct FrameWriter<W> {
 
 impl<W: TransportWrite> FrameWriter<W> {
     pub fn new(io: W) -> Self {
-        FrameWriter { io, buf: BytesMut::with_capacity(64 * 1024) }
+        FrameWriter {
+            io,
+            buf: BytesMut::with_capacity(64 * 1024),
+        }
     }
 
     /// The pending output buffer, for encoders to append frames to.
@@ -117,6 +128,10 @@ impl<T: Transport> Connection<T> {
     pub fn new(transport: T, max_frame: usize) -> Self {
         let peer = transport.peer();
         let (r, w) = transport.split();
-        Connection { peer, reader: FrameReader::new(r, max_frame), writer: FrameWriter::new(w) }
+        Connection {
+            peer,
+            reader: FrameReader::new(r, max_frame),
+            writer: FrameWriter::new(w),
+        }
     }
 }

@@ -17,7 +17,9 @@ pub mod sketch;
 pub mod tick;
 pub mod transport;
 
-pub use client::{Client, ClientEvent, ConnectOptions, Data, Publisher, Service, ServiceCall, Subscription};
+pub use client::{
+    Client, ClientEvent, ConnectOptions, Data, Publisher, Service, ServiceCall, Subscription,
+};
 pub use error::FlowError;
 pub use protocol::{ChanId, ChannelInfo, ChannelKind, ChannelStats, ErrorCode};
 pub use transport::FlowAddr;

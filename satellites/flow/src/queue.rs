@@ -30,7 +30,10 @@ impl<T> DropOldest<T> {
     /// A queue holding at most `capacity` items (at least one).
     pub fn new(capacity: usize) -> Self {
         DropOldest {
-            inner: Mutex::new(Inner { items: VecDeque::new(), closed: false }),
+            inner: Mutex::new(Inner {
+                items: VecDeque::new(),
+                closed: false,
+            }),
             notify: Notify::new(),
             capacity: capacity.max(1),
             dropped: AtomicU64::new(0),
@@ -131,7 +134,9 @@ impl<T> DropOldest<T> {
 /// Locks a mutex, recovering the data if a panicking thread poisoned it: the
 /// queue's invariants hold after every statement, so the data is still sound.
 pub(crate) fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    mutex
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 #[cfg(test)]

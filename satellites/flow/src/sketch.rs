@@ -14,11 +14,20 @@ pub trait Sketch: Send {
     fn setup(&mut self, client: &Client) -> impl Future<Output = Result<(), FlowError>> + Send;
 
     /// Runs on every enabled tick. Return an error to stop the sketch.
-    fn tick(&mut self, client: &Client, tick: Tick) -> impl Future<Output = Result<(), FlowError>> + Send;
+    fn tick(
+        &mut self,
+        client: &Client,
+        tick: Tick,
+    ) -> impl Future<Output = Result<(), FlowError>> + Send;
 }
 
 /// Connects, runs `setup`, then calls `tick` on each pulse until Ctrl-C or an error.
-pub async fn run<S: Sketch>(addr: &FlowAddr, opts: ConnectOptions, ticks: TickConfig, mut sketch: S) -> Result<(), FlowError> {
+pub async fn run<S: Sketch>(
+    addr: &FlowAddr,
+    opts: ConnectOptions,
+    ticks: TickConfig,
+    mut sketch: S,
+) -> Result<(), FlowError> {
     let client = Client::connect(addr, opts).await?;
     sketch.setup(&client).await?;
     let mut pulses = Pulses::new(ticks);

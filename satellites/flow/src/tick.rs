@@ -28,7 +28,11 @@ pub struct TickConfig {
 impl Default for TickConfig {
     /// The paper's defaults: FastTick 10 ms, SlowTick 100 ms, OneSecTick 1 s.
     fn default() -> Self {
-        TickConfig { fast: Some(Duration::from_millis(10)), slow: Some(Duration::from_millis(100)), one_sec: true }
+        TickConfig {
+            fast: Some(Duration::from_millis(10)),
+            slow: Some(Duration::from_millis(100)),
+            one_sec: true,
+        }
     }
 }
 

@@ -1,3 +1,242 @@
-//! flowctl: the command-line client of the flow hub.
+//! flowctl: the command-line client of the flow hub (list channels, watch,
+//! publish files, WAV audio and JPEG sequences, call services, use the pair
+//! database). Errors are one line on stderr and a non-zero exit.
 
-fn main() {}
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use clap::{Parser, Subcommand};
+use flow::{Client, ConnectOptions, FlowAddr};
+
+mod commands;
+mod wav;
+
+/// Command-line client of the flow hub.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Args {
+    /// Hub address: tcp://HOST:PORT, unix:PATH or ws://HOST:PORT/flow.
+    #[arg(
+        long,
+        env = "FLOW_ADDR",
+        default_value = "tcp://127.0.0.1:9000",
+        global = true
+    )]
+    addr: String,
+    /// Login token; by default read from DATA_DIR/token.
+    #[arg(long, env = "FLOW_TOKEN", global = true, hide_env_values = true)]
+    token: Option<String>,
+    /// The server's data directory, where the token file is.
+    #[arg(long, env = "ROBOT_AGENT_DATA", default_value = "data", global = true)]
+    data_dir: PathBuf,
+    /// Use the admin token (DATA_DIR/admin.token) instead of the user token.
+    #[arg(long, global = true)]
+    admin: bool,
+    /// Login name shown as the owner of channels this command creates.
+    #[arg(long = "login", default_value = "flowctl", global = true)]
+    login_name: String,
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// List channels with their properties and counters.
+    Channels {
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print messages of a channel, waiting for it to exist.
+    Echo {
+        name: String,
+        /// Stop after this many messages.
+        #[arg(long)]
+        count: Option<u64>,
+        /// One JSON object per message (seq, timestamp, size, payload if JSON).
+        #[arg(long)]
+        json: bool,
+    },
+    /// Publish on a streaming channel (created if needed): stdin lines, a file, or a directory of files at a rate.
+    Pub {
+        name: String,
+        #[arg(long, default_value = "{}")]
+        header: String,
+        /// Publish this file's bytes as one message.
+        #[arg(long, conflicts_with = "dir")]
+        file: Option<PathBuf>,
+        /// Publish every file in this directory, in name order, as one message each.
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// Messages per second with --dir.
+        #[arg(long, default_value_t = 15.0)]
+        rate: f64,
+        /// With --dir: go through the directory this many times.
+        #[arg(long, default_value_t = 1)]
+        repeat: u32,
+        /// Wait until someone subscribes before publishing.
+        #[arg(long)]
+        wait_subscriber: bool,
+    },
+    /// Stream a WAV file as s16le mono 22050 Hz PCM (resampled and mixed down if needed).
+    PubWav {
+        name: String,
+        file: PathBuf,
+        #[arg(long, default_value_t = 20)]
+        chunk_ms: u32,
+        /// Pace chunks in real time instead of as fast as possible.
+        #[arg(long)]
+        realtime: bool,
+        /// Append this much silence after the file (lets a VAD see the end of speech).
+        #[arg(long, default_value_t = 0)]
+        tail_ms: u32,
+        /// Wait until someone subscribes before streaming.
+        #[arg(long)]
+        wait_subscriber: bool,
+    },
+    /// Call a service with a JSON request and print the response.
+    Call {
+        name: String,
+        json: String,
+        #[arg(long, default_value_t = 10_000)]
+        timeout_ms: u64,
+    },
+    /// Pair database commands.
+    Db {
+        /// Database to use (default: main).
+        #[arg(long)]
+        db: Option<String>,
+        #[command(subcommand)]
+        op: DbOp,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum DbOp {
+    /// List the variables of the database.
+    List,
+    Get {
+        key: String,
+    },
+    Set {
+        key: String,
+        json: String,
+    },
+    Del {
+        key: String,
+    },
+    /// List the databases.
+    Dbs,
+    Create {
+        name: String,
+    },
+    Drop {
+        name: String,
+    },
+}
+
+#[tokio::main(flavor = "current_thread")]
+async fn main() {
+    let args = Args::parse();
+    if let Err(e) = run(args).await {
+        eprintln!("flowctl: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
+    let addr: FlowAddr = args.addr.parse().map_err(anyhow::Error::msg)?;
+    let token = match args.token.clone() {
+        Some(t) => t,
+        None => {
+            let file = args
+                .data_dir
+                .join(if args.admin { "admin.token" } else { "token" });
+            std::fs::read_to_string(&file)
+                .with_context(|| {
+                    format!(
+                        "no token: pass --token or point --data-dir at the server's data ({})",
+                        file.display()
+                    )
+                })?
+                .trim()
+                .to_string()
+        }
+    };
+    let mut opts = ConnectOptions::new(args.login_name.clone(), token);
+    opts.reconnect = false;
+    opts.asynchronous = matches!(
+        args.command,
+        Cmd::Echo { .. } | Cmd::Pub { .. } | Cmd::PubWav { .. }
+    );
+    opts.queue = 1024;
+    let client = Client::connect(&addr, opts).await?;
+    let result = dispatch(&client, args.command).await;
+    client.close();
+    result
+}
+
+async fn dispatch(client: &Client, cmd: Cmd) -> anyhow::Result<()> {
+    match cmd {
+        Cmd::Channels { json } => commands::channels(client, json).await,
+        Cmd::Echo { name, count, json } => commands::echo(client, &name, count, json).await,
+        Cmd::Pub {
+            name,
+            header,
+            file,
+            dir,
+            rate,
+            repeat,
+            wait_subscriber,
+        } => {
+            let publisher =
+                commands::open_publisher(client, &name, &header, wait_subscriber).await?;
+            match (file, dir) {
+                (Some(file), _) => commands::pub_file(&publisher, &file).await?,
+                (None, Some(dir)) => {
+                    if !(rate > 0.0 && rate <= 10_000.0) {
+                        bail!("--rate must be between 0 and 10000");
+                    }
+                    commands::pub_dir(&publisher, &dir, rate, repeat).await?
+                }
+                (None, None) => commands::pub_stdin(&publisher).await?,
+            }
+            // Everything sent before the ping's reply has reached the hub.
+            client.ping().await?;
+            Ok(())
+        }
+        Cmd::PubWav {
+            name,
+            file,
+            chunk_ms,
+            realtime,
+            tail_ms,
+            wait_subscriber,
+        } => {
+            if !(5..=1000).contains(&chunk_ms) {
+                bail!("--chunk-ms must be between 5 and 1000");
+            }
+            let header = r#"{"mime":"audio/pcm","rate":22050,"channels":1,"format":"s16le"}"#;
+            let publisher =
+                commands::open_publisher(client, &name, header, wait_subscriber).await?;
+            let pcm = wav::load_as_22050_mono(&file)?;
+            commands::pub_pcm(&publisher, &pcm, chunk_ms, realtime, tail_ms).await?;
+            client.ping().await?;
+            Ok(())
+        }
+        Cmd::Call {
+            name,
+            json,
+            timeout_ms,
+        } => {
+            serde_json::from_str::<serde_json::Value>(&json)
+                .context("the request is not valid JSON")?;
+            let response = client
+                .call(&name, json.into_bytes(), Duration::from_millis(timeout_ms))
+                .await?;
+            commands::print_payload(&response);
+            Ok(())
+        }
+        Cmd::Db { db, op } => commands::db(client, db.as_deref(), op).await,
+    }
+}

@@ -19,8 +19,8 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 
 use crate::error::FlowError;
 use crate::protocol::{
-    ChanId, ChanRef, ChannelInfo, ChannelKind, Command, DEFAULT_MAX_FRAME, Envelope, ErrorCode, Reply,
-    ReqId, encode_command,
+    ChanId, ChanRef, ChannelInfo, ChannelKind, Command, DEFAULT_MAX_FRAME, Envelope, ErrorCode,
+    Reply, ReqId, encode_command,
 };
 use crate::queue::lock;
 use crate::transport::{FlowAddr, Link};
@@ -72,11 +72,21 @@ pub enum ClientEvent {
     Connected,
     Disconnected(String),
     ChannelAdded(ChannelInfo),
-    ChannelRemoved { id: ChanId, name: String },
-    HeaderChanged { id: ChanId, name: String, header: String },
+    ChannelRemoved {
+        id: ChanId,
+        name: String,
+    },
+    HeaderChanged {
+        id: ChanId,
+        name: String,
+        header: String,
+    },
     DbChanged(String),
     /// The answer to [`Client::call_async`], matched by its request id.
-    CallResult { req: ReqId, result: Result<Bytes, FlowError> },
+    CallResult {
+        req: ReqId,
+        result: Result<Bytes, FlowError>,
+    },
     Goodbye(String),
 }
 
@@ -141,7 +151,9 @@ impl Client {
     /// Connects to `addr`, logs in and, for asynchronous options, starts events.
     /// Fails if the first attempt fails; later losses reconnect in the background.
     pub async fn connect(addr: &FlowAddr, opts: ConnectOptions) -> Result<Client, FlowError> {
-        let link = Link::connect(addr).await.map_err(|e| FlowError::Connect(format!("{addr}: {e}")))?;
+        let link = Link::connect(addr)
+            .await
+            .map_err(|e| FlowError::Connect(format!("{addr}: {e}")))?;
         Self::start(link, Some(addr.clone()), opts).await
     }
 
@@ -151,7 +163,11 @@ impl Client {
         Self::start(link, None, opts).await
     }
 
-    async fn start(link: Link, addr: Option<FlowAddr>, opts: ConnectOptions) -> Result<Client, FlowError> {
+    async fn start(
+        link: Link,
+        addr: Option<FlowAddr>,
+        opts: ConnectOptions,
+    ) -> Result<Client, FlowError> {
         let (out, out_rx) = mpsc::channel(OUT_QUEUE);
         let inner = Arc::new(Inner {
             opts,
@@ -165,6 +181,8 @@ impl Client {
             closed: AtomicBool::new(false),
         });
         let established = session::establish(&inner, link).await?;
+        // Connected from now: requests may be queued before the task first runs.
+        inner.connected.send_replace(true);
         tokio::spawn(session::supervise(inner.clone(), out_rx, established));
         Ok(Client { inner })
     }
@@ -192,14 +210,16 @@ impl Client {
     /// Closes the connection for good; pending requests fail with `Closed`.
     pub fn close(&self) {
         self.inner.closed.store(true, Ordering::SeqCst);
-        let _ = self.inner.closing.send(true);
+        self.inner.closing.send_replace(true);
     }
 
     // ------------------------------------------------------------ channels
 
     /// Creates (or re-creates after a reconnect) a streaming channel owned by this client.
     pub async fn publisher(&self, name: &str, header: &str) -> Result<Publisher, FlowError> {
-        let owned = self.add_owned(name, ChannelKind::Stream, header, None).await?;
+        let owned = self
+            .add_owned(name, ChannelKind::Stream, header, None)
+            .await?;
         Ok(Publisher::new(owned, self.clone()))
     }
 
@@ -208,7 +228,9 @@ impl Client {
         // Bounded: a service that falls this far behind answers "overloaded"
         // instead of queueing without limit (the hub also caps calls in flight).
         let (tx, rx) = mpsc::channel(256);
-        let owned = self.add_owned(name, ChannelKind::Service, header, Some(tx)).await?;
+        let owned = self
+            .add_owned(name, ChannelKind::Service, header, Some(tx))
+            .await?;
         Ok(Service::new(owned, rx, self.clone()))
     }
 
@@ -222,15 +244,22 @@ impl Client {
         check_json(header)?;
         let owned = Arc::new(Owned::new(name, kind, header, calls));
         let cmd = owned.add_command();
-        self.request_hooked(cmd, Some(Hook::Added(owned.clone()))).await?;
-        lock(&self.inner.state).owned.insert(name.to_string(), owned.clone());
+        self.request_hooked(cmd, Some(Hook::Added(owned.clone())))
+            .await?;
+        lock(&self.inner.state)
+            .owned
+            .insert(name.to_string(), owned.clone());
         Ok(owned)
     }
 
     /// Subscribes to a channel by name; sticky across removals and reconnects.
     pub async fn subscribe(&self, name: &str) -> Result<Subscription, FlowError> {
         let shared = Arc::new(SubShared::new(name, self.inner.opts.queue));
-        lock(&self.inner.state).subs.entry(name.to_string()).or_default().push(shared.clone());
+        lock(&self.inner.state)
+            .subs
+            .entry(name.to_string())
+            .or_default()
+            .push(shared.clone());
         match self.activate_subscription(name).await {
             Ok(()) => {}
             // Not there yet: the reader subscribes when the hub announces it.
@@ -246,8 +275,12 @@ impl Client {
     }
 
     async fn activate_subscription(&self, name: &str) -> Result<(), FlowError> {
-        let cmd = Command::Subscribe { chan: ChanRef::Name(name.to_string()) };
-        self.request_hooked(cmd, Some(Hook::Subscribed(name.to_string()))).await.map(drop)
+        let cmd = Command::Subscribe {
+            chan: ChanRef::Name(name.to_string()),
+        };
+        self.request_hooked(cmd, Some(Hook::Subscribed(name.to_string())))
+            .await
+            .map(drop)
     }
 
     /// Called when a local subscription handle goes away.
@@ -255,7 +288,9 @@ impl Client {
         let name = shared.name.clone();
         let now_unused = {
             let mut state = lock(&self.inner.state);
-            let Some(list) = state.subs.get_mut(&name) else { return };
+            let Some(list) = state.subs.get_mut(&name) else {
+                return;
+            };
             list.retain(|s| !Arc::ptr_eq(s, shared));
             if list.is_empty() {
                 state.subs.remove(&name);
@@ -266,7 +301,9 @@ impl Client {
             }
         };
         if now_unused {
-            self.send_nowait(Command::Unsubscribe { chan: ChanRef::Name(name) });
+            self.send_nowait(Command::Unsubscribe {
+                chan: ChanRef::Name(name),
+            });
         }
     }
 
@@ -278,7 +315,9 @@ impl Client {
             state.owned_ids.retain(|_, o| !Arc::ptr_eq(o, owned));
         }
         if let Some(id) = owned.id() {
-            self.send_nowait(Command::RemoveChannel { chan: ChanRef::Id(id) });
+            self.send_nowait(Command::RemoveChannel {
+                chan: ChanRef::Id(id),
+            });
         }
     }
 
@@ -292,7 +331,12 @@ impl Client {
 
     /// One channel by name.
     pub async fn channel(&self, name: &str) -> Result<ChannelInfo, FlowError> {
-        match self.request(Command::GetChannel { chan: ChanRef::Name(name.into()) }).await? {
+        match self
+            .request(Command::GetChannel {
+                chan: ChanRef::Name(name.into()),
+            })
+            .await?
+        {
             Reply::Channel(info) => Ok(info),
             _ => Err(FlowError::UnexpectedReply("get channel")),
         }
@@ -300,17 +344,29 @@ impl Client {
 
     /// Removes any channel by name (owners, or admins for others' channels).
     pub async fn remove_channel(&self, name: &str) -> Result<(), FlowError> {
-        self.request(Command::RemoveChannel { chan: ChanRef::Name(name.into()) }).await.map(drop)
+        self.request(Command::RemoveChannel {
+            chan: ChanRef::Name(name.into()),
+        })
+        .await
+        .map(drop)
     }
 
     // ------------------------------------------------------------ services
 
     /// Calls a service and waits for its response (or the hub's error after `timeout`).
-    pub async fn call(&self, name: &str, payload: impl Into<Bytes>, timeout: Duration) -> Result<Bytes, FlowError> {
+    pub async fn call(
+        &self,
+        name: &str,
+        payload: impl Into<Bytes>,
+        timeout: Duration,
+    ) -> Result<Bytes, FlowError> {
         let cmd = call_command(name, payload.into(), timeout);
         // The hub enforces the timeout and always answers; the margin only
         // covers a hub that has gone silent.
-        match self.request_timeout(cmd, None, timeout + Duration::from_secs(2)).await? {
+        match self
+            .request_timeout(cmd, None, timeout + Duration::from_secs(2))
+            .await?
+        {
             Reply::Payload(p) => Ok(p),
             _ => Err(FlowError::UnexpectedReply("call")),
         }
@@ -318,9 +374,15 @@ impl Client {
 
     /// Sends a call without waiting; the response arrives as
     /// [`ClientEvent::CallResult`] with the returned request id.
-    pub async fn call_async(&self, name: &str, payload: impl Into<Bytes>, timeout: Duration) -> Result<ReqId, FlowError> {
+    pub async fn call_async(
+        &self,
+        name: &str,
+        payload: impl Into<Bytes>,
+        timeout: Duration,
+    ) -> Result<ReqId, FlowError> {
         let req = self.register(None, Some(Hook::CallAsync));
-        self.send_frame(req, call_command(name, payload.into(), timeout)).await?;
+        self.send_frame(req, call_command(name, payload.into(), timeout))
+            .await?;
         Ok(req)
     }
 
@@ -328,17 +390,22 @@ impl Client {
 
     /// Selects the current database of this connection (restored on reconnect).
     pub async fn db_select(&self, name: &str) -> Result<(), FlowError> {
-        self.request(Command::DbSelect { name: name.into() }).await?;
+        self.request(Command::DbSelect { name: name.into() })
+            .await?;
         lock(&self.inner.state).db = Some(name.to_string());
         Ok(())
     }
 
     pub async fn db_create(&self, name: &str) -> Result<(), FlowError> {
-        self.request(Command::DbCreate { name: name.into() }).await.map(drop)
+        self.request(Command::DbCreate { name: name.into() })
+            .await
+            .map(drop)
     }
 
     pub async fn db_remove(&self, name: &str) -> Result<(), FlowError> {
-        self.request(Command::DbRemove { name: name.into() }).await.map(drop)
+        self.request(Command::DbRemove { name: name.into() })
+            .await
+            .map(drop)
     }
 
     pub async fn db_list(&self) -> Result<Vec<String>, FlowError> {
@@ -347,13 +414,20 @@ impl Client {
 
     /// Stores a JSON value; returns once the hub has made the write durable.
     pub async fn var_set(&self, key: &str, value: &serde_json::Value) -> Result<(), FlowError> {
-        self.request(Command::VarSet { key: key.into(), value: value.to_string() }).await.map(drop)
+        self.request(Command::VarSet {
+            key: key.into(),
+            value: value.to_string(),
+        })
+        .await
+        .map(drop)
     }
 
     /// A variable's value, or `None` when it does not exist.
     pub async fn var_get(&self, key: &str) -> Result<Option<serde_json::Value>, FlowError> {
         match self.request(Command::VarGet { key: key.into() }).await {
-            Ok(Reply::Value(text)) => serde_json::from_str(&text).map(Some).map_err(|e| FlowError::Json(e.to_string())),
+            Ok(Reply::Value(text)) => serde_json::from_str(&text)
+                .map(Some)
+                .map_err(|e| FlowError::Json(e.to_string())),
             Ok(_) => Err(FlowError::UnexpectedReply("get variable")),
             Err(FlowError::Hub(e)) if e.code == ErrorCode::NotFound => Ok(None),
             Err(e) => Err(e),
@@ -361,7 +435,9 @@ impl Client {
     }
 
     pub async fn var_del(&self, key: &str) -> Result<(), FlowError> {
-        self.request(Command::VarDel { key: key.into() }).await.map(drop)
+        self.request(Command::VarDel { key: key.into() })
+            .await
+            .map(drop)
     }
 
     pub async fn var_list(&self) -> Result<Vec<String>, FlowError> {
@@ -381,10 +457,16 @@ impl Client {
     }
 
     async fn request_hooked(&self, cmd: Command, hook: Option<Hook>) -> Result<Reply, FlowError> {
-        self.request_timeout(cmd, hook, self.inner.opts.request_timeout).await
+        self.request_timeout(cmd, hook, self.inner.opts.request_timeout)
+            .await
     }
 
-    async fn request_timeout(&self, cmd: Command, hook: Option<Hook>, timeout: Duration) -> Result<Reply, FlowError> {
+    async fn request_timeout(
+        &self,
+        cmd: Command,
+        hook: Option<Hook>,
+        timeout: Duration,
+    ) -> Result<Reply, FlowError> {
         if self.inner.closed.load(Ordering::SeqCst) {
             return Err(FlowError::Closed);
         }
@@ -399,7 +481,9 @@ impl Client {
         }
         match tokio::time::timeout(timeout, rx).await {
             Ok(Ok(result)) => result,
-            Ok(Err(_)) => Err(FlowError::Disconnected("connection closed before the reply".into())),
+            Ok(Err(_)) => Err(FlowError::Disconnected(
+                "connection closed before the reply".into(),
+            )),
             Err(_) => {
                 lock(&self.inner.state).pending.remove(&req);
                 Err(FlowError::Timeout(timeout))
@@ -407,7 +491,11 @@ impl Client {
         }
     }
 
-    fn register(&self, tx: Option<oneshot::Sender<Result<Reply, FlowError>>>, hook: Option<Hook>) -> ReqId {
+    fn register(
+        &self,
+        tx: Option<oneshot::Sender<Result<Reply, FlowError>>>,
+        hook: Option<Hook>,
+    ) -> ReqId {
         let req = loop {
             let req = self.inner.next_req.fetch_add(1, Ordering::Relaxed);
             // Request id 0 means "no reply wanted"; skip it when the counter wraps.
@@ -415,13 +503,19 @@ impl Client {
                 break req;
             }
         };
-        lock(&self.inner.state).pending.insert(req, Pending { tx, hook });
+        lock(&self.inner.state)
+            .pending
+            .insert(req, Pending { tx, hook });
         req
     }
 
     async fn send_frame(&self, req: ReqId, command: Command) -> Result<(), FlowError> {
         let frame = encode(req, command);
-        self.inner.out.send(frame).await.map_err(|_| FlowError::Closed)
+        self.inner
+            .out
+            .send(frame)
+            .await
+            .map_err(|_| FlowError::Closed)
     }
 
     /// Queues a fire-and-forget command without waiting; used from `Drop`.
@@ -442,7 +536,11 @@ fn encode(req: ReqId, command: Command) -> Bytes {
 
 fn call_command(name: &str, payload: Bytes, timeout: Duration) -> Command {
     let timeout_ms = u32::try_from(timeout.as_millis()).unwrap_or(u32::MAX);
-    Command::Call { chan: ChanRef::Name(name.into()), timeout_ms, payload }
+    Command::Call {
+        chan: ChanRef::Name(name.into()),
+        timeout_ms,
+        payload,
+    }
 }
 
 fn names(reply: Reply) -> Result<Vec<String>, FlowError> {
@@ -453,5 +551,7 @@ fn names(reply: Reply) -> Result<Vec<String>, FlowError> {
 }
 
 fn check_json(text: &str) -> Result<(), FlowError> {
-    serde_json::from_str::<serde_json::Value>(text).map(drop).map_err(|e| FlowError::Json(e.to_string()))
+    serde_json::from_str::<serde_json::Value>(text)
+        .map(drop)
+        .map_err(|e| FlowError::Json(e.to_string()))
 }

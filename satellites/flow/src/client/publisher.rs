@@ -1,7 +1,7 @@
 //! Owning side of channels: publishers of streams and servers of services.
 
-use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
 
 use bytes::Bytes;
 use tokio::sync::{mpsc, watch};
@@ -24,7 +24,12 @@ pub(super) struct Owned {
 }
 
 impl Owned {
-    pub(super) fn new(name: &str, kind: ChannelKind, header: &str, calls: Option<mpsc::Sender<ServiceCall>>) -> Self {
+    pub(super) fn new(
+        name: &str,
+        kind: ChannelKind,
+        header: &str,
+        calls: Option<mpsc::Sender<ServiceCall>>,
+    ) -> Self {
         Owned {
             name: name.to_string(),
             kind,
@@ -36,7 +41,11 @@ impl Owned {
     }
 
     pub(super) fn add_command(&self) -> Command {
-        Command::AddChannel { kind: self.kind, name: self.name.clone(), header: lock(&self.header).clone() }
+        Command::AddChannel {
+            kind: self.kind,
+            name: self.name.clone(),
+            header: lock(&self.header).clone(),
+        }
     }
 
     pub(super) fn id(&self) -> Option<ChanId> {
@@ -57,13 +66,22 @@ impl Owned {
     pub(super) fn deliver_call(&self, chan: ChanId, call: CallId, payload: Bytes, client: Client) {
         let sender = lock(&self.calls).clone();
         let Some(sender) = sender else { return };
-        let request = ServiceCall { channel: chan, call, payload, client: client.clone(), answered: false };
+        let request = ServiceCall {
+            channel: chan,
+            call,
+            payload,
+            client: client.clone(),
+            answered: false,
+        };
         if let Err(err) = sender.try_send(request) {
             // The handler is this far behind (or gone): answer at once rather
             // than let the caller wait for its timeout.
             let mut request = err.into_inner();
             request.answered = true;
-            let reply = Command::Respond { call, result: Err("service overloaded".into()) };
+            let reply = Command::Respond {
+                call,
+                result: Err("service overloaded".into()),
+            };
             let _ = client.inner.out.try_send(encode(0, reply));
         }
     }
@@ -83,7 +101,11 @@ pub struct Publisher {
 
 impl Publisher {
     pub(super) fn new(owned: std::sync::Arc<Owned>, client: Client) -> Self {
-        Publisher { owned, client, skipped: AtomicU64::new(0) }
+        Publisher {
+            owned,
+            client,
+            skipped: AtomicU64::new(0),
+        }
     }
 
     pub fn name(&self) -> &str {
@@ -97,7 +119,12 @@ impl Publisher {
     /// Sends one message, waiting if the link's send queue is full.
     pub async fn publish(&self, payload: impl Into<Bytes>) -> Result<(), FlowError> {
         let frame = self.frame(payload.into())?;
-        self.client.inner.out.send(frame).await.map_err(|_| FlowError::Closed)
+        self.client
+            .inner
+            .out
+            .send(frame)
+            .await
+            .map_err(|_| FlowError::Closed)
     }
 
     /// Sends one message unless the link's send queue is full, in which case
@@ -115,7 +142,10 @@ impl Publisher {
     }
 
     fn frame(&self, payload: Bytes) -> Result<Bytes, FlowError> {
-        let chan = self.owned.id().ok_or_else(|| FlowError::NotReady(self.owned.name.clone()))?;
+        let chan = self
+            .owned
+            .id()
+            .ok_or_else(|| FlowError::NotReady(self.owned.name.clone()))?;
         Ok(encode(0, Command::Publish { chan, payload }))
     }
 
@@ -138,8 +168,17 @@ impl Publisher {
     pub async fn set_header(&self, header: &str) -> Result<(), FlowError> {
         super::check_json(header)?;
         *lock(&self.owned.header) = header.to_string();
-        let chan = self.owned.id().ok_or_else(|| FlowError::NotReady(self.owned.name.clone()))?;
-        self.client.request(Command::SetHeader { chan, header: header.to_string() }).await.map(drop)
+        let chan = self
+            .owned
+            .id()
+            .ok_or_else(|| FlowError::NotReady(self.owned.name.clone()))?;
+        self.client
+            .request(Command::SetHeader {
+                chan,
+                header: header.to_string(),
+            })
+            .await
+            .map(drop)
     }
 }
 
@@ -158,8 +197,16 @@ pub struct Service {
 }
 
 impl Service {
-    pub(super) fn new(owned: std::sync::Arc<Owned>, calls: mpsc::Receiver<ServiceCall>, client: Client) -> Self {
-        Service { owned, calls, client }
+    pub(super) fn new(
+        owned: std::sync::Arc<Owned>,
+        calls: mpsc::Receiver<ServiceCall>,
+        client: Client,
+    ) -> Self {
+        Service {
+            owned,
+            calls,
+            client,
+        }
     }
 
     pub fn name(&self) -> &str {
@@ -193,17 +240,30 @@ impl ServiceCall {
     /// Sends the response (or an error message) back to the caller.
     pub async fn respond(mut self, result: Result<Bytes, String>) -> Result<(), FlowError> {
         self.answered = true;
-        let frame = encode(0, Command::Respond { call: self.call, result });
-        self.client.inner.out.send(frame).await.map_err(|_| FlowError::Closed)
+        let frame = encode(
+            0,
+            Command::Respond {
+                call: self.call,
+                result,
+            },
+        );
+        self.client
+            .inner
+            .out
+            .send(frame)
+            .await
+            .map_err(|_| FlowError::Closed)
     }
 }
 
 impl Drop for ServiceCall {
     fn drop(&mut self) {
         if !self.answered {
-            let reply = Command::Respond { call: self.call, result: Err("request dropped unanswered".into()) };
+            let reply = Command::Respond {
+                call: self.call,
+                result: Err("request dropped unanswered".into()),
+            };
             let _ = self.client.inner.out.try_send(encode(0, reply));
         }
     }
 }
-

@@ -12,9 +12,7 @@ use tracing::{debug, info, warn};
 use super::{ClientEvent, Hook, Inner, SessionInfo, encode};
 use crate::connection::{Connection, FrameReader, FrameWriter};
 use crate::error::FlowError;
-use crate::protocol::{
-    ChanRef, Command, ErrorCode, Event, PROTOCOL_VERSION, Reply, decode_event,
-};
+use crate::protocol::{ChanRef, Command, ErrorCode, Event, PROTOCOL_VERSION, Reply, decode_event};
 use crate::queue::lock;
 use crate::transport::{Link, LinkReader, LinkWriter};
 
@@ -27,21 +25,35 @@ pub(super) struct Established {
 /// Logs in (and switches to async) over a fresh link, synchronously, before
 /// any loop runs.
 pub(super) async fn establish(inner: &Arc<Inner>, link: Link) -> Result<Established, FlowError> {
-    let Connection { mut reader, mut writer, peer } = Connection::new(link, inner.opts.max_frame);
+    let Connection {
+        mut reader,
+        mut writer,
+        peer,
+    } = Connection::new(link, inner.opts.max_frame);
     let login = Command::Login {
         version: PROTOCOL_VERSION,
         token: inner.opts.token.clone(),
         name: inner.opts.name.clone(),
     };
     let reply = handshake_step(&mut reader, &mut writer, 1, login).await?;
-    let Reply::LoginOk { conn, admin, server, .. } = reply else {
+    let Reply::LoginOk {
+        conn,
+        admin,
+        server,
+        ..
+    } = reply
+    else {
         return Err(FlowError::UnexpectedReply("login"));
     };
     if inner.opts.asynchronous {
         handshake_step(&mut reader, &mut writer, 2, Command::SetAsync).await?;
     }
     debug!(%peer, conn, "logged in to {server}");
-    lock(&inner.state).session = Some(SessionInfo { conn, admin, server });
+    lock(&inner.state).session = Some(SessionInfo {
+        conn,
+        admin,
+        server,
+    });
     Ok(Established { reader, writer })
 }
 
@@ -52,16 +64,23 @@ async fn handshake_step(
     command: Command,
 ) -> Result<Reply, FlowError> {
     writer.buffer().extend_from_slice(&encode(req, command));
-    writer.flush().await.map_err(|e| FlowError::Connect(e.to_string()))?;
+    writer
+        .flush()
+        .await
+        .map_err(|e| FlowError::Connect(e.to_string()))?;
     let wait = async {
         loop {
             let frame = reader
                 .read_frame()
                 .await
                 .map_err(|e| FlowError::Connect(e.to_string()))?
-                .ok_or_else(|| FlowError::Connect("hub closed the connection during login".into()))?;
+                .ok_or_else(|| {
+                    FlowError::Connect("hub closed the connection during login".into())
+                })?;
             match decode_event(frame)? {
-                Event::Reply { req: r, result } if r == req => return result.map_err(FlowError::Hub),
+                Event::Reply { req: r, result } if r == req => {
+                    return result.map_err(FlowError::Hub);
+                }
                 Event::Goodbye { reason } => return Err(FlowError::Connect(reason)),
                 _ => continue,
             }
@@ -73,17 +92,21 @@ async fn handshake_step(
 }
 
 /// Runs sessions until the client is closed or reconnection is impossible.
-pub(super) async fn supervise(inner: Arc<Inner>, mut out_rx: mpsc::Receiver<Bytes>, first: Established) {
+pub(super) async fn supervise(
+    inner: Arc<Inner>,
+    mut out_rx: mpsc::Receiver<Bytes>,
+    first: Established,
+) {
     let mut session = first;
     let mut restore = false;
     loop {
-        let _ = inner.connected.send(true);
+        inner.connected.send_replace(true);
         let _ = inner.events.send(ClientEvent::Connected);
         if restore {
             tokio::spawn(restore_state(inner.clone()));
         }
         let reason = run(&inner, session, &mut out_rx).await;
-        let _ = inner.connected.send(false);
+        inner.connected.send_replace(false);
         forget_session(&inner, &reason);
         let _ = inner.events.send(ClientEvent::Disconnected(reason.clone()));
         if inner.closed.load(Ordering::SeqCst) || !inner.opts.reconnect {
@@ -138,8 +161,15 @@ async fn reconnect(inner: &Arc<Inner>) -> Option<Established> {
 const WRITE_BATCH: usize = 256 * 1024;
 
 /// Runs the read and write loops of one session; returns why it ended.
-async fn run(inner: &Arc<Inner>, session: Established, out_rx: &mut mpsc::Receiver<Bytes>) -> String {
-    let Established { mut reader, mut writer } = session;
+async fn run(
+    inner: &Arc<Inner>,
+    session: Established,
+    out_rx: &mut mpsc::Receiver<Bytes>,
+) -> String {
+    let Established {
+        mut reader,
+        mut writer,
+    } = session;
     let mut closing = inner.closing.subscribe();
     let read_loop = async {
         loop {
@@ -185,22 +215,48 @@ async fn run(inner: &Arc<Inner>, session: Established, out_rx: &mut mpsc::Receiv
 /// Handles one event; returns a reason to end the session, if any.
 fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
     match event {
-        Event::Data { chan, seq, ts_us, payload } => {
+        Event::Data {
+            chan,
+            seq,
+            ts_us,
+            payload,
+        } => {
             let state = lock(&inner.state);
-            if let Some(subs) = state.sub_ids.get(&chan).and_then(|name| state.subs.get(name)) {
+            if let Some(subs) = state
+                .sub_ids
+                .get(&chan)
+                .and_then(|name| state.subs.get(name))
+            {
                 for sub in subs {
-                    sub.queue.push(super::Data { channel: chan, seq, ts_us, payload: payload.clone() });
+                    sub.queue.push(super::Data {
+                        channel: chan,
+                        seq,
+                        ts_us,
+                        payload: payload.clone(),
+                    });
                 }
             }
         }
         Event::Reply { req, result } => on_reply(inner, req, result),
-        Event::ServiceRequest { chan, call, payload } => {
+        Event::ServiceRequest {
+            chan,
+            call,
+            payload,
+        } => {
             let owned = lock(&inner.state).owned_ids.get(&chan).cloned();
-            let client = super::Client { inner: inner.clone() };
+            let client = super::Client {
+                inner: inner.clone(),
+            };
             match owned {
                 Some(owned) => owned.deliver_call(chan, call, payload, client),
                 None => {
-                    let _ = inner.out.try_send(encode(0, Command::Respond { call, result: Err("no such service here".into()) }));
+                    let _ = inner.out.try_send(encode(
+                        0,
+                        Command::Respond {
+                            call,
+                            result: Err("no such service here".into()),
+                        },
+                    ));
                 }
             }
         }
@@ -213,10 +269,13 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
         Event::ChannelAdded(info) => {
             let wanted = {
                 let state = lock(&inner.state);
-                state.subs.contains_key(&info.name) && !state.sub_ids.values().any(|n| *n == info.name)
+                state.subs.contains_key(&info.name)
+                    && !state.sub_ids.values().any(|n| *n == info.name)
             };
             if wanted {
-                let client = super::Client { inner: inner.clone() };
+                let client = super::Client {
+                    inner: inner.clone(),
+                };
                 let name = info.name.clone();
                 tokio::spawn(async move {
                     if let Err(e) = client.activate_subscription(&name).await {
@@ -237,7 +296,9 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
             let _ = inner.events.send(ClientEvent::ChannelRemoved { id, name });
         }
         Event::HeaderChanged { id, name, header } => {
-            let _ = inner.events.send(ClientEvent::HeaderChanged { id, name, header });
+            let _ = inner
+                .events
+                .send(ClientEvent::HeaderChanged { id, name, header });
         }
         Event::DbChanged { name } => {
             let _ = inner.events.send(ClientEvent::DbChanged(name));
@@ -324,7 +385,9 @@ fn close_all(inner: &Arc<Inner>) {
 
 /// Re-creates channels, the database selection and subscriptions after a reconnect.
 async fn restore_state(inner: Arc<Inner>) {
-    let client = super::Client { inner: inner.clone() };
+    let client = super::Client {
+        inner: inner.clone(),
+    };
     let (owned, subs, db) = {
         let state = lock(&inner.state);
         let owned: Vec<_> = state.owned.values().cloned().collect();
@@ -332,7 +395,10 @@ async fn restore_state(inner: Arc<Inner>) {
         (owned, subs, state.db.clone())
     };
     for o in owned {
-        if let Err(e) = client.request_hooked(o.add_command(), Some(Hook::Added(o.clone()))).await {
+        if let Err(e) = client
+            .request_hooked(o.add_command(), Some(Hook::Added(o.clone())))
+            .await
+        {
             warn!("could not re-create channel {}: {e}", o.name);
         }
     }
@@ -342,8 +408,13 @@ async fn restore_state(inner: Arc<Inner>) {
         warn!("could not re-select database {db}: {e}");
     }
     for name in subs {
-        let cmd = Command::Subscribe { chan: ChanRef::Name(name.clone()) };
-        match client.request_hooked(cmd, Some(Hook::Subscribed(name.clone()))).await {
+        let cmd = Command::Subscribe {
+            chan: ChanRef::Name(name.clone()),
+        };
+        match client
+            .request_hooked(cmd, Some(Hook::Subscribed(name.clone())))
+            .await
+        {
             Ok(_) => {}
             Err(FlowError::Hub(e)) if e.code == ErrorCode::NotFound => {}
             Err(e) => warn!("could not re-subscribe to {name}: {e}"),

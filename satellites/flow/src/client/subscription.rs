@@ -28,7 +28,11 @@ pub(super) struct SubShared {
 
 impl SubShared {
     pub(super) fn new(name: &str, capacity: usize) -> Self {
-        SubShared { name: name.to_string(), queue: DropOldest::new(capacity), info: Mutex::new(None) }
+        SubShared {
+            name: name.to_string(),
+            queue: DropOldest::new(capacity),
+            info: Mutex::new(None),
+        }
     }
 
     pub(super) fn set_info(&self, info: ChannelInfo) {

@@ -13,7 +13,11 @@ use super::message::*;
 pub fn encode_command(env: &Envelope, out: &mut BytesMut) {
     let mut body = BodyWriter::start(out);
     let op = match &env.command {
-        Command::Login { version, token, name } => {
+        Command::Login {
+            version,
+            token,
+            name,
+        } => {
             body.u16(*version);
             body.str(token);
             body.str(name);
@@ -48,7 +52,11 @@ pub fn encode_command(env: &Envelope, out: &mut BytesMut) {
             body.bytes(payload);
             op::PUBLISH
         }
-        Command::Call { chan, timeout_ms, payload } => {
+        Command::Call {
+            chan,
+            timeout_ms,
+            payload,
+        } => {
             body.chref(chan);
             body.u32(*timeout_ms);
             body.bytes(payload);
@@ -128,13 +136,22 @@ pub fn encode_event(event: &Event, out: &mut BytesMut) {
             body.i16(*id);
             (op::STOP_PUBLISHING, 0)
         }
-        Event::ServiceRequest { chan, call, payload } => {
+        Event::ServiceRequest {
+            chan,
+            call,
+            payload,
+        } => {
             body.i16(*chan);
             body.u64(*call);
             body.bytes(payload);
             (op::SERVICE_REQUEST, 0)
         }
-        Event::Data { chan, seq, ts_us, payload } => {
+        Event::Data {
+            chan,
+            seq,
+            ts_us,
+            payload,
+        } => {
             body.i16(*chan);
             body.u64(*seq);
             body.u64(*ts_us);
@@ -238,7 +255,12 @@ impl<'a> BodyWriter<'a> {
     fn reply(&mut self, reply: &Reply) {
         match reply {
             Reply::Done => self.u8(0),
-            Reply::LoginOk { version, conn, admin, server } => {
+            Reply::LoginOk {
+                version,
+                conn,
+                admin,
+                server,
+            } => {
                 self.u8(1);
                 self.u16(*version);
                 self.u32(*conn);
@@ -302,10 +324,16 @@ pub fn decode_command(frame: RawFrame) -> Result<Envelope, DecodeError> {
             header: r.text("header")?,
         },
         op::REMOVE_CHANNEL => Command::RemoveChannel { chan: r.chref()? },
-        op::SET_HEADER => Command::SetHeader { chan: r.chan_id()?, header: r.text("header")? },
+        op::SET_HEADER => Command::SetHeader {
+            chan: r.chan_id()?,
+            header: r.text("header")?,
+        },
         op::SUBSCRIBE => Command::Subscribe { chan: r.chref()? },
         op::UNSUBSCRIBE => Command::Unsubscribe { chan: r.chref()? },
-        op::PUBLISH => Command::Publish { chan: r.chan_id()?, payload: r.rest() },
+        op::PUBLISH => Command::Publish {
+            chan: r.chan_id()?,
+            payload: r.rest(),
+        },
         op::CALL => Command::Call {
             chan: r.chref()?,
             timeout_ms: r.u32("timeout")?,
@@ -316,17 +344,31 @@ pub fn decode_command(frame: RawFrame) -> Result<Envelope, DecodeError> {
             let result = match r.u8("status")? {
                 0 => Ok(r.rest()),
                 1 => Err(String::from_utf8_lossy(&r.rest()).into_owned()),
-                other => return Err(DecodeError::BadValue { field: "status", value: other.into() }),
+                other => {
+                    return Err(DecodeError::BadValue {
+                        field: "status",
+                        value: other.into(),
+                    });
+                }
             };
             Command::Respond { call, result }
         }
         op::LIST_CHANNELS => Command::ListChannels,
         op::GET_CHANNEL => Command::GetChannel { chan: r.chref()? },
-        op::DB_SELECT => Command::DbSelect { name: r.str("database")? },
-        op::DB_CREATE => Command::DbCreate { name: r.str("database")? },
-        op::DB_REMOVE => Command::DbRemove { name: r.str("database")? },
+        op::DB_SELECT => Command::DbSelect {
+            name: r.str("database")?,
+        },
+        op::DB_CREATE => Command::DbCreate {
+            name: r.str("database")?,
+        },
+        op::DB_REMOVE => Command::DbRemove {
+            name: r.str("database")?,
+        },
         op::DB_LIST => Command::DbList,
-        op::VAR_SET => Command::VarSet { key: r.str("key")?, value: r.text("value")? },
+        op::VAR_SET => Command::VarSet {
+            key: r.str("key")?,
+            value: r.text("value")?,
+        },
         op::VAR_GET => Command::VarGet { key: r.str("key")? },
         op::VAR_DEL => Command::VarDel { key: r.str("key")? },
         op::VAR_LIST => Command::VarList,
@@ -334,16 +376,25 @@ pub fn decode_command(frame: RawFrame) -> Result<Envelope, DecodeError> {
         other => return Err(DecodeError::UnknownOp(other)),
     };
     r.end()?;
-    Ok(Envelope { req: frame.req, command })
+    Ok(Envelope {
+        req: frame.req,
+        command,
+    })
 }
 
 /// Decodes a hub frame into an event.
 pub fn decode_event(frame: RawFrame) -> Result<Event, DecodeError> {
     let mut r = BodyReader(frame.body);
     let event = match frame.op {
-        op::REPLY => Event::Reply { req: frame.req, result: r.reply()? },
+        op::REPLY => Event::Reply {
+            req: frame.req,
+            result: r.reply()?,
+        },
         op::CHANNEL_ADDED => Event::ChannelAdded(r.channel()?),
-        op::CHANNEL_REMOVED => Event::ChannelRemoved { id: r.chan_id()?, name: r.str("name")? },
+        op::CHANNEL_REMOVED => Event::ChannelRemoved {
+            id: r.chan_id()?,
+            name: r.str("name")?,
+        },
         op::HEADER_CHANGED => Event::HeaderChanged {
             id: r.chan_id()?,
             name: r.str("name")?,
@@ -362,8 +413,12 @@ pub fn decode_event(frame: RawFrame) -> Result<Event, DecodeError> {
             ts_us: r.u64("timestamp")?,
             payload: r.rest(),
         },
-        op::DB_CHANGED => Event::DbChanged { name: r.str("database")? },
-        op::GOODBYE => Event::Goodbye { reason: r.str("reason")? },
+        op::DB_CHANGED => Event::DbChanged {
+            name: r.str("database")?,
+        },
+        op::GOODBYE => Event::Goodbye {
+            reason: r.str("reason")?,
+        },
         other => return Err(DecodeError::UnknownOp(other)),
     };
     r.end()?;
@@ -375,7 +430,11 @@ struct BodyReader(Bytes);
 
 impl BodyReader {
     fn need(&self, n: usize, what: &'static str) -> Result<(), DecodeError> {
-        if self.0.remaining() < n { Err(DecodeError::Truncated(what)) } else { Ok(()) }
+        if self.0.remaining() < n {
+            Err(DecodeError::Truncated(what))
+        } else {
+            Ok(())
+        }
     }
     fn u8(&mut self, what: &'static str) -> Result<u8, DecodeError> {
         self.need(1, what)?;
@@ -401,7 +460,10 @@ impl BodyReader {
         self.need(2, "channel id")?;
         let id = self.0.get_i16_le();
         if id < 0 {
-            return Err(DecodeError::BadValue { field: "channel id", value: id.into() });
+            return Err(DecodeError::BadValue {
+                field: "channel id",
+                value: id.into(),
+            });
         }
         Ok(id)
     }
@@ -431,14 +493,20 @@ impl BodyReader {
         match self.u8("channel kind")? {
             0 => Ok(ChannelKind::Stream),
             1 => Ok(ChannelKind::Service),
-            other => Err(DecodeError::BadValue { field: "channel kind", value: other.into() }),
+            other => Err(DecodeError::BadValue {
+                field: "channel kind",
+                value: other.into(),
+            }),
         }
     }
     fn chref(&mut self) -> Result<ChanRef, DecodeError> {
         match self.u8("channel reference")? {
             0 => Ok(ChanRef::Id(self.chan_id()?)),
             1 => Ok(ChanRef::Name(self.str("channel name")?)),
-            other => Err(DecodeError::BadValue { field: "channel reference", value: other.into() }),
+            other => Err(DecodeError::BadValue {
+                field: "channel reference",
+                value: other.into(),
+            }),
         }
     }
     fn channel(&mut self) -> Result<ChannelInfo, DecodeError> {
@@ -492,11 +560,21 @@ impl BodyReader {
             7 => Reply::Pong,
             0xff => {
                 let raw = self.u16("error code")?;
-                let code = ErrorCode::from_u16(raw)
-                    .ok_or(DecodeError::BadValue { field: "error code", value: raw.into() })?;
-                return Ok(Err(ErrorReply { code, message: self.str("error message")? }));
+                let code = ErrorCode::from_u16(raw).ok_or(DecodeError::BadValue {
+                    field: "error code",
+                    value: raw.into(),
+                })?;
+                return Ok(Err(ErrorReply {
+                    code,
+                    message: self.str("error message")?,
+                }));
             }
-            other => return Err(DecodeError::BadValue { field: "reply tag", value: other.into() }),
+            other => {
+                return Err(DecodeError::BadValue {
+                    field: "reply tag",
+                    value: other.into(),
+                });
+            }
         };
         Ok(Ok(reply))
     }

@@ -25,5 +25,8 @@ pub enum DecodeError {
     #[error("invalid value for {field}: {value}")]
     BadValue { field: &'static str, value: i64 },
     #[error("invalid {field}: {reason}")]
-    Invalid { field: &'static str, reason: &'static str },
+    Invalid {
+        field: &'static str,
+        reason: &'static str,
+    },
 }

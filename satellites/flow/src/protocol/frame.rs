@@ -58,7 +58,10 @@ pub fn check(buf: &[u8], max_frame: usize) -> Result<Check, FrameError> {
     }
     let total = len + LEN_PREFIX;
     if total > max_frame {
-        return Err(FrameError::TooLarge { len: total, max: max_frame });
+        return Err(FrameError::TooLarge {
+            len: total,
+            max: max_frame,
+        });
     }
     if buf.len() < total {
         Ok(Check::Incomplete(total))
@@ -76,7 +79,11 @@ pub fn parse(buf: &mut BytesMut, total: usize) -> RawFrame {
     frame.advance(LEN_PREFIX);
     let op = frame.get_u8();
     let req = frame.get_u32_le();
-    RawFrame { op, req, body: frame.freeze() }
+    RawFrame {
+        op,
+        req,
+        body: frame.freeze(),
+    }
 }
 
 /// Writes a frame header for a body of `body_len` bytes.
@@ -103,7 +110,14 @@ mod tests {
         assert_eq!(check(&frame[..10], 100), Ok(Check::Incomplete(11)));
         assert_eq!(check(&frame, 100), Ok(Check::Complete(11)));
         let raw = parse(&mut frame, 11);
-        assert_eq!(raw, RawFrame { op: 3, req: 9, body: Bytes::from_static(&[1, 2]) });
+        assert_eq!(
+            raw,
+            RawFrame {
+                op: 3,
+                req: 9,
+                body: Bytes::from_static(&[1, 2])
+            }
+        );
         assert!(frame.is_empty());
     }
 
@@ -112,7 +126,10 @@ mod tests {
         assert_eq!(check(&[4, 0, 0, 0], 100), Err(FrameError::TooShort(4)));
         assert_eq!(
             check(&[0xff, 0xff, 0xff, 0xff], 1024),
-            Err(FrameError::TooLarge { len: 0xffff_ffff + 4, max: 1024 })
+            Err(FrameError::TooLarge {
+                len: 0xffff_ffff + 4,
+                max: 1024
+            })
         );
     }
 }

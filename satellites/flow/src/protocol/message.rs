@@ -113,11 +113,19 @@ pub struct Envelope {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Command {
     /// [0x01] `version:u16 | token:str | name:str`. The only command accepted before authentication.
-    Login { version: u16, token: String, name: String },
+    Login {
+        version: u16,
+        token: String,
+        name: String,
+    },
     /// [0x02] empty. Switches the connection to asynchronous: events start flowing.
     SetAsync,
     /// [0x03] `kind:u8 | name:str | header:text`. Replies with the new channel's info.
-    AddChannel { kind: ChannelKind, name: String, header: String },
+    AddChannel {
+        kind: ChannelKind,
+        name: String,
+        header: String,
+    },
     /// [0x04] `chan:chref`. Owner (or admin) only.
     RemoveChannel { chan: ChanRef },
     /// [0x05] `chan:i16 | header:text`. Owner only.
@@ -131,10 +139,17 @@ pub enum Command {
     /// [0x09] `chan:chref | timeout_ms:u32 | payload:rest`. The reply carries the
     /// owner's response, or an error when the owner is gone, overloaded, fails or
     /// does not answer within the timeout.
-    Call { chan: ChanRef, timeout_ms: u32, payload: Bytes },
+    Call {
+        chan: ChanRef,
+        timeout_ms: u32,
+        payload: Bytes,
+    },
     /// [0x0a] `call:u64 | status:u8 (0 ok, 1 error) | payload:rest`. A service owner's
     /// answer to [`Event::ServiceRequest`]; an error payload is a UTF-8 message.
-    Respond { call: CallId, result: Result<Bytes, String> },
+    Respond {
+        call: CallId,
+        result: Result<Bytes, String>,
+    },
     /// [0x0b] empty. Replies with every channel.
     ListChannels,
     /// [0x0c] `chan:chref`. Replies with one channel.
@@ -175,7 +190,12 @@ pub enum Command {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reply {
     Done,
-    LoginOk { version: u16, conn: u32, admin: bool, server: String },
+    LoginOk {
+        version: u16,
+        conn: u32,
+        admin: bool,
+        server: String,
+    },
     Channel(ChannelInfo),
     Channels(Vec<ChannelInfo>),
     Value(String),
@@ -239,7 +259,10 @@ pub struct ErrorReply {
 
 impl ErrorReply {
     pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
-        ErrorReply { code, message: message.into() }
+        ErrorReply {
+            code,
+            message: message.into(),
+        }
     }
 }
 
@@ -254,24 +277,40 @@ impl std::fmt::Display for ErrorReply {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Event {
     /// [0x80] `tag:u8 | reply-body` (see [`Reply`]) or `0xff | code:u16 | message:str`.
-    Reply { req: ReqId, result: Result<Reply, ErrorReply> },
+    Reply {
+        req: ReqId,
+        result: Result<Reply, ErrorReply>,
+    },
     /// [0x81] `channel-info`. To every asynchronous connection.
     ChannelAdded(ChannelInfo),
     /// [0x82] `id:i16 | name:str`. To every asynchronous connection.
     ChannelRemoved { id: ChanId, name: String },
     /// [0x83] `id:i16 | name:str | header:text`. To every asynchronous connection.
-    HeaderChanged { id: ChanId, name: String, header: String },
+    HeaderChanged {
+        id: ChanId,
+        name: String,
+        header: String,
+    },
     /// [0x84] `id:i16`. To the owner: the first subscriber arrived, start publishing.
     StartPublishing { id: ChanId },
     /// [0x85] `id:i16`. To the owner: the last subscriber left, stop publishing.
     StopPublishing { id: ChanId },
     /// [0x86] `chan:i16 | call:u64 | payload:rest`. To a service owner.
-    ServiceRequest { chan: ChanId, call: CallId, payload: Bytes },
+    ServiceRequest {
+        chan: ChanId,
+        call: CallId,
+        payload: Bytes,
+    },
     /// [0x87] `chan:i16 | seq:u64 | ts_us:u64 | payload:rest`. To subscribers.
     /// `seq` counts messages on the channel from 1 (gaps mean drops); `ts_us` is
     /// the hub's clock (µs since the Unix epoch) when the message was published,
     /// identical for every subscriber.
-    Data { chan: ChanId, seq: u64, ts_us: u64, payload: Bytes },
+    Data {
+        chan: ChanId,
+        seq: u64,
+        ts_us: u64,
+        payload: Bytes,
+    },
     /// [0x88] `name:str`. To the connection that selected a new current database.
     DbChanged { name: String },
     /// [0x89] `reason:str`. The hub is closing this connection (shutdown, overflow).

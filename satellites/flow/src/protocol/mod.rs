@@ -11,5 +11,5 @@ pub mod message;
 
 pub use codec::{decode_command, decode_event, encode_command, encode_event};
 pub use error::{DecodeError, FrameError};
-pub use frame::{Check, RawFrame, DEFAULT_MAX_FRAME};
+pub use frame::{Check, DEFAULT_MAX_FRAME, RawFrame};
 pub use message::*;

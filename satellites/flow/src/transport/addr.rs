@@ -34,7 +34,9 @@ impl FromStr for FlowAddr {
         } else if s.contains(':') && !s.contains('/') {
             Ok(FlowAddr::Tcp(s.to_string()))
         } else {
-            Err(format!("{s:?}: expected tcp://HOST:PORT, unix:PATH or ws://HOST:PORT/flow"))
+            Err(format!(
+                "{s:?}: expected tcp://HOST:PORT, unix:PATH or ws://HOST:PORT/flow"
+            ))
         }
     }
 }
@@ -55,9 +57,18 @@ mod tests {
 
     #[test]
     fn parses_each_form() {
-        assert_eq!("tcp://127.0.0.1:9000".parse(), Ok(FlowAddr::Tcp("127.0.0.1:9000".into())));
-        assert_eq!("127.0.0.1:9000".parse(), Ok(FlowAddr::Tcp("127.0.0.1:9000".into())));
-        assert_eq!("unix:/tmp/x.sock".parse(), Ok(FlowAddr::Unix("/tmp/x.sock".into())));
+        assert_eq!(
+            "tcp://127.0.0.1:9000".parse(),
+            Ok(FlowAddr::Tcp("127.0.0.1:9000".into()))
+        );
+        assert_eq!(
+            "127.0.0.1:9000".parse(),
+            Ok(FlowAddr::Tcp("127.0.0.1:9000".into()))
+        );
+        assert_eq!(
+            "unix:/tmp/x.sock".parse(),
+            Ok(FlowAddr::Unix("/tmp/x.sock".into()))
+        );
         assert_eq!(
             "ws://127.0.0.1:8080/flow".parse(),
             Ok(FlowAddr::Ws("ws://127.0.0.1:8080/flow".into()))

@@ -20,8 +20,14 @@ pub struct MemoryTransport {
 pub fn pair(name: &str) -> (MemoryTransport, MemoryTransport) {
     let (a, b) = tokio::io::duplex(PIPE_BYTES);
     (
-        MemoryTransport { stream: a, peer: format!("module:{name}") },
-        MemoryTransport { stream: b, peer: "hub".into() },
+        MemoryTransport {
+            stream: a,
+            peer: format!("module:{name}"),
+        },
+        MemoryTransport {
+            stream: b,
+            peer: "hub".into(),
+        },
     )
 }
 

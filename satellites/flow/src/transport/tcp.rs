@@ -26,7 +26,10 @@ impl TcpTransport {
     pub fn from_stream(stream: TcpStream) -> Self {
         // Failing to set the option only costs latency, never correctness.
         let _ = stream.set_nodelay(true);
-        let peer = stream.peer_addr().map(|a| format!("tcp:{a}")).unwrap_or_else(|_| "tcp:?".into());
+        let peer = stream
+            .peer_addr()
+            .map(|a| format!("tcp:{a}"))
+            .unwrap_or_else(|_| "tcp:?".into());
         TcpTransport { stream, peer }
     }
 }

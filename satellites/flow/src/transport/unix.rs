@@ -19,7 +19,10 @@ pub struct UnixTransport {
 impl UnixTransport {
     pub async fn connect(path: &Path) -> io::Result<Self> {
         let stream = UnixStream::connect(path).await?;
-        Ok(UnixTransport { stream, peer: format!("unix:{}", path.display()) })
+        Ok(UnixTransport {
+            stream,
+            peer: format!("unix:{}", path.display()),
+        })
     }
 
     pub fn from_stream(stream: UnixStream, peer: String) -> Self {

@@ -22,8 +22,13 @@ pub struct WsClientTransport {
 
 impl WsClientTransport {
     pub async fn connect(url: &str) -> io::Result<Self> {
-        let (ws, _response) = tokio_tungstenite::connect_async(url).await.map_err(ws_error)?;
-        Ok(WsClientTransport { ws, peer: url.to_string() })
+        let (ws, _response) = tokio_tungstenite::connect_async(url)
+            .await
+            .map_err(ws_error)?;
+        Ok(WsClientTransport {
+            ws,
+            peer: url.to_string(),
+        })
     }
 }
 
@@ -64,7 +69,10 @@ impl TransportRead for WsReader {
                 // Pings are answered by the library; pongs carry nothing for us.
                 Some(Ok(Message::Ping(_) | Message::Pong(_) | Message::Frame(_))) => continue,
                 Some(Ok(Message::Text(_))) => {
-                    return Err(io::Error::new(io::ErrorKind::InvalidData, "text message on a flow link"));
+                    return Err(io::Error::new(
+                        io::ErrorKind::InvalidData,
+                        "text message on a flow link",
+                    ));
                 }
                 Some(Err(e)) => return Err(ws_error(e)),
             }
@@ -74,7 +82,10 @@ impl TransportRead for WsReader {
 
 impl TransportWrite for WsWriter {
     async fn write_all(&mut self, data: &[u8]) -> io::Result<()> {
-        self.0.send(Message::Binary(Bytes::copy_from_slice(data))).await.map_err(ws_error)
+        self.0
+            .send(Message::Binary(Bytes::copy_from_slice(data)))
+            .await
+            .map_err(ws_error)
     }
 
     async fn shutdown(&mut self) -> io::Result<()> {

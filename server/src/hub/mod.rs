@@ -1,0 +1,647 @@
+//! The hub core: channels, subscriptions, service calls and the events they
+//! cause. It never touches a socket: connections are ids with an [`Outbox`],
+//! and every operation is a synchronous method that updates state and queues
+//! events. Transports and sessions live elsewhere.
+
+use std::collections::{BTreeSet, HashMap};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+
+use bytes::Bytes;
+use flow::protocol::{
+    CallId, ChanId, ChanRef, ChannelInfo, ChannelKind, ChannelStats, ErrorCode, ErrorReply, Event,
+    Reply, ReqId, channel_hash, validate_name,
+};
+
+pub mod outbox;
+
+pub use outbox::{Outbox, OutboxLimits};
+
+/// A connection (satellite or module) as the hub knows it.
+pub type ConnId = u32;
+
+/// Largest number of channels (ids are non-negative `i16`).
+pub const MAX_CHANNELS: usize = 32768;
+
+/// Limits applied by the hub.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HubLimits {
+    pub outbox: OutboxLimits,
+    /// Service calls waiting for one service's owner before callers get `Overloaded`.
+    pub service_inflight: usize,
+    pub max_channels: usize,
+}
+
+type HubResult<T> = Result<T, ErrorReply>;
+
+fn err<T>(code: ErrorCode, message: impl Into<String>) -> HubResult<T> {
+    Err(ErrorReply::new(code, message))
+}
+
+#[derive(Debug)]
+struct Conn {
+    label: String,
+    outbox: Arc<Outbox>,
+    is_async: bool,
+    admin: bool,
+    owned: BTreeSet<ChanId>,
+    subs: BTreeSet<ChanId>,
+}
+
+#[derive(Debug)]
+struct Channel {
+    id: ChanId,
+    hash: u64,
+    kind: ChannelKind,
+    name: String,
+    owner: ConnId,
+    owner_label: String,
+    header: String,
+    subscribers: Vec<(ConnId, Arc<Outbox>)>,
+    seq: u64,
+    msgs: u64,
+    bytes: u64,
+    dropped: u64,
+    inflight: usize,
+    rate: Rate,
+}
+
+/// Messages and bytes per second over the last measurement window.
+#[derive(Debug, Default, Clone, Copy)]
+struct Rate {
+    last_msgs: u64,
+    last_bytes: u64,
+    msgs_per_s: f32,
+    bytes_per_s: f32,
+}
+
+#[derive(Debug)]
+struct PendingCall {
+    caller: ConnId,
+    req: ReqId,
+    chan: ChanId,
+}
+
+#[derive(Debug, Default)]
+struct State {
+    conns: HashMap<ConnId, Conn>,
+    next_conn: ConnId,
+    channels: HashMap<ChanId, Channel>,
+    by_name: HashMap<String, ChanId>,
+    by_hash: HashMap<u64, ChanId>,
+    next_id: u16,
+    calls: HashMap<CallId, PendingCall>,
+    next_call: CallId,
+    last_rate: Option<Instant>,
+}
+
+/// The hub: shared by every connection task.
+#[derive(Debug)]
+pub struct Hub {
+    state: Mutex<State>,
+    limits: HubLimits,
+}
+
+fn now_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0)
+}
+
+impl Hub {
+    pub fn new(limits: HubLimits) -> Self {
+        Hub {
+            state: Mutex::new(State {
+                next_conn: 1,
+                next_call: 1,
+                ..State::default()
+            }),
+            limits,
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        // Methods validate before they mutate, so state stays consistent even
+        // if a panic poisoned the lock; keep serving rather than crash the hub.
+        self.state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    // ------------------------------------------------------------ connections
+
+    /// Registers a new, not yet logged-in connection.
+    pub fn connect(&self, peer: &str) -> (ConnId, Arc<Outbox>) {
+        let outbox = Arc::new(Outbox::new(self.limits.outbox));
+        let mut st = self.lock();
+        let id = st.next_conn;
+        st.next_conn = st.next_conn.wrapping_add(1).max(1);
+        st.conns.insert(
+            id,
+            Conn {
+                label: format!("{peer}#{id}"),
+                outbox: outbox.clone(),
+                is_async: false,
+                admin: false,
+                owned: BTreeSet::new(),
+                subs: BTreeSet::new(),
+            },
+        );
+        (id, outbox)
+    }
+
+    /// Records the login name and rights of a connection.
+    pub fn login(&self, conn: ConnId, name: &str, admin: bool) {
+        if let Some(c) = self.lock().conns.get_mut(&conn) {
+            c.label = format!("{name}#{conn}");
+            c.admin = admin;
+        }
+    }
+
+    /// Starts delivering events to a connection.
+    pub fn set_async(&self, conn: ConnId) {
+        if let Some(c) = self.lock().conns.get_mut(&conn) {
+            c.is_async = true;
+        }
+    }
+
+    /// Forgets a connection: its channels are removed (everyone is told), its
+    /// subscriptions end, and calls to its services fail.
+    pub fn disconnect(&self, conn: ConnId) {
+        let mut st = self.lock();
+        let Some(c) = st.conns.remove(&conn) else {
+            return;
+        };
+        for chan in c.subs {
+            unsubscribe_locked(&mut st, conn, chan);
+        }
+        for chan in c.owned {
+            remove_channel_locked(&mut st, chan);
+        }
+        st.calls.retain(|_, call| call.caller != conn);
+    }
+
+    /// Sends a goodbye to every connection and closes their outboxes.
+    pub fn shutdown(&self, reason: &str) {
+        let st = self.lock();
+        for c in st.conns.values() {
+            c.outbox.push_control(Event::Goodbye {
+                reason: reason.to_string(),
+            });
+            c.outbox.close(reason);
+        }
+    }
+
+    pub fn connection_count(&self) -> usize {
+        self.lock().conns.len()
+    }
+
+    // ------------------------------------------------------------ channels
+
+    /// Creates a channel owned by `conn`.
+    pub fn add_channel(
+        &self,
+        conn: ConnId,
+        kind: ChannelKind,
+        name: &str,
+        header: &str,
+    ) -> HubResult<ChannelInfo> {
+        if let Err(reason) = validate_name(name) {
+            return err(
+                ErrorCode::BadRequest,
+                format!("channel name {name:?}: {reason}"),
+            );
+        }
+        let mut st = self.lock();
+        let Some(owner) = st.conns.get(&conn) else {
+            return err(ErrorCode::Internal, "unknown connection");
+        };
+        if kind == ChannelKind::Service && !owner.is_async {
+            return err(
+                ErrorCode::BadRequest,
+                "a service owner must be an asynchronous connection",
+            );
+        }
+        let owner_label = owner.label.clone();
+        if st.by_name.contains_key(name) {
+            return err(ErrorCode::Exists, format!("channel {name} already exists"));
+        }
+        let hash = channel_hash(name);
+        if st.by_hash.contains_key(&hash) {
+            return err(
+                ErrorCode::Exists,
+                format!("channel {name} collides with another channel's hash"),
+            );
+        }
+        if st.channels.len() >= self.limits.max_channels.min(MAX_CHANNELS) {
+            return err(ErrorCode::Limit, "too many channels");
+        }
+        // Ids rotate instead of reusing the lowest free one, so a late message
+        // for a removed channel cannot land on its successor.
+        let id = loop {
+            let candidate = (st.next_id % MAX_CHANNELS as u16) as ChanId;
+            st.next_id = st.next_id.wrapping_add(1) % MAX_CHANNELS as u16;
+            if !st.channels.contains_key(&candidate) {
+                break candidate;
+            }
+        };
+        let channel = Channel {
+            id,
+            hash,
+            kind,
+            name: name.to_string(),
+            owner: conn,
+            owner_label,
+            header: header.to_string(),
+            subscribers: Vec::new(),
+            seq: 0,
+            msgs: 0,
+            bytes: 0,
+            dropped: 0,
+            inflight: 0,
+            rate: Rate::default(),
+        };
+        let info = channel.info();
+        st.channels.insert(id, channel);
+        st.by_name.insert(name.to_string(), id);
+        st.by_hash.insert(hash, id);
+        if let Some(owner) = st.conns.get_mut(&conn) {
+            owner.owned.insert(id);
+        }
+        broadcast(&st, |_| Event::ChannelAdded(info.clone()));
+        Ok(info)
+    }
+
+    /// Removes a channel; only its owner or an admin may.
+    pub fn remove_channel(&self, conn: ConnId, chan: &ChanRef) -> HubResult<()> {
+        let mut st = self.lock();
+        let id = resolve(&st, chan)?;
+        let admin = st.conns.get(&conn).is_some_and(|c| c.admin);
+        let owner = st.channels.get(&id).map(|c| c.owner);
+        if owner != Some(conn) && !admin {
+            return err(
+                ErrorCode::NotOwner,
+                format!("channel {chan} belongs to someone else"),
+            );
+        }
+        remove_channel_locked(&mut st, id);
+        Ok(())
+    }
+
+    /// Replaces a channel's JSON header; owner only.
+    pub fn set_header(&self, conn: ConnId, id: ChanId, header: &str) -> HubResult<()> {
+        let mut st = self.lock();
+        let ch = owned_channel(&mut st, conn, id)?;
+        ch.header = header.to_string();
+        let (name, header) = (ch.name.clone(), ch.header.clone());
+        broadcast(&st, |_| Event::HeaderChanged {
+            id,
+            name: name.clone(),
+            header: header.clone(),
+        });
+        Ok(())
+    }
+
+    /// Subscribes `conn` to a streaming channel; idempotent.
+    pub fn subscribe(&self, conn: ConnId, chan: &ChanRef) -> HubResult<ChannelInfo> {
+        let mut st = self.lock();
+        let id = resolve(&st, chan)?;
+        let Some(c) = st.conns.get(&conn) else {
+            return err(ErrorCode::Internal, "unknown connection");
+        };
+        if !c.is_async {
+            return err(
+                ErrorCode::BadRequest,
+                "subscribing needs an asynchronous connection",
+            );
+        }
+        let outbox = c.outbox.clone();
+        let Some(ch) = st.channels.get_mut(&id) else {
+            return err(ErrorCode::NotFound, "no such channel");
+        };
+        if ch.kind != ChannelKind::Stream {
+            return err(
+                ErrorCode::WrongKind,
+                format!("{} is a service channel; call it instead", ch.name),
+            );
+        }
+        if !ch.subscribers.iter().any(|(c, _)| *c == conn) {
+            ch.subscribers.push((conn, outbox));
+            if ch.subscribers.len() == 1 {
+                let owner = ch.owner;
+                notify_owner(&st, owner, Event::StartPublishing { id });
+            }
+        }
+        let info = st.channels.get(&id).map(Channel::info);
+        if let Some(c) = st.conns.get_mut(&conn) {
+            c.subs.insert(id);
+        }
+        info.ok_or_else(|| ErrorReply::new(ErrorCode::Internal, "channel vanished"))
+    }
+
+    /// Ends a subscription; not being subscribed is not an error.
+    pub fn unsubscribe(&self, conn: ConnId, chan: &ChanRef) -> HubResult<()> {
+        let mut st = self.lock();
+        let id = resolve(&st, chan)?;
+        unsubscribe_locked(&mut st, conn, id);
+        if let Some(c) = st.conns.get_mut(&conn) {
+            c.subs.remove(&id);
+        }
+        Ok(())
+    }
+
+    /// Fans a message out to every subscriber of a stream; owner only. Never
+    /// blocks: a subscriber that fell behind loses its oldest queued message.
+    pub fn publish(&self, conn: ConnId, id: ChanId, payload: Bytes) -> HubResult<()> {
+        let mut st = self.lock();
+        let ch = owned_channel(&mut st, conn, id)?;
+        if ch.kind != ChannelKind::Stream {
+            return err(
+                ErrorCode::WrongKind,
+                format!("{} is a service channel", ch.name),
+            );
+        }
+        ch.seq += 1;
+        ch.msgs += 1;
+        let len = payload.len();
+        ch.bytes += len as u64;
+        let event = Event::Data {
+            chan: id,
+            seq: ch.seq,
+            ts_us: now_us(),
+            payload,
+        };
+        let mut dropped = 0;
+        for (_, outbox) in &ch.subscribers {
+            dropped += outbox.push_data(id, event.clone(), len).dropped;
+        }
+        ch.dropped += dropped as u64;
+        Ok(())
+    }
+
+    /// Forwards a service request to the channel's owner; the reply to the
+    /// caller comes later from [`Hub::respond`] or [`Hub::expire_call`].
+    pub fn call(
+        &self,
+        conn: ConnId,
+        req: ReqId,
+        chan: &ChanRef,
+        payload: Bytes,
+    ) -> HubResult<CallId> {
+        let mut st = self.lock();
+        let id = resolve(&st, chan)?;
+        let limit = self.limits.service_inflight;
+        let Some(ch) = st.channels.get_mut(&id) else {
+            return err(ErrorCode::NotFound, "no such channel");
+        };
+        if ch.kind != ChannelKind::Service {
+            return err(
+                ErrorCode::WrongKind,
+                format!("{} is a streaming channel", ch.name),
+            );
+        }
+        if ch.inflight >= limit {
+            return err(
+                ErrorCode::Overloaded,
+                format!("{} already has {limit} calls in flight", ch.name),
+            );
+        }
+        ch.inflight += 1;
+        ch.msgs += 1;
+        ch.bytes += payload.len() as u64;
+        let owner = ch.owner;
+        let call = st.next_call;
+        st.next_call += 1;
+        st.calls.insert(
+            call,
+            PendingCall {
+                caller: conn,
+                req,
+                chan: id,
+            },
+        );
+        let delivered = st.conns.get(&owner).is_some_and(|o| {
+            o.outbox.push_control(Event::ServiceRequest {
+                chan: id,
+                call,
+                payload,
+            })
+        });
+        if !delivered {
+            finish_call(&mut st, call);
+            return err(ErrorCode::ServiceGone, "the service owner is not reachable");
+        }
+        Ok(call)
+    }
+
+    /// Delivers a service owner's response to the caller.
+    pub fn respond(
+        &self,
+        conn: ConnId,
+        call: CallId,
+        result: Result<Bytes, String>,
+    ) -> HubResult<()> {
+        let mut st = self.lock();
+        let Some(pending) = st.calls.get(&call) else {
+            // Late (after the timeout) or duplicate: the caller already has its answer.
+            return Ok(());
+        };
+        if st.channels.get(&pending.chan).map(|c| c.owner) != Some(conn) {
+            return err(ErrorCode::NotOwner, "only the service owner may respond");
+        }
+        let Some(pending) = finish_call(&mut st, call) else {
+            return Ok(());
+        };
+        let result = match result {
+            Ok(payload) => Ok(Reply::Payload(payload)),
+            Err(message) => Err(ErrorReply::new(ErrorCode::ServiceFailed, message)),
+        };
+        reply_to(&st, pending.caller, pending.req, result);
+        Ok(())
+    }
+
+    /// Fails a call that got no response in time. No-op if it was answered.
+    pub fn expire_call(&self, call: CallId, waited_ms: u32) {
+        let mut st = self.lock();
+        if let Some(pending) = finish_call(&mut st, call) {
+            let name = st
+                .channels
+                .get(&pending.chan)
+                .map(|c| c.name.clone())
+                .unwrap_or_default();
+            let message = format!("service {name} did not answer within {waited_ms} ms");
+            reply_to(
+                &st,
+                pending.caller,
+                pending.req,
+                Err(ErrorReply::new(ErrorCode::Timeout, message)),
+            );
+        }
+    }
+
+    // ------------------------------------------------------------ queries
+
+    pub fn list_channels(&self) -> Vec<ChannelInfo> {
+        let st = self.lock();
+        let mut list: Vec<_> = st.channels.values().map(Channel::info).collect();
+        list.sort_by_key(|c| c.id);
+        list
+    }
+
+    pub fn channel(&self, chan: &ChanRef) -> HubResult<ChannelInfo> {
+        let st = self.lock();
+        let id = resolve(&st, chan)?;
+        st.channels
+            .get(&id)
+            .map(Channel::info)
+            .ok_or_else(|| ErrorReply::new(ErrorCode::NotFound, "no such channel"))
+    }
+
+    /// Updates each channel's msgs/s and bytes/s; call about once a second.
+    pub fn update_rates(&self) {
+        let mut st = self.lock();
+        let now = Instant::now();
+        let elapsed = st
+            .last_rate
+            .map(|t| now.duration_since(t).as_secs_f32())
+            .unwrap_or(0.0);
+        st.last_rate = Some(now);
+        for ch in st.channels.values_mut() {
+            if elapsed > 0.0 {
+                ch.rate.msgs_per_s = (ch.msgs - ch.rate.last_msgs) as f32 / elapsed;
+                ch.rate.bytes_per_s = (ch.bytes - ch.rate.last_bytes) as f32 / elapsed;
+            }
+            ch.rate.last_msgs = ch.msgs;
+            ch.rate.last_bytes = ch.bytes;
+        }
+    }
+}
+
+impl Channel {
+    fn info(&self) -> ChannelInfo {
+        ChannelInfo {
+            id: self.id,
+            hash: self.hash,
+            kind: self.kind,
+            name: self.name.clone(),
+            owner: self.owner_label.clone(),
+            header: self.header.clone(),
+            stats: ChannelStats {
+                subscribers: self.subscribers.len() as u32,
+                msgs: self.msgs,
+                bytes: self.bytes,
+                dropped: self.dropped,
+                msgs_per_s: self.rate.msgs_per_s,
+                bytes_per_s: self.rate.bytes_per_s,
+            },
+        }
+    }
+}
+
+fn resolve(st: &State, chan: &ChanRef) -> HubResult<ChanId> {
+    let found = match chan {
+        ChanRef::Id(id) => st.channels.contains_key(id).then_some(*id),
+        ChanRef::Name(name) => st.by_name.get(name).copied(),
+    };
+    found.ok_or_else(|| ErrorReply::new(ErrorCode::NotFound, format!("no channel {chan}")))
+}
+
+fn owned_channel(st: &mut State, conn: ConnId, id: ChanId) -> HubResult<&mut Channel> {
+    let Some(ch) = st.channels.get_mut(&id) else {
+        return err(ErrorCode::NotFound, format!("no channel #{id}"));
+    };
+    if ch.owner != conn {
+        return err(
+            ErrorCode::NotOwner,
+            format!("channel {} belongs to {}", ch.name, ch.owner_label),
+        );
+    }
+    Ok(ch)
+}
+
+/// Queues an event for every asynchronous connection.
+fn broadcast(st: &State, event: impl Fn(ConnId) -> Event) {
+    for (id, c) in &st.conns {
+        if c.is_async {
+            c.outbox.push_control(event(*id));
+        }
+    }
+}
+
+fn notify_owner(st: &State, owner: ConnId, event: Event) {
+    if let Some(c) = st.conns.get(&owner).filter(|c| c.is_async) {
+        c.outbox.push_control(event);
+    }
+}
+
+fn reply_to(st: &State, conn: ConnId, req: ReqId, result: Result<Reply, ErrorReply>) {
+    if let Some(c) = st.conns.get(&conn) {
+        c.outbox.push_control(Event::Reply { req, result });
+    }
+}
+
+fn finish_call(st: &mut State, call: CallId) -> Option<PendingCall> {
+    let pending = st.calls.remove(&call)?;
+    if let Some(ch) = st.channels.get_mut(&pending.chan) {
+        ch.inflight = ch.inflight.saturating_sub(1);
+    }
+    Some(pending)
+}
+
+fn unsubscribe_locked(st: &mut State, conn: ConnId, id: ChanId) {
+    let Some(ch) = st.channels.get_mut(&id) else {
+        return;
+    };
+    let before = ch.subscribers.len();
+    ch.subscribers.retain(|(c, _)| *c != conn);
+    let now_empty = before > 0 && ch.subscribers.is_empty();
+    let owner = ch.owner;
+    if let Some(c) = st.conns.get(&conn) {
+        c.outbox.drop_lane(id);
+    }
+    if now_empty {
+        notify_owner(st, owner, Event::StopPublishing { id });
+    }
+}
+
+fn remove_channel_locked(st: &mut State, id: ChanId) {
+    let Some(ch) = st.channels.remove(&id) else {
+        return;
+    };
+    st.by_name.remove(&ch.name);
+    st.by_hash.remove(&ch.hash);
+    if let Some(owner) = st.conns.get_mut(&ch.owner) {
+        owner.owned.remove(&id);
+    }
+    for (sub, outbox) in &ch.subscribers {
+        outbox.drop_lane(id);
+        if let Some(c) = st.conns.get_mut(sub) {
+            c.subs.remove(&id);
+        }
+    }
+    // Calls waiting on this service will never be answered: fail them now.
+    let orphaned: Vec<CallId> = st
+        .calls
+        .iter()
+        .filter(|(_, p)| p.chan == id)
+        .map(|(k, _)| *k)
+        .collect();
+    for call in orphaned {
+        if let Some(p) = st.calls.remove(&call) {
+            let e = ErrorReply::new(
+                ErrorCode::ServiceGone,
+                format!("service {} went away", ch.name),
+            );
+            reply_to(st, p.caller, p.req, Err(e));
+        }
+    }
+    let name = ch.name.clone();
+    broadcast(st, |_| Event::ChannelRemoved {
+        id,
+        name: name.clone(),
+    });
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,163 @@
+//! The serialisation edge from hub channels to percepts: transcripts and detections become `heard(text)`,
+//! `face(count, dir)`, `motion(dir)` and `code(text)` facts for the rule engine.
+
+use agent_brain::Value;
+use serde::Deserialize;
+
+/// A percept to assert: `name(args...)`, or the whole current set of a predicate.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Percept {
+    One { name: &'static str, args: Vec<Value> },
+    Set { name: &'static str, sets: Vec<Vec<Value>> },
+}
+
+/// What an `Agent.transcript` message says: a final transcript, or nothing to act on.
+///
+/// The message is JSON with a `text` field (partial results, marked `"final": false` or `"partial": true`, are
+/// ignored: the brain answers complete utterances); plain UTF-8 text is accepted too, for `flowctl` users.
+pub fn transcript(payload: &[u8]) -> Result<Option<String>, String> {
+    #[derive(Deserialize)]
+    struct Message {
+        text: String,
+        #[serde(default = "yes", rename = "final")]
+        is_final: bool,
+        #[serde(default)]
+        partial: bool,
+    }
+    fn yes() -> bool {
+        true
+    }
+    let text = std::str::from_utf8(payload).map_err(|e| format!("transcript is not UTF-8: {e}"))?;
+    let text = if text.trim_start().starts_with('{') {
+        let message: Message = serde_json::from_str(text).map_err(|e| format!("transcript JSON: {e}"))?;
+        if !message.is_final || message.partial {
+            return Ok(None);
+        }
+        message.text
+    } else {
+        text.to_owned()
+    };
+    let text = text.trim();
+    Ok((!text.is_empty()).then(|| text.to_owned()))
+}
+
+#[derive(Debug, Deserialize)]
+struct Detections {
+    frame: Frame,
+    #[serde(default)]
+    faces: Option<Vec<FaceBox>>,
+    #[serde(default)]
+    motion: Option<Motion>,
+    #[serde(default)]
+    codes: Option<Vec<Code>>,
+}
+
+#[derive(Debug, Deserialize)]
+struct Frame {
+    width: u32,
+}
+
+/// A face box in frame pixels (its vertical extent does not matter to the brain).
+#[derive(Debug, Deserialize)]
+struct FaceBox {
+    x: f64,
+    w: f64,
+    h: f64,
+}
+
+#[derive(Debug, Deserialize)]
+struct Point {
+    x: f64,
+}
+
+#[derive(Debug, Deserialize)]
+struct Motion {
+    moving: bool,
+    #[serde(default)]
+    centre: Option<Point>,
+}
+
+#[derive(Debug, Deserialize)]
+struct Code {
+    #[serde(default)]
+    text: Option<String>,
+}
+
+/// The percepts in one `Agent.detections` message (faces, motion and visible codes of a video frame).
+///
+/// Absence is not asserted: a frame without faces simply does not refresh `face`, which goes stale after its
+/// freshness window, so that a detector missing a few frames does not end a person's visit.
+pub fn detections(payload: &[u8]) -> Result<Vec<Percept>, String> {
+    let message: Detections = serde_json::from_slice(payload).map_err(|e| format!("detections JSON: {e}"))?;
+    let width = f64::from(message.frame.width.max(1));
+    let mut percepts = Vec::new();
+    if let Some(faces) = message.faces.filter(|faces| !faces.is_empty()) {
+        let largest = faces.iter().max_by(|a, b| (a.w * a.h).total_cmp(&(b.w * b.h)));
+        let dir = largest.map_or("centre", |face| direction((face.x + face.w / 2.0) / width));
+        percepts.push(Percept::One { name: "face", args: vec![Value::Num(faces.len() as f64), Value::from(dir)] });
+    }
+    if let Some(Motion { moving: true, centre: Some(centre) }) = message.motion {
+        percepts.push(Percept::One { name: "motion", args: vec![Value::from(direction(centre.x / width))] });
+    }
+    if let Some(codes) = message.codes {
+        let texts: Vec<Vec<Value>> =
+            codes.into_iter().filter_map(|code| code.text).map(|text| vec![Value::Text(text)]).collect();
+        if !texts.is_empty() {
+            percepts.push(Percept::Set { name: "code", sets: texts });
+        }
+    }
+    Ok(percepts)
+}
+
+/// Where a horizontal position (0 to 1 across the camera image) is, from the agent's point of view: the camera
+/// image is not mirrored, so its left is the agent's left.
+fn direction(x: f64) -> &'static str {
+    if x < 1.0 / 3.0 {
+        "left"
+    } else if x > 2.0 / 3.0 {
+        "right"
+    } else {
+        "centre"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transcripts_in_json_or_plain_text() {
+        assert_eq!(transcript(br#"{"text":" What time is it? ","final":true}"#), Ok(Some("What time is it?".into())));
+        assert_eq!(transcript(br#"{"text":"what ti","final":false}"#), Ok(None));
+        assert_eq!(transcript(br#"{"text":"what ti","partial":true}"#), Ok(None));
+        assert_eq!(transcript(b"hello there"), Ok(Some("hello there".into())));
+        assert_eq!(transcript(b"   "), Ok(None));
+        assert!(transcript(br#"{"txt":"x"}"#).is_err());
+        assert!(transcript(&[0xff, 0xfe]).is_err());
+    }
+
+    #[test]
+    fn detections_become_percepts() {
+        let message = br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},
+            "faces":[{"x":10,"y":10,"w":40,"h":40},{"x":500,"y":100,"w":100,"h":100}],
+            "motion":{"moving":true,"centre":{"x":320,"y":100},"regions":[],"changed_fraction":0.1,"held":false},
+            "codes":[{"kind":"qr","text":"HELLO","hex":"","polygon":[],"appearance":1,"new":true},
+                     {"kind":"ean13","text":null,"hex":"ff","polygon":[],"appearance":2,"new":false}]}"#;
+        let percepts = detections(message);
+        assert_eq!(
+            percepts,
+            Ok(vec![
+                Percept::One { name: "face", args: vec![Value::Num(2.0), Value::from("right")] },
+                Percept::One { name: "motion", args: vec![Value::from("centre")] },
+                Percept::Set { name: "code", sets: vec![vec![Value::from("HELLO")]] },
+            ])
+        );
+    }
+
+    #[test]
+    fn absence_asserts_nothing() {
+        let message = br#"{"frame":{"width":640},"faces":[],"motion":{"moving":false,"centre":null},"codes":[]}"#;
+        assert_eq!(detections(message), Ok(vec![]));
+        assert!(detections(b"{\"faces\":[]}").is_err());
+    }
+}

@@ -1,0 +1,9 @@
+//! Network edges: the connection driver shared by every transport, and one
+//! listener module per transport.
+
+pub mod conn;
+pub mod tcp;
+pub mod unix;
+pub mod ws;
+
+pub use conn::serve_connection;

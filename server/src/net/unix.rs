@@ -1,0 +1,49 @@
+//! FlowProtocol over a Unix domain socket: binding and the accept loop.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use flow::transport::unix::UnixTransport;
+use tokio::net::UnixListener;
+use tracing::warn;
+
+use super::serve_connection;
+use crate::server::Shared;
+
+/// Binds `path`, replacing a stale socket file left by a killed server.
+pub fn bind(path: &Path) -> std::io::Result<UnixListener> {
+    if path.exists() {
+        // Only a socket nobody answers on is stale; a live one means another server runs.
+        if std::os::unix::net::UnixStream::connect(path).is_ok() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::AddrInUse,
+                format!("{} is in use by a running server", path.display()),
+            ));
+        }
+        std::fs::remove_file(path)?;
+    }
+    UnixListener::bind(path)
+}
+
+/// Accepts connections until shutdown, then removes the socket file.
+pub async fn accept_loop(listener: UnixListener, path: std::path::PathBuf, shared: Arc<Shared>) {
+    let mut shutdown = shared.shutdown.subscribe();
+    let mut next = 0u64;
+    loop {
+        tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, _)) => {
+                    next += 1;
+                    let peer = format!("unix:{next}");
+                    tokio::spawn(serve_connection(UnixTransport::from_stream(stream, peer), shared.clone(), false));
+                }
+                Err(e) => {
+                    warn!("unix accept failed: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                }
+            },
+            _ = shutdown.changed() => break,
+        }
+    }
+    let _ = std::fs::remove_file(path);
+}

@@ -1,0 +1,215 @@
+//! The pair database: named databases of key -> JSON value, persisted in redb.
+//!
+//! Every write is its own redb transaction committed with immediate
+//! durability (fsync) before the call returns, so an acknowledged write
+//! survives a `kill -9` of the server. Methods block on disk I/O; async callers
+//! run them on the blocking pool.
+
+use std::path::Path;
+
+use redb::{Database, ReadableTable, TableDefinition};
+use thiserror::Error;
+
+/// `(database, key) -> JSON text`.
+const VARS: TableDefinition<(&str, &str), &str> = TableDefinition::new("vars");
+/// `database -> creation time (s since the epoch)`.
+const DATABASES: TableDefinition<&str, u64> = TableDefinition::new("databases");
+
+/// The database every connection starts with.
+pub const DEFAULT_DB: &str = "main";
+
+#[derive(Debug, Error)]
+pub enum PairDbError {
+    #[error("no database named {0}")]
+    NoDatabase(String),
+    #[error("database {0} already exists")]
+    Exists(String),
+    #[error("storage: {0}")]
+    Storage(String),
+}
+
+fn storage(e: impl std::fmt::Display) -> PairDbError {
+    PairDbError::Storage(e.to_string())
+}
+
+/// Handle on the store; cheap to share behind an `Arc`.
+#[derive(Debug)]
+pub struct PairDb {
+    db: Database,
+}
+
+impl PairDb {
+    /// Opens (or creates) the store at `path`, with the default database present.
+    pub fn open(path: &Path) -> Result<Self, PairDbError> {
+        let db = Database::create(path).map_err(storage)?;
+        let this = PairDb { db };
+        if !this.exists(DEFAULT_DB)? {
+            this.create(DEFAULT_DB)?;
+        }
+        Ok(this)
+    }
+
+    pub fn exists(&self, name: &str) -> Result<bool, PairDbError> {
+        let tx = self.db.begin_read().map_err(storage)?;
+        match tx.open_table(DATABASES) {
+            Ok(t) => Ok(t.get(name).map_err(storage)?.is_some()),
+            Err(redb::TableError::TableDoesNotExist(_)) => Ok(false),
+            Err(e) => Err(storage(e)),
+        }
+    }
+
+    pub fn create(&self, name: &str) -> Result<(), PairDbError> {
+        let tx = self.db.begin_write().map_err(storage)?;
+        {
+            let mut t = tx.open_table(DATABASES).map_err(storage)?;
+            if t.get(name).map_err(storage)?.is_some() {
+                return Err(PairDbError::Exists(name.into()));
+            }
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0);
+            t.insert(name, now).map_err(storage)?;
+        }
+        tx.commit().map_err(storage)
+    }
+
+    /// Removes a database and every variable in it.
+    pub fn remove(&self, name: &str) -> Result<(), PairDbError> {
+        let tx = self.db.begin_write().map_err(storage)?;
+        {
+            let mut dbs = tx.open_table(DATABASES).map_err(storage)?;
+            if dbs.remove(name).map_err(storage)?.is_none() {
+                return Err(PairDbError::NoDatabase(name.into()));
+            }
+            let mut vars = tx.open_table(VARS).map_err(storage)?;
+            let keys: Vec<String> = vars
+                .range((name, "")..)
+                .map_err(storage)?
+                .map_while(|entry| {
+                    let (k, _) = entry.ok()?;
+                    let (db, key) = k.value();
+                    (db == name).then(|| key.to_string())
+                })
+                .collect();
+            for key in keys {
+                vars.remove((name, key.as_str())).map_err(storage)?;
+            }
+        }
+        tx.commit().map_err(storage)
+    }
+
+    pub fn list(&self) -> Result<Vec<String>, PairDbError> {
+        let tx = self.db.begin_read().map_err(storage)?;
+        let t = tx.open_table(DATABASES).map_err(storage)?;
+        let mut names = Vec::new();
+        for entry in t.iter().map_err(storage)? {
+            let (k, _) = entry.map_err(storage)?;
+            names.push(k.value().to_string());
+        }
+        Ok(names)
+    }
+
+    /// Stores `json` (already validated) under `key`; durable on return.
+    pub fn set(&self, db: &str, key: &str, json: &str) -> Result<(), PairDbError> {
+        let tx = self.db.begin_write().map_err(storage)?;
+        {
+            let dbs = tx.open_table(DATABASES).map_err(storage)?;
+            if dbs.get(db).map_err(storage)?.is_none() {
+                return Err(PairDbError::NoDatabase(db.into()));
+            }
+            let mut vars = tx.open_table(VARS).map_err(storage)?;
+            vars.insert((db, key), json).map_err(storage)?;
+        }
+        tx.commit().map_err(storage)
+    }
+
+    pub fn get(&self, db: &str, key: &str) -> Result<Option<String>, PairDbError> {
+        self.require(db)?;
+        let tx = self.db.begin_read().map_err(storage)?;
+        let vars = match tx.open_table(VARS) {
+            Ok(t) => t,
+            Err(redb::TableError::TableDoesNotExist(_)) => return Ok(None),
+            Err(e) => return Err(storage(e)),
+        };
+        Ok(vars
+            .get((db, key))
+            .map_err(storage)?
+            .map(|v| v.value().to_string()))
+    }
+
+    /// Removes a variable; returns whether it existed.
+    pub fn del(&self, db: &str, key: &str) -> Result<bool, PairDbError> {
+        self.require(db)?;
+        let tx = self.db.begin_write().map_err(storage)?;
+        let existed = {
+            let mut vars = tx.open_table(VARS).map_err(storage)?;
+            vars.remove((db, key)).map_err(storage)?.is_some()
+        };
+        tx.commit().map_err(storage)?;
+        Ok(existed)
+    }
+
+    pub fn keys(&self, db: &str) -> Result<Vec<String>, PairDbError> {
+        self.require(db)?;
+        let tx = self.db.begin_read().map_err(storage)?;
+        let vars = match tx.open_table(VARS) {
+            Ok(t) => t,
+            Err(redb::TableError::TableDoesNotExist(_)) => return Ok(Vec::new()),
+            Err(e) => return Err(storage(e)),
+        };
+        let mut keys = Vec::new();
+        for entry in vars.range((db, "")..).map_err(storage)? {
+            let (k, _) = entry.map_err(storage)?;
+            let (d, key) = k.value();
+            if d != db {
+                break;
+            }
+            keys.push(key.to_string());
+        }
+        Ok(keys)
+    }
+
+    fn require(&self, db: &str) -> Result<(), PairDbError> {
+        if self.exists(db)? {
+            Ok(())
+        } else {
+            Err(PairDbError::NoDatabase(db.into()))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn databases_and_variables() {
+        let dir = std::env::temp_dir().join(format!("pairdb-test-{}", std::process::id()));
+        let _ = std::fs::remove_file(&dir);
+        let db = PairDb::open(&dir).expect("open");
+        db.create("robot").expect("create");
+        assert!(matches!(db.create("robot"), Err(PairDbError::Exists(_))));
+        db.set("robot", "b", "2").expect("set");
+        db.set("robot", "a", "{\"x\":1}").expect("set");
+        db.set(DEFAULT_DB, "a", "true").expect("set");
+        assert_eq!(db.keys("robot").expect("keys"), vec!["a", "b"]);
+        assert_eq!(
+            db.get("robot", "a").expect("get").as_deref(),
+            Some("{\"x\":1}")
+        );
+        assert!(db.del("robot", "b").expect("del"));
+        assert!(!db.del("robot", "b").expect("del"));
+        db.remove("robot").expect("remove");
+        assert!(matches!(
+            db.get("robot", "a"),
+            Err(PairDbError::NoDatabase(_))
+        ));
+        assert_eq!(
+            db.get(DEFAULT_DB, "a").expect("get").as_deref(),
+            Some("true")
+        );
+        drop(db);
+        let _ = std::fs::remove_file(&dir);
+    }
+}

@@ -1,0 +1,171 @@
+//! Wiring: shared state, listeners, modules and the shutdown sequence.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::net::TcpListener;
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use tracing::info;
+
+use crate::config::Config;
+use crate::hub::{Hub, HubLimits, OutboxLimits};
+use crate::pairdb::PairDb;
+use crate::pulse::PulseHub;
+use crate::tokens::Tokens;
+
+/// State shared by every connection, module and HTTP handler.
+#[derive(Debug)]
+pub struct Shared {
+    pub config: Config,
+    pub hub: Arc<Hub>,
+    pub pairdb: Arc<PairDb>,
+    pub tokens: Tokens,
+    pub pulses: Arc<PulseHub>,
+    /// Flips to true once at shutdown; every task watches it.
+    pub shutdown: watch::Sender<bool>,
+    reports: Mutex<BTreeMap<String, serde_json::Value>>,
+}
+
+impl Shared {
+    /// Records a module's latest self-report (timings, counters), shown at `/api/status`.
+    pub fn report(&self, module: &str, status: serde_json::Value) {
+        self.reports
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .insert(module.to_string(), status);
+    }
+
+    pub fn module_reports(&self) -> BTreeMap<String, serde_json::Value> {
+        self.reports
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+    }
+}
+
+/// A started server: its bound addresses and a handle to stop it.
+#[derive(Debug)]
+pub struct RunningServer {
+    pub http: SocketAddr,
+    pub flow_tcp: Option<SocketAddr>,
+    pub flow_unix: Option<PathBuf>,
+    pub shared: Arc<Shared>,
+    tasks: Vec<JoinHandle<()>>,
+}
+
+/// Opens the data directory, binds every listener and starts the modules.
+pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
+    let data_dir = config.server.data_dir.clone();
+    std::fs::create_dir_all(&data_dir)
+        .with_context(|| format!("creating data dir {}", data_dir.display()))?;
+    let tokens = Tokens::load_or_create(&data_dir).context("reading or creating tokens")?;
+    let db_path = data_dir.join("pairs.redb");
+    let pairdb = tokio::task::spawn_blocking(move || PairDb::open(&db_path))
+        .await?
+        .context("opening the pair database")?;
+    let h = &config.hub;
+    let limits = HubLimits {
+        outbox: OutboxLimits {
+            lane_msgs: h.subscriber_queue,
+            lane_bytes: h.subscriber_queue_bytes,
+            control_msgs: h.control_queue,
+        },
+        service_inflight: h.service_inflight,
+        max_channels: crate::hub::MAX_CHANNELS,
+    };
+    let pulses = Arc::new(PulseHub::new(
+        Duration::from_millis(config.ticks.fast_ms),
+        Duration::from_millis(config.ticks.slow_ms),
+    ));
+    let shared = Arc::new(Shared {
+        hub: Arc::new(Hub::new(limits)),
+        pairdb: Arc::new(pairdb),
+        tokens,
+        pulses: pulses.clone(),
+        shutdown: watch::channel(false).0,
+        reports: Mutex::new(BTreeMap::new()),
+        config,
+    });
+    let mut tasks = Vec::new();
+    tasks.push(tokio::spawn(
+        pulses.run(shared.hub.clone(), shared.shutdown.subscribe()),
+    ));
+
+    let flow_tcp = if shared.config.server.flow_tcp.is_empty() {
+        None
+    } else {
+        let addr = &shared.config.server.flow_tcp;
+        let listener = TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("binding flow TCP {addr}"))?;
+        let bound = listener.local_addr()?;
+        tasks.push(tokio::spawn(crate::net::tcp::accept_loop(
+            listener,
+            shared.clone(),
+        )));
+        Some(bound)
+    };
+    let flow_unix = match shared.config.unix_socket() {
+        None => None,
+        Some(path) => {
+            let listener = crate::net::unix::bind(&path)
+                .with_context(|| format!("binding unix socket {}", path.display()))?;
+            tasks.push(tokio::spawn(crate::net::unix::accept_loop(
+                listener,
+                path.clone(),
+                shared.clone(),
+            )));
+            Some(path)
+        }
+    };
+    let http_addr = &shared.config.server.http;
+    let listener = TcpListener::bind(http_addr)
+        .await
+        .with_context(|| format!("binding HTTP {http_addr}"))?;
+    let http = listener.local_addr()?;
+    let app = crate::http::app(shared.clone()).into_make_service_with_connect_info::<SocketAddr>();
+    let mut stop = shared.shutdown.subscribe();
+    tasks.push(tokio::spawn(async move {
+        let graceful = axum::serve(listener, app).with_graceful_shutdown(async move {
+            let _ = stop.changed().await;
+        });
+        if let Err(e) = graceful.await {
+            tracing::error!("http server failed: {e}");
+        }
+    }));
+    for module in crate::modules::builtin(&shared.config) {
+        tasks.push(crate::module::spawn(shared.clone(), module).await?);
+    }
+    info!(%http, ?flow_tcp, ?flow_unix, "robot-agent is up");
+    Ok(RunningServer {
+        http,
+        flow_tcp,
+        flow_unix,
+        shared,
+        tasks,
+    })
+}
+
+impl RunningServer {
+    /// Tells clients goodbye, stops listeners and modules, and waits for them.
+    pub async fn shutdown(self) {
+        info!("shutting down");
+        self.shared.hub.shutdown("server shutting down");
+        self.shared.shutdown.send_replace(true);
+        for task in self.tasks {
+            if tokio::time::timeout(Duration::from_secs(5), task)
+                .await
+                .is_err()
+            {
+                tracing::warn!("a task did not stop within 5 s");
+            }
+        }
+        // redb commits every acknowledged write durably; nothing is left to flush.
+        info!("stopped");
+    }
+}
