@@ -215,6 +215,8 @@ impl Espeak {
             panic: None,
         };
         let slot_ptr: *mut CallbackSlot<'_> = &mut slot;
+        // `espeakENDPAUSE` keeps the pause that ends a sentence; without it, sentences synthesised one by one
+        // would run into each other.
         // SAFETY: `c_text` is a NUL-terminated UTF-8 string (flag `espeakCHARS_UTF8`) alive for the call. The
         // user-data pointer refers to `slot`, which lives on this stack frame until the call returns;
         // synchronous mode runs every callback on this thread before `espeak_ng_Synthesize` returns, so the
@@ -226,7 +228,7 @@ impl Espeak {
                 0,
                 sys::espeak_POSITION_TYPE_POS_CHARACTER,
                 0,
-                sys::espeakCHARS_UTF8,
+                sys::espeakCHARS_UTF8 | sys::espeakENDPAUSE,
                 std::ptr::null_mut(),
                 slot_ptr.cast::<c_void>(),
             )

@@ -67,6 +67,22 @@ pub fn samples_to_ms(samples: u64, sample_rate: u32) -> f64 {
     samples as f64 * 1000.0 / f64::from(sample_rate.max(1))
 }
 
+/// A phoneme whose mouth shape depends on what follows it, waiting for the next phoneme event.
+#[derive(Debug, Clone, Copy)]
+enum OpenPhoneme {
+    /// A diphthong that switches to `second` half way to the next phoneme.
+    Glide { start: u64, second: Viseme },
+    /// A phoneme without an IPA spelling. espeak-ng reports pauses this way, but also short linking sounds
+    /// inside words (the Italian schwa before a tapped r, the English linking `;`); only the audio tells them
+    /// apart, so it becomes a rest only if the samples up to the next phoneme are quiet.
+    Unspelled { start: u64 },
+}
+
+/// Quiet means an RMS below this share of the loudest chunk so far...
+const QUIET_SHARE: f64 = 0.1;
+/// ...capped at this absolute RMS (about -46 dBFS), so that a loud voice does not make soft speech "quiet".
+const QUIET_CEILING: f64 = 160.0;
+
 /// Builds chunks for one utterance, one espeak-ng buffer at a time.
 #[derive(Debug, Default)]
 pub(crate) struct TimelineBuilder {
@@ -78,9 +94,10 @@ pub(crate) struct TimelineBuilder {
     /// Cues and marks not yet given to a chunk, in time order.
     cues: Vec<VisemeCue>,
     marks: Vec<PhonemeMark>,
-    /// An open diphthong: where it started and the shape it ends in.
-    open_glide: Option<(u64, Viseme)>,
+    open: Option<OpenPhoneme>,
     last_viseme: Option<Viseme>,
+    /// RMS of the loudest chunk so far, the reference for "quiet".
+    loudest_rms: f64,
     /// Phoneme names the viseme table did not know (they keep the previous shape).
     pub unmapped: Vec<String>,
 }
@@ -99,26 +116,9 @@ impl TimelineBuilder {
 
     /// Takes one espeak-ng buffer and returns the chunks that are complete.
     pub(crate) fn push(&mut self, pcm: &[i16], events: &[RawEvent]) -> Vec<SpeechChunk> {
-        for event in events {
-            if let RawEventKind::Phoneme(ipa) = &event.kind {
-                let sample = self.sentence_start + event.sample;
-                self.marks.push(PhonemeMark {
-                    sample,
-                    ipa: ipa.clone(),
-                    espeak_ms: event.audio_ms,
-                });
-                self.close_glide(sample);
-                match mouth_shape(ipa) {
-                    Some(MouthShape::Single(viseme)) => self.cue(sample, viseme),
-                    Some(MouthShape::Glide(first, second)) => {
-                        self.cue(sample, first);
-                        self.open_glide = Some((sample, second));
-                    }
-                    None => self.unmapped.push(ipa.clone()),
-                }
-            }
-        }
+        // The buffer goes in first: the events inside it may need its samples to be decided.
         if !pcm.is_empty() {
+            self.loudest_rms = self.loudest_rms.max(rms(pcm));
             self.held.push(SpeechChunk {
                 sentence: self.sentence,
                 sentence_start: self.sentence_start,
@@ -129,18 +129,30 @@ impl TimelineBuilder {
             });
             self.written += pcm.len() as u64;
         }
-        if self.open_glide.is_some() {
+        for event in events {
+            if let RawEventKind::Phoneme(ipa) = &event.kind {
+                let sample = self.sentence_start + event.sample;
+                self.marks.push(PhonemeMark {
+                    sample,
+                    ipa: ipa.clone(),
+                    espeak_ms: event.audio_ms,
+                });
+                self.close_open(sample);
+                self.start_phoneme(sample, ipa);
+            }
+        }
+        if self.open.is_some() {
             Vec::new()
         } else {
             self.flush()
         }
     }
 
-    /// Ends the current sentence: closes an open diphthong at the end of the audio, returns the mouth to rest
-    /// there, and releases every held chunk.
+    /// Ends the current sentence: decides an open phoneme against the end of the audio, returns the mouth to
+    /// rest there, and releases every held chunk.
     pub(crate) fn end_sentence(&mut self) -> Vec<SpeechChunk> {
         let end = self.written;
-        self.close_glide(end);
+        self.close_open(end);
         self.cue(end, Viseme::Sil);
         if self.held.is_empty() && (!self.cues.is_empty() || !self.marks.is_empty()) {
             // Cues with no audio after them still have to reach the consumer; an empty chunk carries them.
@@ -156,9 +168,58 @@ impl TimelineBuilder {
         self.flush()
     }
 
-    fn close_glide(&mut self, next_start: u64) {
-        if let Some((start, second)) = self.open_glide.take() {
-            self.cue(start + next_start.saturating_sub(start) / 2, second);
+    fn start_phoneme(&mut self, sample: u64, ipa: &str) {
+        if ipa.trim().is_empty() {
+            self.open = Some(OpenPhoneme::Unspelled { start: sample });
+            return;
+        }
+        match mouth_shape(ipa) {
+            Some(MouthShape::Single(viseme)) => self.cue(sample, viseme),
+            Some(MouthShape::Glide(first, second)) => {
+                self.cue(sample, first);
+                self.open = Some(OpenPhoneme::Glide {
+                    start: sample,
+                    second,
+                });
+            }
+            None => self.unmapped.push(ipa.to_owned()),
+        }
+    }
+
+    /// Decides the open phoneme now that the next one starts at `next_start`.
+    fn close_open(&mut self, next_start: u64) {
+        match self.open.take() {
+            Some(OpenPhoneme::Glide { start, second }) => {
+                self.cue(start + next_start.saturating_sub(start) / 2, second);
+            }
+            Some(OpenPhoneme::Unspelled { start }) if next_start > start => {
+                // At the very start nothing loud has been heard yet; only near-digital silence counts then.
+                let threshold = (self.loudest_rms * QUIET_SHARE).clamp(1.0, QUIET_CEILING);
+                if self.held_rms(start, next_start) < threshold {
+                    self.cue(start, Viseme::Sil);
+                }
+            }
+            Some(OpenPhoneme::Unspelled { .. }) | None => {}
+        }
+    }
+
+    /// RMS of the held samples in `from..to` (absolute positions).
+    fn held_rms(&self, from: u64, to: u64) -> f64 {
+        let (mut sum, mut count) = (0.0, 0u64);
+        for chunk in &self.held {
+            let lo = from.max(chunk.start_sample);
+            let hi = to.min(chunk.end_sample());
+            if lo < hi {
+                let slice = &chunk.pcm
+                    [(lo - chunk.start_sample) as usize..(hi - chunk.start_sample) as usize];
+                sum += slice.iter().map(|&s| f64::from(s).powi(2)).sum::<f64>();
+                count += hi - lo;
+            }
+        }
+        if count == 0 {
+            0.0
+        } else {
+            (sum / count as f64).sqrt()
         }
     }
 
@@ -185,6 +246,13 @@ impl TimelineBuilder {
         }
         chunks
     }
+}
+
+fn rms(pcm: &[i16]) -> f64 {
+    if pcm.is_empty() {
+        return 0.0;
+    }
+    (pcm.iter().map(|&s| f64::from(s).powi(2)).sum::<f64>() / pcm.len() as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -248,7 +316,7 @@ mod tests {
             released[1].cues,
             vec![VisemeCue {
                 sample: 120,
-                viseme: Viseme::Ih
+                viseme: Viseme::I
             }]
         );
         assert_eq!(
@@ -257,6 +325,32 @@ mod tests {
                 sample: 220,
                 viseme: Viseme::SS
             }]
+        );
+    }
+
+    #[test]
+    fn unspelled_phonemes_rest_only_over_quiet_audio() {
+        let mut builder = TimelineBuilder::default();
+        builder.begin_sentence(0);
+        let loud = [3000i16, -3000].repeat(100);
+        // A loud vowel, then an unspelled phoneme over loud audio (a linking sound): no rest.
+        let mut chunks = builder.push(&loud, &[phoneme("a", 0), phoneme("", 100)]);
+        chunks.extend(builder.push(&loud, &[phoneme("n", 250)]));
+        // Then an unspelled phoneme over silence (a pause): the mouth rests.
+        chunks.extend(builder.push(&[0; 200], &[phoneme("", 400)]));
+        chunks.extend(builder.push(&loud, &[phoneme("a", 600)]));
+        let cues: Vec<(u64, Viseme)> = chunks
+            .iter()
+            .flat_map(|c| c.cues.iter().map(|q| (q.sample, q.viseme)))
+            .collect();
+        assert_eq!(
+            cues,
+            vec![
+                (0, Viseme::Aa),
+                (250, Viseme::Nn),
+                (400, Viseme::Sil),
+                (600, Viseme::Aa)
+            ]
         );
     }
 

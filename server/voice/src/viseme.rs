@@ -34,11 +34,11 @@ pub enum Viseme {
     /// e, ɛ, ə: jaw half open, lips relaxed.
     E,
     /// i, ɪ, j: lips spread, jaw nearly closed.
-    Ih,
+    I,
     /// o, ɔ, ɒ: lips rounded, jaw half open.
-    Oh,
+    O,
     /// u, ʊ, w: lips rounded and pushed forward.
-    Ou,
+    U,
 }
 
 impl Viseme {
@@ -56,12 +56,14 @@ impl Viseme {
         Viseme::RR,
         Viseme::Aa,
         Viseme::E,
-        Viseme::Ih,
-        Viseme::Oh,
-        Viseme::Ou,
+        Viseme::I,
+        Viseme::O,
+        Viseme::U,
     ];
 
-    /// The Oculus name (`sil`, `PP`, ..., `ou`), used on the wire.
+    /// The name used on the wire (`sil`, `PP`, ..., `U`): the Oculus viseme names as the browser link
+    /// (docs/browser-link.md) spells them, with the Oculus table's `ih`, `oh`, `ou` written `I`, `O`, `U` as in
+    /// the `viseme_I`, `viseme_O`, `viseme_U` blend shapes.
     pub fn name(self) -> &'static str {
         match self {
             Viseme::Sil => "sil",
@@ -76,18 +78,23 @@ impl Viseme {
             Viseme::RR => "RR",
             Viseme::Aa => "aa",
             Viseme::E => "E",
-            Viseme::Ih => "ih",
-            Viseme::Oh => "oh",
-            Viseme::Ou => "ou",
+            Viseme::I => "I",
+            Viseme::O => "O",
+            Viseme::U => "U",
         }
     }
 
-    /// Looks a viseme up by its Oculus name.
+    /// Looks a viseme up by its wire name, also accepting the Oculus table's spellings `ih`, `oh`, `ou`.
     pub fn from_name(name: &str) -> Option<Viseme> {
-        Viseme::ALL.into_iter().find(|v| v.name() == name)
+        match name {
+            "ih" => Some(Viseme::I),
+            "oh" => Some(Viseme::O),
+            "ou" => Some(Viseme::U),
+            _ => Viseme::ALL.into_iter().find(|v| v.name() == name),
+        }
     }
 
-    /// Position in the Oculus list (0 = `sil` ... 14 = `ou`).
+    /// Position in the Oculus list (0 = `sil` ... 14 = `U`).
     pub fn index(self) -> usize {
         self as usize
     }
@@ -168,8 +175,8 @@ fn consonant(symbol: char) -> Option<Viseme> {
         }
         'r' | 'ɹ' | 'ʁ' | 'ɻ' | 'ʀ' | 'ɽ' | 'ɚ' | 'ɝ' => Viseme::RR,
         // Glides take the shape of the vowel they come from.
-        'j' => Viseme::Ih,
-        'w' | 'ɥ' => Viseme::Ou,
+        'j' => Viseme::I,
+        'w' | 'ɥ' => Viseme::U,
         _ => return None,
     })
 }
@@ -178,9 +185,9 @@ fn vowel(symbol: char) -> Option<Viseme> {
     Some(match symbol {
         'a' | 'ɑ' | 'ɐ' | 'æ' | 'ʌ' | 'ɶ' => Viseme::Aa,
         'e' | 'ɛ' | 'ə' | 'ɜ' | 'ɘ' | 'œ' | 'ø' | 'ɞ' => Viseme::E,
-        'i' | 'ɪ' | 'y' | 'ʏ' | 'ɨ' | 'ᵻ' | 'ɯ' => Viseme::Ih,
-        'o' | 'ɔ' | 'ɒ' | 'ɤ' | 'ɵ' => Viseme::Oh,
-        'u' | 'ʊ' | 'ʉ' => Viseme::Ou,
+        'i' | 'ɪ' | 'y' | 'ʏ' | 'ɨ' | 'ᵻ' | 'ɯ' => Viseme::I,
+        'o' | 'ɔ' | 'ɒ' | 'ɤ' | 'ɵ' => Viseme::O,
+        'u' | 'ʊ' | 'ʉ' => Viseme::U,
         // An r-coloured vowel ends in an r shape (`ɑɹ`, `ɜː` with ɹ in American English).
         'ɚ' | 'ɝ' => Viseme::RR,
         _ => return None,
@@ -198,6 +205,8 @@ mod tests {
             assert_eq!(Viseme::from_name(viseme.name()), Some(viseme));
         }
         assert_eq!(Viseme::from_name("xx"), None);
+        assert_eq!(Viseme::from_name("ou"), Some(Viseme::U));
+        assert_eq!(Viseme::U.name(), "U");
     }
 
     #[test]
@@ -209,8 +218,8 @@ mod tests {
         assert_eq!(mouth_shape("dz"), Some(Single(Viseme::SS)));
         assert_eq!(mouth_shape("ɲ"), Some(Single(Viseme::Nn)));
         assert_eq!(mouth_shape("ˈa"), Some(Single(Viseme::Aa)));
-        assert_eq!(mouth_shape("ˌɔ"), Some(Single(Viseme::Oh)));
-        assert_eq!(mouth_shape("iː"), Some(Single(Viseme::Ih)));
+        assert_eq!(mouth_shape("ˌɔ"), Some(Single(Viseme::O)));
+        assert_eq!(mouth_shape("iː"), Some(Single(Viseme::I)));
         assert_eq!(mouth_shape("_"), Some(Single(Viseme::Sil)));
         assert_eq!(mouth_shape(""), Some(Single(Viseme::Sil)));
     }
@@ -219,18 +228,18 @@ mod tests {
     fn diphthongs_glide() {
         assert_eq!(
             mouth_shape("ˈaɪ"),
-            Some(MouthShape::Glide(Viseme::Aa, Viseme::Ih))
+            Some(MouthShape::Glide(Viseme::Aa, Viseme::I))
         );
         assert_eq!(
             mouth_shape("əʊ"),
-            Some(MouthShape::Glide(Viseme::E, Viseme::Ou))
+            Some(MouthShape::Glide(Viseme::E, Viseme::U))
         );
         // Two letters with the same shape are not a glide.
         assert_eq!(
             mouth_shape("eɪ"),
-            Some(MouthShape::Glide(Viseme::E, Viseme::Ih))
+            Some(MouthShape::Glide(Viseme::E, Viseme::I))
         );
-        assert_eq!(mouth_shape("ɪi"), Some(MouthShape::Single(Viseme::Ih)));
+        assert_eq!(mouth_shape("ɪi"), Some(MouthShape::Single(Viseme::I)));
     }
 
     #[test]

@@ -122,8 +122,8 @@ fn visemes_are_ordered_inside_the_audio_and_cover_the_mouth_shapes() {
         Viseme::PP,
         Viseme::Aa,
         Viseme::E,
-        Viseme::Ih,
-        Viseme::Ou,
+        Viseme::I,
+        Viseme::U,
         Viseme::Nn,
         Viseme::SS,
     ] {
