@@ -1,0 +1,42 @@
+# The project's commands. `make run` and `make test` are the contract: each sets up everything it needs on a fresh
+# Debian 12 machine (system packages, the Whisper model, the build) and then runs.
+
+SHELL := /bin/bash
+CARGO ?= cargo
+TARGET_DIR := $(or $(CARGO_TARGET_DIR),$(CURDIR)/target)
+
+.PHONY: run test bench fuzz deps model model-release build build-debug clean
+
+## Start the agent on the embedded default configuration (release build) and print its URL.
+run: deps model-release build
+	scripts/run.sh $(TARGET_DIR)/release
+
+## Install everything, then run every test of the workspace.
+test: deps model build-debug
+	$(CARGO) test --workspace --no-fail-fast
+
+## Benchmarks against their baselines, side by side (not part of the tests).
+bench: deps model-release build
+	$(CARGO) run --release -p agent-bench --bin hub-bench
+
+## Coverage-guided fuzzing of the protocol decoder (not in CI).
+fuzz:
+	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run decode -- -max_total_time=60
+
+deps:
+	scripts/deps.sh
+
+model:
+	scripts/model.sh
+
+model-release:
+	CARGO_PROFILE_FLAGS=--release scripts/model.sh
+
+build:
+	$(CARGO) build --release --workspace --bins
+
+build-debug:
+	$(CARGO) build --workspace --bins
+
+clean:
+	$(CARGO) clean

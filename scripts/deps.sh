@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Installs the Debian packages the project needs to build, run, test and benchmark, skipping those already present,
+# so that `make run` and `make test` work on a fresh Debian 12 machine.
+set -euo pipefail
+
+packages=(
+    build-essential pkg-config libssl-dev curl ca-certificates git
+    clang libclang-dev cmake                 # bindgen for opencv; whisper.cpp and espeak-ng builds
+    libopencv-dev opencv-data                # OpenCV 4.6 and its Haar/LBP cascades
+    libsonic-dev espeak-ng espeak-ng-data    # speech synthesis
+    python3 python3-pip python3-venv         # model download (pip), Python baselines in benchmarks
+    chromium chromium-driver                 # headless end-to-end tests
+    ffmpeg sox                               # fixture conversion for fake camera / microphone devices
+    redis-server                             # hub benchmark baseline
+)
+
+missing=()
+for p in "${packages[@]}"; do
+    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed"; then
+        missing+=("$p")
+    fi
+done
+
+if ((${#missing[@]} == 0)); then
+    echo "deps: all system packages present"
+    exit 0
+fi
+
+echo "deps: installing ${missing[*]}"
+sudo=""
+if [[ $(id -u) -ne 0 ]]; then
+    sudo="sudo"
+fi
+export DEBIAN_FRONTEND=noninteractive
+$sudo apt-get update -qq
+$sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# Debian's redis-server package starts a system instance; the benchmark starts its own on a free port.
+if [[ " ${missing[*]} " == *" redis-server "* ]]; then
+    $sudo systemctl disable --now redis-server >/dev/null 2>&1 || true
+fi
