@@ -84,6 +84,27 @@ impl Subscription {
         &self.shared.name
     }
 
+    /// The subscription as an async stream of messages.
+    pub fn into_stream(self) -> impl futures_util::Stream<Item = Data> + Send {
+        futures_util::stream::unfold(self, |sub| async move {
+            let next = sub.recv().await?;
+            Some((next, sub))
+        })
+    }
+
+    /// Calls `on_data` for every message on a task of its own, until the client
+    /// shuts down or the returned handle is aborted (which unsubscribes).
+    pub fn spawn_callback<F>(self, mut on_data: F) -> tokio::task::JoinHandle<()>
+    where
+        F: FnMut(Data) + Send + 'static,
+    {
+        tokio::spawn(async move {
+            while let Some(data) = self.recv().await {
+                on_data(data);
+            }
+        })
+    }
+
     /// The channel's properties as of the last (re)subscription, header included.
     pub fn info(&self) -> Option<ChannelInfo> {
         lock(&self.shared.info).clone()
