@@ -179,7 +179,11 @@ impl Hub {
         for chan in c.owned {
             remove_channel_locked(&mut st, chan);
         }
-        st.calls.retain(|_, call| call.caller != conn);
+        // Calls this connection was waiting on: nobody will read the answers.
+        let abandoned: Vec<CallId> = st.calls.iter().filter(|(_, p)| p.caller == conn).map(|(k, _)| *k).collect();
+        for call in abandoned {
+            finish_call(&mut st, call);
+        }
     }
 
     /// Sends a goodbye to every connection and closes their outboxes.
