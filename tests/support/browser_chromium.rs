@@ -37,7 +37,7 @@ pub struct Chromium {
     out: mpsc::Sender<String>,
     pending: Pending,
     next_id: AtomicU64,
-    _profile: TempProfile,
+    _profile: tempfile::TempDir,
 }
 
 /// One tab, attached with a flat CDP session.
@@ -51,7 +51,9 @@ impl Chromium {
     /// Starts `chromium` (or `$CHROMIUM`) headless with fake media devices playing `media`.
     pub async fn launch(media: &FakeMedia) -> anyhow::Result<Chromium> {
         let exe = std::env::var("CHROMIUM").unwrap_or_else(|_| "chromium".into());
-        let profile = TempProfile::new()?;
+        let profile = tempfile::Builder::new()
+            .prefix("agent-chromium-")
+            .tempdir()?;
         let mut child = Command::new(&exe)
             .args([
                 "--headless",
@@ -69,7 +71,7 @@ impl Chromium {
                 "--window-size=1400,860",
                 "--remote-debugging-port=0",
             ])
-            .arg(format!("--user-data-dir={}", profile.0.display()))
+            .arg(format!("--user-data-dir={}", profile.path().display()))
             .arg(format!(
                 "--use-file-for-fake-audio-capture={}",
                 media.audio_wav.display()
@@ -265,31 +267,4 @@ async fn devtools_url(stderr: tokio::process::ChildStderr) -> anyhow::Result<Str
     // A full stderr pipe would block the browser: keep reading it.
     tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
     Ok(url)
-}
-
-/// A fresh profile directory per browser, removed afterwards.
-#[derive(Debug)]
-struct TempProfile(PathBuf);
-
-impl TempProfile {
-    fn new() -> anyhow::Result<TempProfile> {
-        let dir = std::env::temp_dir().join(format!(
-            "agent-chromium-{}-{}",
-            std::process::id(),
-            rand_suffix()
-        ));
-        std::fs::create_dir_all(&dir)?;
-        Ok(TempProfile(dir))
-    }
-}
-
-impl Drop for TempProfile {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn rand_suffix() -> u64 {
-    use std::hash::{BuildHasher, RandomState};
-    RandomState::new().hash_one(std::time::SystemTime::now())
 }

@@ -372,7 +372,7 @@ function drawMouth(ctx, pose) {
   const cy = 655 + py(pose, 0.8);
   const half = 64 * pose.mouthWidth * (1 - pose.round * 0.38);
   const open = pose.jaw * 58 * (1 + pose.round * 0.15);
-  const smileLift = pose.smile * 12;
+  const smileLift = pose.smile * 17;
   const lipT = 14 + pose.round * 6 - pose.lipPress * 5; // lip thickness
   const left = { x: cx - half, y: cy - smileLift };
   const right = { x: cx + half, y: cy - smileLift };

@@ -1,14 +1,16 @@
 //! Camera capture: getUserMedia -> preview <video> -> 640x360 JPEG frames at an adjustable frame rate.
 //
 // Frames are scaled to cover 640x360 (centre crop, like the preview's object-fit: cover), so the detection
-// coordinates the server sends line up with the preview. A frame is skipped, not queued, while the previous one is
-// still being encoded or while the socket has a backlog: the counter `skipped` shows it in the status strip.
+// coordinates the server sends line up with the preview. Scaling happens in createImageBitmap and JPEG encoding in
+// a worker, so the avatar's drawing on the main thread does not slow the camera down. A frame is skipped, not
+// queued, while two are already being encoded or while the socket has a backlog: the counter `skipped` shows it.
 
 import { explainMediaError } from "./media-errors.js";
 
 export const FRAME_WIDTH = 640;
 export const FRAME_HEIGHT = 360;
 const JPEG_QUALITY = 0.75;
+const MAX_IN_FLIGHT = 2;
 
 export class Camera {
   /** `onFrame(ArrayBuffer jpeg)` is called per frame; `canSend()` says whether the link can take one now. */
@@ -18,12 +20,9 @@ export class Camera {
     this.canSend = canSend;
     this.stream = null;
     this.fps = 15;
-    this.canvas = document.createElement("canvas");
-    this.canvas.width = FRAME_WIDTH;
-    this.canvas.height = FRAME_HEIGHT;
-    this.ctx = this.canvas.getContext("2d", { alpha: false });
+    this.worker = null;
     this.timer = null;
-    this.encoding = false;
+    this.inFlight = 0;
     this.skipped = 0;
     this.nextAt = 0;
   }
@@ -46,6 +45,13 @@ export class Camera {
       throw new Error(explainMediaError(err, "camera"));
     }
     this.stream = stream;
+    this.inFlight = 0;
+    this.worker = new Worker(new URL("./jpeg-worker.js", import.meta.url));
+    this.worker.onmessage = (ev) => {
+      this.inFlight = Math.max(0, this.inFlight - 1);
+      if (ev.data.error) console.warn("camera: JPEG encoding failed:", ev.data.error);
+      else if (this.running) this.onFrame(ev.data.jpeg);
+    };
     this.video.srcObject = stream;
     await this.video.play().catch(() => {});
     for (const track of stream.getVideoTracks()) {
@@ -64,32 +70,35 @@ export class Camera {
     if (!this.running) return;
     const now = performance.now();
     const interval = 1000 / this.fps;
-    // Keep a steady cadence: schedule from the ideal time, not from when the timer happened to fire.
-    this.nextAt = Math.max(this.nextAt + interval, now + 1);
-    this.timer = setTimeout(() => this.tick(), this.nextAt - now);
+    // Keep a steady cadence: schedule from the ideal time, not from when the timer happened to fire, so a late
+    // timer is made up by the next one; after a long stall (more than a frame behind) start afresh.
+    this.nextAt += interval;
+    if (this.nextAt < now - interval) this.nextAt = now;
+    this.timer = setTimeout(() => this.tick(), Math.max(0, this.nextAt - now));
     this.capture();
   }
 
   capture() {
     const v = this.video;
     if (v.readyState < 2 || v.videoWidth === 0) return;
-    if (this.encoding || !this.canSend()) {
+    if (this.inFlight >= MAX_IN_FLIGHT || !this.canSend()) {
       this.skipped += 1;
       return;
     }
     const scale = Math.max(FRAME_WIDTH / v.videoWidth, FRAME_HEIGHT / v.videoHeight);
     const sw = FRAME_WIDTH / scale;
     const sh = FRAME_HEIGHT / scale;
-    this.ctx.drawImage(v, (v.videoWidth - sw) / 2, (v.videoHeight - sh) / 2, sw, sh, 0, 0, FRAME_WIDTH, FRAME_HEIGHT);
-    this.encoding = true;
-    this.canvas.toBlob(
-      (blob) => {
-        this.encoding = false;
-        if (!blob || !this.running) return;
-        blob.arrayBuffer().then((buf) => this.onFrame(buf));
+    this.inFlight += 1;
+    createImageBitmap(v, (v.videoWidth - sw) / 2, (v.videoHeight - sh) / 2, sw, sh, {
+      resizeWidth: FRAME_WIDTH,
+      resizeHeight: FRAME_HEIGHT,
+      resizeQuality: "medium",
+    }).then(
+      (bitmap) => this.worker.postMessage({ bitmap, quality: JPEG_QUALITY }, [bitmap]),
+      (err) => {
+        this.inFlight -= 1;
+        console.warn("camera: frame grab failed:", err);
       },
-      "image/jpeg",
-      JPEG_QUALITY,
     );
   }
 
@@ -100,5 +109,7 @@ export class Camera {
     for (const t of this.stream.getTracks()) t.stop();
     this.stream = null;
     this.video.srcObject = null;
+    this.worker?.terminate();
+    this.worker = null;
   }
 }

@@ -15,11 +15,13 @@ export class Overlay {
     this.last = null;
     this.lastAt = 0;
     this.count = 0;
+    this.dirty = false;
     this.w = 0;
     this.h = 0;
     trackCanvasSize(canvas, this.ctx, (w, h) => {
       this.w = w;
       this.h = h;
+      this.dirty = true;
     });
     this.draw = this.draw.bind(this);
     requestAnimationFrame(this.draw);
@@ -30,15 +32,18 @@ export class Overlay {
     this.last = data;
     this.lastAt = performance.now();
     this.count += 1;
+    this.dirty = true;
   }
 
   draw(now) {
     requestAnimationFrame(this.draw);
+    // Redraw only when something changed: new detections, a resize, or while they fade out.
+    const age = now - this.lastAt;
+    if (!this.dirty && (!this.last || age > FADE_MS * 2 + 100)) return;
+    this.dirty = false;
     const ctx = this.ctx;
     ctx.clearRect(0, 0, this.w, this.h);
-    if (!this.last) return;
-    const age = now - this.lastAt;
-    if (age > FADE_MS * 2) return;
+    if (!this.last || age > FADE_MS * 2) return;
     ctx.globalAlpha = age < FADE_MS ? 1 : 1 - (age - FADE_MS) / FADE_MS;
     const fw = this.last.frame?.width || 640;
     const fh = this.last.frame?.height || 360;
@@ -101,6 +106,8 @@ function label(ctx, text, x, y, colour) {
   const shown = text.length > 40 ? `${text.slice(0, 39)}…` : text;
   const w = ctx.measureText(shown).width + 10;
   const top = Math.max(0, y - 18);
+  // Keep the label inside the preview even for a geometry at its right edge.
+  x = Math.max(0, Math.min(x, ctx.canvas.clientWidth - w));
   ctx.fillStyle = "rgba(8, 12, 18, 0.78)";
   ctx.fillRect(x, top, w, 17);
   ctx.fillStyle = colour;

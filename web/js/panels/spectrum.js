@@ -60,6 +60,11 @@ export class Spectrum {
 
   draw(now) {
     requestAnimationFrame(this.draw);
+    // 30 fps is plenty for bars, and a spectrum at rest (all at the floor) needs no redraw at all.
+    if (now - this.last < 32) return;
+    const resting = this.peaks.every((p) => p <= FLOOR_DB);
+    if (resting && this.drawnResting) return;
+    this.drawnResting = resting;
     const dt = Math.min(100, now - this.last);
     this.last = now;
     const ctx = this.ctx;

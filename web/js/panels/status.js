@@ -9,6 +9,7 @@ export class StatusStrip {
       drops: $("st-drops"), rtt: $("st-rtt"), pill: $("conn-pill"),
     };
     this.prev = null;
+    this.rates = null;
   }
 
   /** Refreshes from `s` = {connection, role, sentVideo, sentAudio, received, levelDb, drops, rttMs}. */
@@ -22,9 +23,16 @@ export class StatusStrip {
     if (this.prev) {
       const dt = (nowMs - this.prev.t) / 1000;
       if (dt > 0) {
-        e.fpsOut.textContent = ((s.sentVideo - this.prev.sentVideo) / dt).toFixed(1);
-        e.audOut.textContent = ((s.sentAudio - this.prev.sentAudio) / dt).toFixed(0);
-        e.fpsIn.textContent = ((s.received - this.prev.received) / dt).toFixed(0);
+        // Rates are smoothed over a few seconds: a single late timer should not make the figures jump.
+        const ema = (old, now) => (old === undefined ? now : old + (now - old) * 0.3);
+        this.rates = {
+          video: ema(this.rates?.video, (s.sentVideo - this.prev.sentVideo) / dt),
+          audio: ema(this.rates?.audio, (s.sentAudio - this.prev.sentAudio) / dt),
+          received: ema(this.rates?.received, (s.received - this.prev.received) / dt),
+        };
+        e.fpsOut.textContent = this.rates.video.toFixed(1);
+        e.audOut.textContent = this.rates.audio.toFixed(0);
+        e.fpsIn.textContent = this.rates.received.toFixed(0);
       }
     }
     this.prev = { t: nowMs, sentVideo: s.sentVideo, sentAudio: s.sentAudio, received: s.received };
