@@ -8,6 +8,7 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use agent_tests::browser_chromium::{Chromium, FakeMedia, Tab};
+use agent_tests::browser_link::post_session;
 use agent_tests::browser_media::{
     TONE_HZ, best_loop_correlation, envelope, jpeg_shape, pcm_samples, prepare, read_wav,
     spectrum_peak, speech_fixture,
@@ -448,27 +449,4 @@ async fn link_refuses_foreign_origins_and_closes_on_malformed_frames() -> anyhow
     let msg = again.next().await.context("no welcome after reconnect")??;
     assert!(msg.to_text()?.contains("\"welcome\""));
     Ok(())
-}
-
-/// `POST /api/session` with an `Origin` header; returns the status and body.
-async fn post_session(http: &str, origin: &str) -> anyhow::Result<(u16, String)> {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let mut s = tokio::net::TcpStream::connect(http).await?;
-    let req = format!(
-        "POST /api/session HTTP/1.1\r\nHost: {http}\r\nOrigin: {origin}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
-    );
-    s.write_all(req.as_bytes()).await?;
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).await?;
-    let text = String::from_utf8_lossy(&buf).to_string();
-    let status = text
-        .split_whitespace()
-        .nth(1)
-        .and_then(|c| c.parse().ok())
-        .context("no HTTP status")?;
-    let body = text
-        .split_once("\r\n\r\n")
-        .map(|(_, b)| b.to_string())
-        .unwrap_or_default();
-    Ok((status, body))
 }

@@ -13,6 +13,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use agent_tests::browser_chromium::Chromium;
+use agent_tests::browser_link::session_token;
 use agent_tests::browser_media::{prepare, read_wav, speech_fixture};
 use agent_tests::fixtures::fixtures;
 use agent_tests::{Agent, DataDir};
@@ -171,11 +172,16 @@ async fn measure(agent: &Agent, hub: &flow::Client, window: Duration) -> anyhow:
     })
 }
 
+fn kiosk_url(agent: &Agent) -> String {
+    format!("http://{}/?autostart=1&aec=0", agent.http)
+}
+
 async fn browser_phase(
     media: &agent_tests::browser_chromium::FakeMedia,
     window: Duration,
 ) -> anyhow::Result<Phase> {
-    let agent = Agent::start().await?;
+    let data = DataDir::new()?;
+    let agent = Agent::start(&data).await?;
     let hub = agent.client("bench").await?;
     let browser = Chromium::launch(media).await?;
     let tab = browser.open(&kiosk_url(&agent)).await?;
@@ -272,7 +278,7 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     // A minimal page: session, socket, claim, media on.
     let origin = format!("http://{}", agent.http);
     let http = agent.http.to_string();
-    let token = session(&http, &origin).await?;
+    let token = session_token(&http).await?;
     let mut req = format!("ws://{http}/link?session={token}").into_client_request()?;
     req.headers_mut().insert("Origin", origin.parse()?);
     let (ws, _) = tokio_tungstenite::connect_async(req).await?;
@@ -323,24 +329,6 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
         }
     }
     Ok((link, base))
-}
-
-async fn session(http: &str, origin: &str) -> anyhow::Result<String> {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let mut s = tokio::net::TcpStream::connect(http).await?;
-    let req = format!(
-        "POST /api/session HTTP/1.1\r\nHost: {http}\r\nOrigin: {origin}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
-    );
-    s.write_all(req.as_bytes()).await?;
-    let mut buf = Vec::new();
-    s.read_to_end(&mut buf).await?;
-    let text = String::from_utf8_lossy(&buf);
-    let body = text
-        .split_once("\r\n\r\n")
-        .map(|(_, b)| b)
-        .context("no HTTP body")?;
-    let v: serde_json::Value = serde_json::from_str(body.trim())?;
-    Ok(v["session"].as_str().context("no session")?.to_string())
 }
 
 fn percentile(v: &[f64], q: f64) -> f64 {
