@@ -1,0 +1,485 @@
+//! Utterance segmentation of a 16 kHz stream with WebRTC's voice activity detector, pre-roll and hangover.
+//!
+//! The detector classifies 20 ms frames. An utterance starts once most frames of a short onset window are voiced
+//! (a single click does not open one) and takes some audio from before the onset with it (pre-roll), so the first
+//! syllable is not cut. It ends after a run of unvoiced frames as long as the hangover; the audio handed on keeps a
+//! little of that silence, which Whisper transcribes better than an abrupt cut. Frames quieter than an energy floor
+//! count as unvoiced whatever the detector says, which keeps faint hiss from opening utterances.
+//!
+//! `webrtc_vad::Vad` wraps a raw C pointer and is not `Send`; a segmenter therefore lives on one thread (the
+//! satellite gives it a thread of its own).
+
+use std::collections::VecDeque;
+
+use webrtc_vad::{SampleRate, Vad, VadMode};
+
+/// The rate the segmenter works at (Whisper's input rate; also one WebRTC VAD supports).
+pub const RATE: u32 = 16_000;
+const FRAME: usize = 320; // 20 ms at 16 kHz
+
+/// Tunable segmentation parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmenterConfig {
+    /// WebRTC aggressiveness 0 (quality) .. 3 (very aggressive: fewest false positives).
+    pub aggressiveness: u8,
+    /// Audio kept from before the detected onset.
+    pub pre_roll_ms: u32,
+    /// Unvoiced time that ends an utterance (end-of-speech hangover).
+    pub hangover_ms: u32,
+    /// Onset window: an utterance opens when `onset_voiced_ms` of the last `onset_ms` are voiced.
+    pub onset_ms: u32,
+    pub onset_voiced_ms: u32,
+    /// Utterances with less voiced time than this are dropped as clicks or bursts.
+    pub min_voiced_ms: u32,
+    /// Longer utterances are cut here (Whisper sees at most 30 s at once).
+    pub max_utterance_ms: u32,
+    /// Trailing silence kept after the last voiced frame.
+    pub post_roll_ms: u32,
+    /// Frames below this RMS level (dBFS) count as unvoiced.
+    pub energy_floor_dbfs: f32,
+}
+
+impl Default for SegmenterConfig {
+    fn default() -> Self {
+        Self {
+            aggressiveness: 3,
+            pre_roll_ms: 300,
+            hangover_ms: 300,
+            onset_ms: 100,
+            onset_voiced_ms: 80,
+            min_voiced_ms: 200,
+            max_utterance_ms: 25_000,
+            post_roll_ms: 150,
+            energy_floor_dbfs: -50.0,
+        }
+    }
+}
+
+/// Errors in a configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum SegmenterError {
+    #[error("vad aggressiveness must be 0..=3, got {0}")]
+    Aggressiveness(u8),
+    #[error(
+        "onset_voiced_ms ({voiced}) must not exceed onset_ms ({window}), which must be at least 20"
+    )]
+    Onset { voiced: u32, window: u32 },
+}
+
+/// One detected utterance. Sample indices count 16 kHz samples from the start of the stream.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Utterance {
+    /// First sample of `audio` (onset minus pre-roll).
+    pub start: u64,
+    /// End of the last voiced frame: the end of speech.
+    pub speech_end: u64,
+    /// Audio from `start`, including the post-roll.
+    pub audio: Vec<f32>,
+    /// True when the utterance was cut at the maximum length rather than ended by silence.
+    pub forced: bool,
+}
+
+/// What the segmenter reports while it consumes audio.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SegmentEvent {
+    /// Speech began at this sample (pre-roll included).
+    Started { start: u64 },
+    /// An utterance ended by silence (or the length cap).
+    Ended(Utterance),
+    /// What started at `start` was too short to be speech and is dropped.
+    Dropped { start: u64 },
+}
+
+enum State {
+    Idle,
+    Speech {
+        start: u64,
+        audio: Vec<f32>,
+        speech_end: u64,
+        voiced_frames: u32,
+        silent_frames: u32,
+    },
+}
+
+/// The streaming segmenter.
+pub struct Segmenter {
+    cfg: SegmenterConfig,
+    vad: Vad,
+    state: State,
+    /// Partial frame not yet classified.
+    partial: Vec<f32>,
+    /// Absolute index of the first sample of `partial`.
+    position: u64,
+    /// Recent audio while idle, for the pre-roll and the onset window.
+    recent: VecDeque<f32>,
+    /// Voiced flags of the frames in the onset window.
+    onset: VecDeque<bool>,
+}
+
+impl std::fmt::Debug for Segmenter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Segmenter")
+            .field("cfg", &self.cfg)
+            .field("position", &self.position)
+            .field("in_speech", &matches!(self.state, State::Speech { .. }))
+            .finish()
+    }
+}
+
+fn frames(ms: u32) -> u32 {
+    ms.div_ceil(20)
+}
+
+fn samples(ms: u32) -> usize {
+    ms as usize * RATE as usize / 1000
+}
+
+impl Segmenter {
+    /// A segmenter starting at sample 0.
+    pub fn new(cfg: SegmenterConfig) -> Result<Self, SegmenterError> {
+        let mode = match cfg.aggressiveness {
+            0 => VadMode::Quality,
+            1 => VadMode::LowBitrate,
+            2 => VadMode::Aggressive,
+            3 => VadMode::VeryAggressive,
+            a => return Err(SegmenterError::Aggressiveness(a)),
+        };
+        if cfg.onset_ms < 20 || cfg.onset_voiced_ms > cfg.onset_ms {
+            return Err(SegmenterError::Onset {
+                voiced: cfg.onset_voiced_ms,
+                window: cfg.onset_ms,
+            });
+        }
+        Ok(Self {
+            vad: Vad::new_with_rate_and_mode(SampleRate::Rate16kHz, mode),
+            cfg,
+            state: State::Idle,
+            partial: Vec::with_capacity(FRAME),
+            position: 0,
+            recent: VecDeque::new(),
+            onset: VecDeque::new(),
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &SegmenterConfig {
+        &self.cfg
+    }
+
+    /// Index of the next sample the segmenter expects.
+    pub fn position(&self) -> u64 {
+        self.position + self.partial.len() as u64
+    }
+
+    /// True while an utterance is open.
+    pub fn in_speech(&self) -> bool {
+        matches!(self.state, State::Speech { .. })
+    }
+
+    /// Consumes 16 kHz samples, appending what happened to `events`.
+    pub fn push(&mut self, mut input: &[f32], events: &mut Vec<SegmentEvent>) {
+        while !input.is_empty() {
+            let take = (FRAME - self.partial.len()).min(input.len());
+            self.partial.extend_from_slice(&input[..take]);
+            input = &input[take..];
+            if self.partial.len() == FRAME {
+                let frame = std::mem::take(&mut self.partial);
+                self.frame(&frame, events);
+                self.position += FRAME as u64;
+                self.partial = frame;
+                self.partial.clear();
+            }
+        }
+    }
+
+    /// Ends the stream: an open utterance is closed as if silence followed.
+    pub fn finish(&mut self, events: &mut Vec<SegmentEvent>) {
+        if let State::Speech { .. } = self.state {
+            self.close(false, events);
+        }
+        self.reset_detector();
+    }
+
+    /// Forgets all state (a gap in the stream), keeping the sample position.
+    pub fn reset_detector(&mut self) {
+        self.vad.reset();
+        self.state = State::Idle;
+        self.recent.clear();
+        self.onset.clear();
+    }
+
+    /// Moves the position forward without audio (the stream skipped), closing anything open first.
+    pub fn skip_to(&mut self, position: u64, events: &mut Vec<SegmentEvent>) {
+        self.finish(events);
+        self.partial.clear();
+        self.position = position;
+    }
+
+    fn voiced(&mut self, frame: &[f32]) -> bool {
+        let energy = frame.iter().map(|s| s * s).sum::<f32>() / frame.len() as f32;
+        let dbfs = 10.0 * energy.max(1e-12).log10();
+        let pcm: Vec<i16> = frame
+            .iter()
+            .map(|s| (s * 32768.0).clamp(-32768.0, 32767.0) as i16)
+            .collect();
+        // A frame of the right length at a supported rate is always accepted by the detector.
+        let vad_says = self.vad.is_voice_segment(&pcm).unwrap_or(false);
+        vad_says && dbfs >= self.cfg.energy_floor_dbfs
+    }
+
+    fn frame(&mut self, frame: &[f32], events: &mut Vec<SegmentEvent>) {
+        let voiced = self.voiced(frame);
+        let frame_end = self.position + FRAME as u64;
+        match &mut self.state {
+            State::Idle => {
+                self.recent.extend(frame);
+                let keep = samples(self.cfg.pre_roll_ms) + samples(self.cfg.onset_ms) + FRAME;
+                while self.recent.len() > keep {
+                    self.recent.pop_front();
+                }
+                self.onset.push_back(voiced);
+                while self.onset.len() > frames(self.cfg.onset_ms) as usize {
+                    self.onset.pop_front();
+                }
+                let voiced_in_window = self.onset.iter().filter(|&&v| v).count() as u32;
+                if voiced && voiced_in_window >= frames(self.cfg.onset_voiced_ms) {
+                    // Speech began at the first voiced frame of the window; the pre-roll reaches back from there.
+                    let first = self.onset.iter().position(|&v| v).unwrap_or(0);
+                    let window_start = frame_end - (self.onset.len() * FRAME) as u64;
+                    let onset_at = window_start + (first * FRAME) as u64;
+                    let recent_start = frame_end - self.recent.len() as u64;
+                    let start = onset_at
+                        .saturating_sub(samples(self.cfg.pre_roll_ms) as u64)
+                        .max(recent_start);
+                    let audio: Vec<f32> = self
+                        .recent
+                        .iter()
+                        .skip((start - recent_start) as usize)
+                        .copied()
+                        .collect();
+                    self.recent.clear();
+                    self.onset.clear();
+                    self.state = State::Speech {
+                        start,
+                        audio,
+                        speech_end: frame_end,
+                        voiced_frames: voiced_in_window,
+                        silent_frames: 0,
+                    };
+                    events.push(SegmentEvent::Started { start });
+                }
+            }
+            State::Speech {
+                audio,
+                speech_end,
+                voiced_frames,
+                silent_frames,
+                ..
+            } => {
+                audio.extend_from_slice(frame);
+                if voiced {
+                    *speech_end = frame_end;
+                    *voiced_frames += 1;
+                    *silent_frames = 0;
+                } else {
+                    *silent_frames += 1;
+                }
+                let too_long = audio.len() >= samples(self.cfg.max_utterance_ms);
+                if *silent_frames >= frames(self.cfg.hangover_ms) {
+                    self.close(false, events);
+                } else if too_long {
+                    self.close(true, events);
+                }
+            }
+        }
+    }
+
+    fn close(&mut self, forced: bool, events: &mut Vec<SegmentEvent>) {
+        let State::Speech {
+            start,
+            mut audio,
+            speech_end,
+            voiced_frames,
+            ..
+        } = std::mem::replace(&mut self.state, State::Idle)
+        else {
+            return;
+        };
+        if voiced_frames < frames(self.cfg.min_voiced_ms) {
+            events.push(SegmentEvent::Dropped { start });
+            return;
+        }
+        let keep = (speech_end - start) as usize + samples(self.cfg.post_roll_ms);
+        if forced {
+            // Cut at the current position; the speech goes on in a new utterance that starts right here.
+            let end = start + audio.len() as u64;
+            events.push(SegmentEvent::Ended(Utterance {
+                start,
+                speech_end: end,
+                audio,
+                forced: true,
+            }));
+            self.state = State::Speech {
+                start: end,
+                audio: Vec::new(),
+                speech_end: end,
+                voiced_frames: 0,
+                silent_frames: 0,
+            };
+            events.push(SegmentEvent::Started { start: end });
+            return;
+        }
+        audio.truncate(keep);
+        events.push(SegmentEvent::Ended(Utterance {
+            start,
+            speech_end,
+            audio,
+            forced,
+        }));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vowel-like harmonic tone with a 4 Hz syllable envelope: speech-like enough for the WebRTC detector.
+    fn voice(ms: u32) -> Vec<f32> {
+        let n = samples(ms);
+        (0..n)
+            .map(|i| {
+                let t = i as f32 / RATE as f32;
+                let env = 0.6 + 0.4 * (2.0 * std::f32::consts::PI * 4.0 * t).sin();
+                let f0 = 140.0;
+                let s: f32 = (1..=12)
+                    .map(|h| (2.0 * std::f32::consts::PI * f0 * h as f32 * t).sin() / h as f32)
+                    .sum();
+                0.15 * env * s
+            })
+            .collect()
+    }
+
+    fn silence(ms: u32) -> Vec<f32> {
+        vec![0.0; samples(ms)]
+    }
+
+    fn run(cfg: SegmenterConfig, audio: &[f32]) -> Vec<SegmentEvent> {
+        let mut seg = Segmenter::new(cfg).expect("valid config");
+        let mut ev = Vec::new();
+        for chunk in audio.chunks(441) {
+            seg.push(chunk, &mut ev);
+        }
+        seg.finish(&mut ev);
+        ev
+    }
+
+    fn ended(ev: &[SegmentEvent]) -> Vec<&Utterance> {
+        ev.iter()
+            .filter_map(|e| match e {
+                SegmentEvent::Ended(u) => Some(u),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn silence_opens_nothing() {
+        let ev = run(SegmenterConfig::default(), &silence(3000));
+        assert!(ev.is_empty(), "{ev:?}");
+    }
+
+    #[test]
+    fn one_burst_gives_one_utterance_with_pre_roll_and_hangover() {
+        let audio = [silence(1000), voice(1500), silence(1000)].concat();
+        let cfg = SegmenterConfig::default();
+        let ev = run(cfg.clone(), &audio);
+        let utts = ended(&ev);
+        assert_eq!(utts.len(), 1, "{ev:?}");
+        let u = utts[0];
+        let onset = samples(1000) as u64;
+        // The start reaches back into the silence by about the pre-roll.
+        assert!(
+            u.start < onset && u.start + samples(cfg.pre_roll_ms) as u64 >= onset - FRAME as u64,
+            "{}",
+            u.start
+        );
+        // The end of speech is within two frames of the true end.
+        let true_end = samples(2500) as u64;
+        assert!(
+            u.speech_end.abs_diff(true_end) <= 2 * FRAME as u64,
+            "{}",
+            u.speech_end
+        );
+        assert_eq!(
+            u.audio.len() as u64,
+            u.speech_end - u.start + samples(cfg.post_roll_ms) as u64
+        );
+        assert!(matches!(ev[0], SegmentEvent::Started { .. }));
+    }
+
+    #[test]
+    fn a_pause_shorter_than_the_hangover_does_not_split() {
+        let audio = [
+            silence(500),
+            voice(800),
+            silence(200),
+            voice(800),
+            silence(800),
+        ]
+        .concat();
+        let ev = run(SegmenterConfig::default(), &audio);
+        assert_eq!(ended(&ev).len(), 1, "{ev:?}");
+        let longer = SegmenterConfig {
+            hangover_ms: 100,
+            ..SegmenterConfig::default()
+        };
+        assert_eq!(ended(&run(longer, &audio)).len(), 2);
+    }
+
+    #[test]
+    fn clicks_are_dropped_and_long_speech_is_cut() {
+        let audio = [silence(500), voice(60), silence(1000)].concat();
+        let ev = run(SegmenterConfig::default(), &audio);
+        assert!(ended(&ev).is_empty(), "{ev:?}");
+        let capped = SegmenterConfig {
+            max_utterance_ms: 1000,
+            ..SegmenterConfig::default()
+        };
+        let ev = run(capped, &[voice(2500), silence(600)].concat());
+        let utts = ended(&ev);
+        assert!(utts.len() >= 2, "{ev:?}");
+        assert!(utts[0].forced);
+        assert_eq!(utts[1].start, utts[0].start + utts[0].audio.len() as u64);
+    }
+
+    #[test]
+    fn quiet_hiss_stays_below_the_energy_floor() {
+        // Deterministic pseudo-random noise at about -60 dBFS.
+        let mut x = 12345u32;
+        let hiss: Vec<f32> = (0..samples(3000))
+            .map(|_| {
+                x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                ((x >> 16) as f32 / 32768.0 - 1.0) * 0.0017
+            })
+            .collect();
+        assert!(ended(&run(SegmenterConfig::default(), &hiss)).is_empty());
+    }
+
+    #[test]
+    fn invalid_configuration_is_rejected() {
+        assert!(
+            Segmenter::new(SegmenterConfig {
+                aggressiveness: 4,
+                ..SegmenterConfig::default()
+            })
+            .is_err()
+        );
+        assert!(
+            Segmenter::new(SegmenterConfig {
+                onset_voiced_ms: 200,
+                ..SegmenterConfig::default()
+            })
+            .is_err()
+        );
+    }
+}

@@ -1,0 +1,110 @@
+//! End-to-end checks of the converted model: it loads in whisper-rs and transcribes the fixture speech.
+//!
+//! The model comes from `make model` (models/ggml-tiny.en.bin, or `WHISPER_MODEL`); the Makefile runs that before
+//! the tests, so a missing model is a failure with instructions, not a skip.
+
+use std::path::PathBuf;
+
+use whisper_sat::model_path::{default_model, fixtures_dir};
+use whisper_sat::offline::{joined_text, transcribe_clip};
+use whisper_sat::segmenter::SegmenterConfig;
+use whisper_sat::transcriber::{AudioContext, Outcome, Transcriber, TranscriberConfig};
+use whisper_sat::wer::wer;
+
+fn model() -> PathBuf {
+    let path = default_model();
+    assert!(
+        path.is_file(),
+        "Whisper model {} is missing: run `make model` (or scripts/model.sh), or set WHISPER_MODEL to a ggml file",
+        path.display()
+    );
+    path
+}
+
+fn fixture(name: &str) -> (whisper_sat::wav::Clip, String) {
+    let dir = fixtures_dir().join("audio");
+    let clip = whisper_sat::wav::read_mono(&dir.join(format!("{name}.wav"))).unwrap_or_else(|e| {
+        panic!("fixture {name}: {e} (set AGENT_FIXTURES to the shared fixtures directory)")
+    });
+    let reference =
+        std::fs::read_to_string(dir.join(format!("{name}.txt"))).expect("fixture transcript");
+    (clip, reference)
+}
+
+#[test]
+fn converted_tiny_en_transcribes_jfk_with_at_most_ten_percent_wer() {
+    let (clip, reference) = fixture("jfk");
+    let mut t = Transcriber::load(
+        &model(),
+        TranscriberConfig {
+            audio_context: AudioContext::Full,
+            ..TranscriberConfig::default()
+        },
+    )
+    .expect("model loads");
+    let audio =
+        whisper_sat::resample::resample_clip(&clip.samples, clip.rate, 16_000).expect("resample");
+    let decoded = t.decode(&audio).expect("inference");
+    let rate = wer(&reference, &decoded.text);
+    println!(
+        "jfk whole clip: WER {:.1}% : {}",
+        rate * 100.0,
+        decoded.text
+    );
+    assert!(rate <= 0.10, "WER {rate:.3} for {:?}", decoded.text);
+}
+
+#[test]
+fn segmented_pipeline_transcribes_every_fixture_clip() {
+    let mut t = Transcriber::load(&model(), TranscriberConfig::default()).expect("model loads");
+    let mut errors = 0.0;
+    let mut words = 0.0;
+    for name in [
+        "jfk",
+        "LJ001-0001",
+        "LJ001-0002",
+        "LJ001-0004",
+        "sb_example1",
+    ] {
+        let (clip, reference) = fixture(name);
+        let results = transcribe_clip(&clip.samples, clip.rate, SegmenterConfig::default(), &mut t)
+            .expect("run");
+        let text = joined_text(&results);
+        let rate = wer(&reference, &text);
+        let n = whisper_sat::wer::normalise(&reference).len() as f64;
+        errors += rate * n;
+        words += n;
+        println!("{name}: WER {:.1}% : {text}", rate * 100.0);
+        assert!(rate <= 0.25, "{name}: WER {rate:.3} for {text:?}");
+    }
+    let overall = errors / words;
+    println!("overall WER {:.1}%", overall * 100.0);
+    assert!(overall <= 0.10, "overall WER {overall:.3}");
+}
+
+#[test]
+fn silence_and_noise_give_no_transcript() {
+    let mut t = Transcriber::load(&model(), TranscriberConfig::default()).expect("model loads");
+    let silence = vec![0.0f32; 22_050 * 3];
+    assert!(
+        transcribe_clip(&silence, 22_050, SegmenterConfig::default(), &mut t)
+            .expect("run")
+            .is_empty()
+    );
+    // Deterministic white noise at about -30 dBFS: loud, but not speech.
+    let mut x = 0x2545_f491_u32;
+    let noise: Vec<f32> = (0..22_050 * 4)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x as f32 / u32::MAX as f32 - 0.5) * 0.11
+        })
+        .collect();
+    let results = transcribe_clip(&noise, 22_050, SegmenterConfig::default(), &mut t).expect("run");
+    let accepted: Vec<_> = results
+        .iter()
+        .filter(|r| matches!(r.outcome, Outcome::Speech(_)))
+        .collect();
+    assert!(accepted.is_empty(), "noise produced {accepted:?}");
+}
