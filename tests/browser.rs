@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use agent_tests::browser_chromium::{Chromium, FakeMedia, Tab};
+use agent_tests::browser_chromium::{Chromium, Devices, FakeMedia, Tab};
 use agent_tests::browser_link::post_session;
 use agent_tests::browser_media::{
     TONE_HZ, best_loop_correlation, envelope, jpeg_shape, pcm_samples, prepare, read_wav,
@@ -360,6 +360,55 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
         started.elapsed()
     );
     browser.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn page_explains_denied_permission_and_missing_devices() -> anyhow::Result<()> {
+    let data = DataDir::new()?;
+    let agent = Agent::start(&data).await?;
+    for (devices, expected) in [
+        (
+            Devices::Denied,
+            [
+                "Permission to use the microphone was denied",
+                "Permission to use the camera was denied",
+            ],
+        ),
+        (
+            Devices::Absent,
+            ["No microphone was found", "No camera was found"],
+        ),
+    ] {
+        let browser = Chromium::launch_with(&devices).await?;
+        let tab = browser.open(&kiosk_url(&agent)).await?;
+        let shown = "document.getElementById('notice').hidden === false";
+        browser.wait_for(&tab, shown, PAGE_READY).await?;
+        // Both devices fail; give the second failure a moment to be reported too.
+        let both = format!(
+            "document.getElementById('notice').textContent.includes({:?})",
+            expected[1]
+        );
+        browser
+            .wait_for(&tab, &both, Duration::from_secs(10))
+            .await?;
+        let text = browser
+            .eval(&tab, "document.getElementById('notice').textContent")
+            .await?;
+        let text = text.as_str().unwrap_or_default().to_string();
+        for e in expected {
+            ensure!(text.contains(e), "{devices:?}: notice {text:?} lacks {e:?}");
+        }
+        // Nothing was captured, so the page gave the role back for someone else.
+        browser
+            .wait_for(
+                &tab,
+                "agentDebug.role === 'none' && !agentDebug.micRunning",
+                Duration::from_secs(10),
+            )
+            .await?;
+        browser.quit().await;
+    }
     Ok(())
 }
 

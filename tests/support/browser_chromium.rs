@@ -28,6 +28,17 @@ pub struct FakeMedia {
     pub video_y4m: PathBuf,
 }
 
+/// The media devices the browser offers the page.
+#[derive(Debug, Clone)]
+pub enum Devices {
+    /// Fake microphone and camera playing files; permission granted without a prompt.
+    Granted(FakeMedia),
+    /// Fake devices exist, but the user refuses permission (headless Chromium denies the prompt).
+    Denied,
+    /// No microphone or camera at all; permission would be granted.
+    Absent,
+}
+
 type Pending = Arc<Mutex<HashMap<u64, oneshot::Sender<Result<Value, String>>>>>;
 
 /// A running headless Chromium and its DevTools connection; killed on drop.
@@ -50,6 +61,11 @@ pub struct Tab {
 impl Chromium {
     /// Starts `chromium` (or `$CHROMIUM`) headless with fake media devices playing `media`.
     pub async fn launch(media: &FakeMedia) -> anyhow::Result<Chromium> {
+        Self::launch_with(&Devices::Granted(media.clone())).await
+    }
+
+    /// Starts `chromium` (or `$CHROMIUM`) headless offering `devices` to pages.
+    pub async fn launch_with(devices: &Devices) -> anyhow::Result<Chromium> {
         let exe = std::env::var("CHROMIUM").unwrap_or_else(|_| "chromium".into());
         let profile = tempfile::Builder::new()
             .prefix("agent-chromium-")
@@ -66,20 +82,11 @@ impl Chromium {
                 "--disable-renderer-backgrounding",
                 "--disable-backgrounding-occluded-windows",
                 "--autoplay-policy=no-user-gesture-required",
-                "--use-fake-ui-for-media-stream",
-                "--use-fake-device-for-media-stream",
                 "--window-size=1400,860",
                 "--remote-debugging-port=0",
             ])
             .arg(format!("--user-data-dir={}", profile.path().display()))
-            .arg(format!(
-                "--use-file-for-fake-audio-capture={}",
-                media.audio_wav.display()
-            ))
-            .arg(format!(
-                "--use-file-for-fake-video-capture={}",
-                media.video_y4m.display()
-            ))
+            .args(device_flags(devices))
             .arg("about:blank")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -247,6 +254,25 @@ impl Chromium {
     /// Stops the browser.
     pub async fn quit(mut self) {
         let _ = self.child.kill().await;
+    }
+}
+
+fn device_flags(devices: &Devices) -> Vec<String> {
+    match devices {
+        Devices::Granted(media) => vec![
+            "--use-fake-ui-for-media-stream".into(),
+            "--use-fake-device-for-media-stream".into(),
+            format!(
+                "--use-file-for-fake-audio-capture={}",
+                media.audio_wav.display()
+            ),
+            format!(
+                "--use-file-for-fake-video-capture={}",
+                media.video_y4m.display()
+            ),
+        ],
+        Devices::Denied => vec!["--use-fake-device-for-media-stream".into()],
+        Devices::Absent => vec!["--use-fake-ui-for-media-stream".into()],
     }
 }
 

@@ -225,13 +225,17 @@ function handleAvatar(cmd) {
 
 // ---- notices, banner, caption --------------------------------------------------------------------------------
 
+const notices = [];
 function showNotice(text) {
   page.lastError = text;
-  $("notice").textContent = text;
+  // Microphone and camera can fail together: show both messages, once each.
+  if (!notices.includes(text)) notices.push(text);
+  $("notice").textContent = notices.join(" ");
   $("notice").hidden = false;
 }
 
 function clearNotice() {
+  notices.length = 0;
   $("notice").hidden = true;
 }
 
