@@ -238,6 +238,52 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
         )
         .await?;
 
+    // Speech: framed PCM of one utterance plays through WebAudio, and its visemes follow the audio clock.
+    let speech = hub
+        .publisher(
+            "Agent.speech",
+            r#"{"format":"s16le","rate":22050,"channels":1,"framing":"utterance-offset"}"#,
+        )
+        .await?;
+    let (_, voice) = read_wav(&agent_tests::fixtures::fixture("audio/LJ001-0002.wav")?)?;
+    let utterance: u32 = 7;
+    avatar
+        .publish(
+            json!({"cmd": "visemes", "utterance": utterance, "items": [
+                {"t_ms": 0, "v": "sil"}, {"t_ms": 100, "v": "aa"}, {"t_ms": 500, "v": "O"},
+                {"t_ms": 900, "v": "E"}, {"t_ms": 1300, "v": "PP"}, {"t_ms": 1700, "v": "sil"}]})
+            .to_string(),
+        )
+        .await?;
+    for (i, chunk) in voice.chunks(RATE / 5).enumerate() {
+        let mut payload = utterance.to_le_bytes().to_vec();
+        payload.extend_from_slice(&((i * RATE / 5) as u32).to_le_bytes());
+        payload.extend(chunk.iter().flat_map(|s| s.to_le_bytes()));
+        speech.publish(payload).await?;
+    }
+    browser
+        .wait_for(
+            &tab,
+            "agentDebug.speechChunks >= 9",
+            Duration::from_secs(10),
+        )
+        .await?;
+    // The mouth opens for "aa"/"O" while the utterance plays, then closes again (to the happy mood's rest).
+    browser
+        .wait_for(
+            &tab,
+            "agentDebug.viseme === 'O' && agentDebug.jaw > 0.3",
+            Duration::from_secs(5),
+        )
+        .await?;
+    browser
+        .wait_for(
+            &tab,
+            "agentDebug.viseme === 'sil' && agentDebug.jaw < 0.15",
+            Duration::from_secs(5),
+        )
+        .await?;
+
     let png = browser.screenshot(&tab).await?;
     std::fs::create_dir_all(artifacts_dir())?;
     let shot = artifacts_dir().join("browser-page.png");

@@ -12,12 +12,14 @@ export function installDebugHook({ avatar, link, page, camera, mic, spectrum, ov
   define("head", () => avatar.debugState().head);
   define("mood", () => avatar.debugState().mood);
   define("viseme", () => avatar.debugState().viseme);
+  define("jaw", () => avatar.debugState().jaw);
   define("role", () => page.role);
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));
   define("received", () => ({ ...link.received }));
   define("videoFps", () => camera.fps);
   define("cameraSkipped", () => camera.skipped);
+  define("cameraPacing", () => camera.paced);
   define("micRunning", () => mic.running);
   define("cameraRunning", () => camera.running);
   define("micLevelDb", () => mic.levelDb);

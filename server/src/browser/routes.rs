@@ -99,8 +99,5 @@ async fn link(
             tracing::warn!(error = %e, "WebSocket upgrade failed");
             lock(&failed.0.sessions).unbind(&failed.1, Instant::now());
         })
-        .on_upgrade(move |ws| async move {
-            socket::run(shared.clone(), ws, &token).await;
-            lock(&shared.sessions).unbind(&token, Instant::now());
-        })
+        .on_upgrade(move |ws| async move { socket::run(shared, ws, &token).await })
 }

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use axum::extract::ws::{CloseFrame, Message, WebSocket};
 use bytes::Bytes;
@@ -42,17 +42,19 @@ struct Meter {
     samples: u64,
 }
 
-/// Runs one page's socket until it closes; `token` is only used in logs (its first 8 characters).
+/// Runs one page's socket until it closes, then frees `token` for a reconnect (its first 8 characters tag the
+/// logs).
 pub async fn run(shared: Arc<Shared>, ws: WebSocket, token: &str) {
     let page: PageId = shared.next_page.fetch_add(1, Ordering::Relaxed);
     let tag = token.get(..8).unwrap_or(token).to_string();
     let span = tracing::info_span!("page", id = page, session = %tag);
-    serve(shared, ws, page).instrument(span).await;
+    serve(shared, ws, page, token).instrument(span).await;
 }
 
-async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
+async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId, token: &str) {
     let Some(client) = shared.client.get().cloned() else {
         // The route checks this before upgrading; the module cannot unset it.
+        lock(&shared.sessions).unbind(token, Instant::now());
         return;
     };
     tracing::info!("page connected");
@@ -109,6 +111,8 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId) {
     conn.uplink.close();
     lock(&shared.pages).remove(&page);
     conn.leave_role();
+    // Free the token before the page hears the close, so that it can reconnect with it at once.
+    lock(&shared.sessions).unbind(token, Instant::now());
     match end {
         End::PageClosed => tracing::info!("page disconnected"),
         End::Close(code, reason) => {

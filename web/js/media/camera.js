@@ -1,9 +1,10 @@
 //! Camera capture: getUserMedia -> preview <video> -> 640x360 JPEG frames at an adjustable frame rate.
 //
 // Frames are scaled to cover 640x360 (centre crop, like the preview's object-fit: cover), so the detection
-// coordinates the server sends line up with the preview. Scaling happens in createImageBitmap and JPEG encoding in
-// a worker, so the avatar's drawing on the main thread does not slow the camera down. A frame is skipped, not
-// queued, while two are already being encoded or while the socket has a backlog: the counter `skipped` shows it.
+// coordinates the server sends line up with the preview. Where the browser has MediaStreamTrackProcessor (Chrome,
+// Edge), the camera's frames go straight to a worker that paces, scales and encodes them, so the avatar's drawing on
+// the main thread cannot slow the camera down; elsewhere a timer grabs ImageBitmaps for the same worker. A frame is
+// skipped, not queued, while two are already being encoded or while the socket has a backlog (`skipped` counts).
 
 import { explainMediaError } from "./media-errors.js";
 
@@ -23,6 +24,7 @@ export class Camera {
     this.worker = null;
     this.timer = null;
     this.inFlight = 0;
+    this.paced = null;
     this.skipped = 0;
     this.nextAt = 0;
   }
@@ -50,20 +52,33 @@ export class Camera {
     this.worker.onmessage = (ev) => {
       this.inFlight = Math.max(0, this.inFlight - 1);
       if (ev.data.error) console.warn("camera: JPEG encoding failed:", ev.data.error);
-      else if (this.running) this.onFrame(ev.data.jpeg);
+      else if (!this.running) return;
+      else if (this.canSend()) this.onFrame(ev.data.jpeg);
+      else this.skipped += 1;
     };
     this.video.srcObject = stream;
     await this.video.play().catch(() => {});
     for (const track of stream.getVideoTracks()) {
       track.addEventListener("ended", () => this.stop());
     }
-    this.nextAt = performance.now();
-    this.tick();
+    const track = stream.getVideoTracks()[0];
+    if (typeof MediaStreamTrackProcessor === "function" && track) {
+      const { readable } = new MediaStreamTrackProcessor({ track });
+      const msg = { type: "stream", readable, fps: this.fps, quality: JPEG_QUALITY, width: FRAME_WIDTH, height: FRAME_HEIGHT };
+      this.worker.postMessage(msg, [readable]);
+      this.paced = "worker";
+    } else {
+      this.paced = "timer";
+      this.nextAt = performance.now();
+      this.tick();
+    }
   }
 
   /** Changes the capture rate (the server's advice, 5..15 fps). */
   setFps(fps) {
-    if (Number.isFinite(fps)) this.fps = Math.max(1, Math.min(15, fps));
+    if (!Number.isFinite(fps)) return;
+    this.fps = Math.max(1, Math.min(15, fps));
+    this.worker?.postMessage({ type: "fps", fps: this.fps });
   }
 
   tick() {
@@ -94,7 +109,7 @@ export class Camera {
       resizeHeight: FRAME_HEIGHT,
       resizeQuality: "medium",
     }).then(
-      (bitmap) => this.worker.postMessage({ bitmap, quality: JPEG_QUALITY }, [bitmap]),
+      (bitmap) => this.worker.postMessage({ type: "bitmap", bitmap, quality: JPEG_QUALITY }, [bitmap]),
       (err) => {
         this.inFlight -= 1;
         console.warn("camera: frame grab failed:", err);

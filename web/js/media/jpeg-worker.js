@@ -1,24 +1,79 @@
-//! Web worker: encodes camera frames to JPEG off the page's main thread (which is busy drawing the avatar).
+//! Web worker: turns camera frames into 640x360 JPEGs off the page's main thread (which is busy drawing the avatar).
 //
-// Each message carries an ImageBitmap already scaled to the frame size; the answer carries the JPEG bytes, or an
-// error text. The canvas is drawn synchronously before the asynchronous encode, so frames never mix.
+// Two ways in:
+// - `{type: "stream", readable, fps, quality, width, height}`: the camera track's frames as a ReadableStream
+//   (MediaStreamTrackProcessor). The worker paces itself on the camera's own frames, so a busy main thread cannot
+//   slow the camera down; it keeps one frame in `fps` and encodes it.
+// - `{type: "bitmap", bitmap, quality}`: one already scaled ImageBitmap (browsers without track processors).
+// `{type: "fps", fps}` changes the pace. Answers are `{jpeg}` (an ArrayBuffer) or `{error}`.
 
 let canvas = null;
 let ctx = null;
+let fps = 15;
+
+function surface(width, height) {
+  if (!canvas || canvas.width !== width || canvas.height !== height) {
+    canvas = new OffscreenCanvas(width, height);
+    ctx = canvas.getContext("2d", { alpha: false });
+  }
+  return ctx;
+}
+
+async function encode(quality) {
+  const blob = await canvas.convertToBlob({ type: "image/jpeg", quality });
+  const jpeg = await blob.arrayBuffer();
+  self.postMessage({ jpeg }, [jpeg]);
+}
+
+/** Draws `frame` scaled to cover width x height (centre crop), like the preview's object-fit: cover. */
+function drawCover(frame, width, height) {
+  const fw = frame.displayWidth;
+  const fh = frame.displayHeight;
+  const scale = Math.max(width / fw, height / fh);
+  const sw = width / scale;
+  const sh = height / scale;
+  surface(width, height).drawImage(frame, (fw - sw) / 2, (fh - sh) / 2, sw, sh, 0, 0, width, height);
+}
+
+async function pump({ readable, quality, width, height }) {
+  const reader = readable.getReader();
+  let next = 0;
+  for (;;) {
+    const { value: frame, done } = await reader.read();
+    if (done) return;
+    const now = performance.now();
+    const interval = 1000 / fps;
+    // Accept a frame a little early (camera jitter), else a 15 fps camera at 15 fps would lose every other one.
+    if (now + interval / 4 < next) {
+      frame.close();
+      continue;
+    }
+    next = Math.max(next + interval, now - interval / 2);
+    try {
+      drawCover(frame, width, height);
+      frame.close();
+      await encode(quality);
+    } catch (err) {
+      frame.close();
+      self.postMessage({ error: String(err && err.message ? err.message : err) });
+    }
+  }
+}
 
 self.onmessage = async (ev) => {
-  const { bitmap, quality } = ev.data;
-  try {
-    if (!canvas || canvas.width !== bitmap.width || canvas.height !== bitmap.height) {
-      canvas = new OffscreenCanvas(bitmap.width, bitmap.height);
-      ctx = canvas.getContext("2d", { alpha: false });
+  const msg = ev.data;
+  if (msg.type === "fps") {
+    if (Number.isFinite(msg.fps) && msg.fps > 0) fps = msg.fps;
+  } else if (msg.type === "stream") {
+    fps = msg.fps;
+    pump(msg).catch((err) => self.postMessage({ error: String(err) }));
+  } else if (msg.type === "bitmap") {
+    try {
+      surface(msg.bitmap.width, msg.bitmap.height).drawImage(msg.bitmap, 0, 0);
+      msg.bitmap.close();
+      await encode(msg.quality);
+    } catch (err) {
+      self.postMessage({ error: String(err && err.message ? err.message : err) });
     }
-    ctx.drawImage(bitmap, 0, 0);
-    bitmap.close();
-    const blob = await canvas.convertToBlob({ type: "image/jpeg", quality });
-    const jpeg = await blob.arrayBuffer();
-    self.postMessage({ jpeg }, [jpeg]);
-  } catch (err) {
-    self.postMessage({ error: String(err && err.message ? err.message : err) });
   }
 };
