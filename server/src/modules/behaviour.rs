@@ -1,0 +1,338 @@
+//! The avatar's behaviour, driven from the server: blinking, gaze and listening (the first paper's section 4:
+//! blinks every 450 ms to 4 s with distinct phase speeds; gaze from the detected faces, else the centre of
+//! motion). The controllers are plain state machines fed with events and the time; `run` drives them on the
+//! hub and publishes their commands through the TTS module's `Agent.avatar` publisher (a channel has a single
+//! owner, so both share it).
+
+mod blink;
+mod gaze;
+
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use serde::Deserialize;
+use tokio::sync::mpsc;
+use tokio::time::Instant;
+use tracing::debug;
+
+use crate::modules::tts::speaker::AvatarOut;
+use crate::modules::tts::wire::{AvatarCommand, Sighting};
+use blink::Blinker;
+use gaze::Gazer;
+
+/// `[modules.tts.behaviour]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BehaviourParams {
+    /// Drive blinks, gaze and moods from the server (the page blinks by itself when nothing drives it).
+    pub enabled: bool,
+    /// Shortest and longest interval between spontaneous blinks.
+    pub blink_min_ms: u64,
+    pub blink_max_ms: u64,
+    /// Idle saccades: interval range, and how far from the centre the eyes wander (normalised units).
+    pub saccade_min_ms: u64,
+    pub saccade_max_ms: u64,
+    pub saccade_radius: f64,
+    /// After this long without a face or motion the gaze goes idle.
+    pub idle_after_ms: u64,
+    /// Gaze moves smaller than this (normalised units) are not sent.
+    pub gaze_deadband: f64,
+    /// A gaze jump larger than this also triggers a blink.
+    pub gaze_shift_blink: f64,
+    /// How long the avatar looks away "thinking" after the user said something, unless it starts to speak.
+    pub think_ms: u64,
+    /// Nod at the user's pauses while listening.
+    pub nod: bool,
+}
+
+impl Default for BehaviourParams {
+    fn default() -> Self {
+        BehaviourParams {
+            enabled: true,
+            blink_min_ms: 450,
+            blink_max_ms: 4000,
+            saccade_min_ms: 600,
+            saccade_max_ms: 2500,
+            saccade_radius: 0.06,
+            idle_after_ms: 1500,
+            gaze_deadband: 0.02,
+            gaze_shift_blink: 0.2,
+            think_ms: 1500,
+            nod: true,
+        }
+    }
+}
+
+impl BehaviourParams {
+    /// Checks the ranges; the error names the key.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if self.blink_min_ms < 100 || self.blink_min_ms > self.blink_max_ms {
+            return Err((
+                "blink_min_ms",
+                format!(
+                    "must be >= 100 and <= blink_max_ms, got {}",
+                    self.blink_min_ms
+                ),
+            ));
+        }
+        if self.saccade_min_ms < 100 || self.saccade_min_ms > self.saccade_max_ms {
+            return Err((
+                "saccade_min_ms",
+                format!(
+                    "must be >= 100 and <= saccade_max_ms, got {}",
+                    self.saccade_min_ms
+                ),
+            ));
+        }
+        for (key, value) in [
+            ("saccade_radius", self.saccade_radius),
+            ("gaze_deadband", self.gaze_deadband),
+            ("gaze_shift_blink", self.gaze_shift_blink),
+        ] {
+            if !(0.0..=0.5).contains(&value) {
+                return Err((key, format!("{value} is outside 0..=0.5")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What the controllers react to.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A detections message: where to look, or nothing seen.
+    Seen(Option<Sighting>),
+    /// The user started speaking (voice activity, or a partial transcript).
+    UserSpeaking,
+    /// The user paused (end of voice activity).
+    UserPaused,
+    /// A final transcript: the agent is thinking about its answer.
+    Heard,
+    /// The agent's reply became audible.
+    SpeechStarted,
+    /// A sentence of the reply ends when the audio reaches `at`.
+    PhraseBoundary { at: Instant },
+    /// The reply stops being audible at `at`.
+    SpeechEnded { at: Instant },
+}
+
+/// Events waiting for the controllers; behaviour is cosmetic, so when they fall this far behind new events are
+/// dropped (and counted) rather than delaying anything else.
+const EVENT_QUEUE: usize = 64;
+
+/// The sending side, cheap to clone.
+#[derive(Debug, Clone)]
+pub struct Sender {
+    events: mpsc::Sender<Event>,
+    dropped: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl Sender {
+    /// Queues an event; when the controllers are switched off (receiver gone) it is simply not needed.
+    pub fn send(&self, event: Event) {
+        if let Err(mpsc::error::TrySendError::Full(_)) = self.events.try_send(event) {
+            self.dropped
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+/// A channel to the controllers.
+pub fn channel() -> (Sender, mpsc::Receiver<Event>) {
+    let (events, queue) = mpsc::channel(EVENT_QUEUE);
+    (
+        Sender {
+            events,
+            dropped: Default::default(),
+        },
+        queue,
+    )
+}
+
+/// Blink and gaze controllers together, with the mood that follows listening and thinking.
+#[derive(Debug)]
+pub struct Controllers {
+    blinker: Blinker,
+    gazer: Gazer,
+    rng: StdRng,
+}
+
+impl Controllers {
+    pub fn new(params: &BehaviourParams, now: Instant, seed: Option<u64>) -> Controllers {
+        let mut rng = match seed {
+            Some(seed) => StdRng::seed_from_u64(seed),
+            None => StdRng::from_os_rng(),
+        };
+        Controllers {
+            blinker: Blinker::new(params, now, &mut rng),
+            gazer: Gazer::new(params, now, &mut rng),
+            rng,
+        }
+    }
+
+    /// Reacts to an event; returns the commands to send now.
+    pub fn handle(&mut self, now: Instant, event: Event, out: &mut Vec<AvatarCommand>) {
+        match event {
+            Event::PhraseBoundary { at } => self.blinker.blink_at(at),
+            Event::SpeechEnded { at } => {
+                // The end of a reply is a phrase boundary too, and the speaking mood ends with it.
+                self.blinker.blink_at(at);
+                self.gazer.speech_ended();
+            }
+            other => {
+                if self.gazer.handle(now, other, &mut self.rng, out) {
+                    self.blinker.blink_at(now);
+                }
+            }
+        }
+        self.tick(now, out);
+    }
+
+    /// Emits what is due at `now`.
+    pub fn tick(&mut self, now: Instant, out: &mut Vec<AvatarCommand>) {
+        if self.gazer.tick(now, &mut self.rng, out) {
+            self.blinker.blink_at(now);
+        }
+        self.blinker.tick(now, &mut self.rng, out);
+    }
+
+    /// When something is next due.
+    pub fn next_deadline(&self) -> Instant {
+        self.blinker.next_deadline().min(self.gazer.next_deadline())
+    }
+}
+
+/// Drives the controllers until the event channel closes. While nobody subscribes to `Agent.avatar` the timers
+/// rest (events still update the state), so an unattended agent costs nothing.
+pub async fn run(params: BehaviourParams, avatar: AvatarOut, mut events: mpsc::Receiver<Event>) {
+    let mut controllers = Controllers::new(&params, Instant::now(), None);
+    let mut watched = avatar.watched();
+    let mut commands = Vec::new();
+    loop {
+        let active = *watched.borrow();
+        let deadline = controllers.next_deadline();
+        tokio::select! {
+            event = events.recv() => match event {
+                Some(event) => controllers.handle(Instant::now(), event, &mut commands),
+                None => break,
+            },
+            () = tokio::time::sleep_until(deadline), if active => controllers.tick(Instant::now(), &mut commands),
+            changed = watched.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+            }
+        }
+        if active {
+            for command in commands.drain(..) {
+                avatar.send(&command).await;
+            }
+        } else {
+            commands.clear();
+        }
+    }
+    debug!("behaviour controllers stopped");
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::*;
+
+    fn blinks(commands: &[AvatarCommand]) -> usize {
+        commands
+            .iter()
+            .filter(|c| matches!(c, AvatarCommand::Blink { .. }))
+            .count()
+    }
+
+    #[test]
+    fn blinks_come_every_450_ms_to_4_s_with_distinct_phase_speeds() {
+        let params = BehaviourParams::default();
+        let t0 = Instant::now();
+        let mut controllers = Controllers::new(&params, t0, Some(7));
+        let mut times = Vec::new();
+        let mut now = t0;
+        while times.len() < 200 {
+            now = controllers.next_deadline();
+            let mut out = Vec::new();
+            controllers.tick(now, &mut out);
+            for command in &out {
+                if let AvatarCommand::Blink {
+                    close_ms,
+                    hold_ms,
+                    open_ms,
+                } = command
+                {
+                    assert!(
+                        close_ms < hold_ms.max(open_ms) && close_ms < open_ms,
+                        "{command:?}"
+                    );
+                    times.push(now);
+                }
+            }
+        }
+        let gaps: Vec<Duration> = times.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(
+            gaps.iter()
+                .all(|g| *g >= Duration::from_millis(450) && *g <= Duration::from_millis(4000)),
+            "{gaps:?}"
+        );
+        let short = gaps
+            .iter()
+            .filter(|g| **g < Duration::from_millis(1500))
+            .count();
+        let long = gaps
+            .iter()
+            .filter(|g| **g > Duration::from_millis(3000))
+            .count();
+        assert!(
+            short > 10 && long > 10,
+            "intervals vary: {short} short, {long} long"
+        );
+        assert!(now > t0);
+    }
+
+    #[test]
+    fn phrase_boundaries_and_gaze_shifts_add_blinks() {
+        let params = BehaviourParams {
+            blink_min_ms: 3900,
+            blink_max_ms: 4000,
+            ..BehaviourParams::default()
+        };
+        let t0 = Instant::now();
+        let mut controllers = Controllers::new(&params, t0, Some(1));
+        let mut out = Vec::new();
+        controllers.handle(
+            t0,
+            Event::PhraseBoundary {
+                at: t0 + Duration::from_millis(500),
+            },
+            &mut out,
+        );
+        assert_eq!(blinks(&out), 0, "not before the boundary is heard");
+        assert!(controllers.next_deadline() <= t0 + Duration::from_millis(500));
+        controllers.tick(t0 + Duration::from_millis(500), &mut out);
+        assert_eq!(blinks(&out), 1);
+        out.clear();
+        let face = |x| {
+            Event::Seen(Some(Sighting {
+                x,
+                y: 0.5,
+                source: "face",
+            }))
+        };
+        let t1 = t0 + Duration::from_millis(1500);
+        controllers.handle(t1, face(0.1), &mut out);
+        controllers.handle(t1 + Duration::from_millis(600), face(0.9), &mut out);
+        assert!(blinks(&out) >= 1, "a large gaze jump blinks: {out:?}");
+        assert!(
+            out.iter()
+                .any(|c| matches!(c, AvatarCommand::Gaze { source: "face", .. }))
+        );
+    }
+}

@@ -1,0 +1,437 @@
+//! The TTS module's edges: the `Agent.say` service and `Agent.ctrl` requests it accepts, the voice activity and
+//! detections it follows, and the `Agent.speech` / `Agent.avatar` messages it publishes (docs/voice.md,
+//! docs/browser-link.md). Everything inside the module works on the plain types defined here.
+
+use agent_voice::Viseme;
+use bytes::{BufMut, Bytes, BytesMut};
+use serde::Deserialize;
+use serde_json::json;
+
+pub const SPEECH: &str = "Agent.speech";
+pub const AVATAR: &str = "Agent.avatar";
+pub const SAY_SERVICE: &str = "Agent.say";
+pub const CTRL: &str = "Agent.ctrl";
+pub const TRANSCRIPT: &str = "Agent.transcript";
+pub const DETECTIONS: &str = "Agent.detections";
+
+/// The JSON header of `Agent.speech`: PCM framed per utterance (docs/browser-link.md).
+pub fn speech_header(rate: u32, chunk_ms: u32) -> String {
+    json!({
+        "format": "s16le", "rate": rate, "channels": 1, "chunk_ms": chunk_ms,
+        "framing": "utterance-offset", "source": "tts",
+    })
+    .to_string()
+}
+
+/// The JSON header of `Agent.avatar`.
+pub const AVATAR_HEADER: &str = r#"{"format":"json","commands":["blink","gaze","mood","visemes","speech_stop","say"],"source":"tts"}"#;
+
+/// The JSON header of the `Agent.say` service: what it takes and answers.
+pub const SAY_HEADER: &str = r#"{"request":{"text":"string","voice":"optional espeak-ng voice","rate_wpm":"optional","pitch":"optional"},"cancel":{"cancel":"all | utterance number"},"answer":{"utterance":"number","cancelled":"[numbers]"}}"#;
+
+/// An `Agent.speech` payload: `[utterance u32 LE][offset u32 LE][s16le PCM]`, `offset` being the index of the
+/// first sample inside the utterance.
+pub fn speech_payload(utterance: u64, offset: u64, pcm: &[i16]) -> Bytes {
+    let mut out = BytesMut::with_capacity(8 + pcm.len() * 2);
+    // Utterance numbers and offsets fit u32 for 2^32 utterances and 54 hours of speech; past that they wrap,
+    // which the page only uses to tell utterances apart.
+    out.put_u32_le(utterance as u32);
+    out.put_u32_le(offset as u32);
+    for sample in pcm {
+        out.put_i16_le(*sample);
+    }
+    out.freeze()
+}
+
+/// Voice changes a single request may ask for; unset fields keep the module's configured voice.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct VoiceChoice {
+    pub voice: Option<String>,
+    pub rate_wpm: Option<u32>,
+    pub pitch: Option<u32>,
+}
+
+/// Which utterances a cancel request stops.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CancelTarget {
+    All,
+    One(u64),
+}
+
+/// A request to the TTS module.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SayRequest {
+    Say { text: String, choice: VoiceChoice },
+    Cancel(CancelTarget),
+}
+
+/// Parses an `Agent.say` call: `{"text": "...", "voice"?, "rate_wpm"?, "pitch"?}` or
+/// `{"cancel": "all"}` / `{"cancel": N}`.
+pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
+    let value: serde_json::Value =
+        serde_json::from_slice(payload).map_err(|e| format!("not JSON: {e}"))?;
+    if let Some(cancel) = value.get("cancel") {
+        return match cancel {
+            serde_json::Value::String(all) if all == "all" => {
+                Ok(SayRequest::Cancel(CancelTarget::All))
+            }
+            serde_json::Value::Number(n) => n
+                .as_u64()
+                .map(|n| SayRequest::Cancel(CancelTarget::One(n)))
+                .ok_or_else(|| format!("cancel: {n} is not an utterance number")),
+            other => Err(format!(
+                "cancel: expected \"all\" or an utterance number, got {other}"
+            )),
+        };
+    }
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Say {
+        text: String,
+        voice: Option<String>,
+        rate_wpm: Option<u32>,
+        pitch: Option<u32>,
+    }
+    let say: Say = serde_json::from_value(value).map_err(|e| e.to_string())?;
+    if say.text.trim().is_empty() {
+        return Err("text is empty".into());
+    }
+    let choice = VoiceChoice {
+        voice: say.voice,
+        rate_wpm: say.rate_wpm,
+        pitch: say.pitch,
+    };
+    Ok(SayRequest::Say {
+        text: say.text,
+        choice,
+    })
+}
+
+/// The answer to a `say` call.
+pub fn said(utterance: u64) -> Bytes {
+    Bytes::from(json!({ "utterance": utterance }).to_string())
+}
+
+/// The answer to a `cancel` call: the utterances stopped.
+pub fn cancelled(utterances: &[u64]) -> Bytes {
+    Bytes::from(json!({ "cancelled": utterances }).to_string())
+}
+
+/// What an `Agent.ctrl` message asks of the TTS module, if anything: `{"say": "text"}` speaks, `{"speech":
+/// "stop"}` (or `{"cmd": "speech_stop"}`) stops all speech. Every other control message is for someone else.
+pub fn ctrl_request(payload: &[u8]) -> Option<SayRequest> {
+    let value: serde_json::Value = serde_json::from_slice(payload).ok()?;
+    if let Some(text) = value.get("say").and_then(serde_json::Value::as_str) {
+        let text = text.trim();
+        return (!text.is_empty()).then(|| SayRequest::Say {
+            text: text.to_owned(),
+            choice: VoiceChoice::default(),
+        });
+    }
+    let stop = value.get("speech").and_then(serde_json::Value::as_str) == Some("stop")
+        || value.get("cmd").and_then(serde_json::Value::as_str) == Some("speech_stop");
+    stop.then_some(SayRequest::Cancel(CancelTarget::All))
+}
+
+/// What an `Agent.transcript` message says about the user's voice.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Hearing {
+    /// Voice activity began (`{"vad": "start"}`), or a partial transcript arrived: the user is speaking.
+    Speaking,
+    /// Voice activity ended (`{"vad": "end"}`): a pause.
+    Paused,
+    /// A final transcript: the user has said something the agent will now think about.
+    Said,
+}
+
+/// Reads voice activity from `Agent.transcript`: `{"vad": "start" | "end"}` events, partial transcripts
+/// (`"final": false` or `"partial": true`) and final ones (JSON with `text`, or plain text).
+pub fn hearing(payload: &[u8]) -> Option<Hearing> {
+    let text = std::str::from_utf8(payload).ok()?.trim();
+    if !text.starts_with('{') {
+        return (!text.is_empty()).then_some(Hearing::Said);
+    }
+    let value: serde_json::Value = serde_json::from_str(text).ok()?;
+    match value.get("vad").and_then(serde_json::Value::as_str) {
+        Some("start") => return Some(Hearing::Speaking),
+        Some("end") => return Some(Hearing::Paused),
+        _ => {}
+    }
+    let words = value.get("text").and_then(serde_json::Value::as_str)?;
+    let partial = value.get("final").and_then(serde_json::Value::as_bool) == Some(false)
+        || value.get("partial").and_then(serde_json::Value::as_bool) == Some(true);
+    if partial {
+        Some(Hearing::Speaking)
+    } else {
+        (!words.trim().is_empty()).then_some(Hearing::Said)
+    }
+}
+
+/// Where the vision modules say the avatar should look, in normalised camera coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sighting {
+    pub x: f64,
+    pub y: f64,
+    /// `face` or `motion`.
+    pub source: &'static str,
+}
+
+/// Reads the gaze target from an `Agent.detections` message: its `gaze` field when the vision module filled
+/// it (`source` `face`/`motion`; `idle` means nothing seen), else the largest face, else the moving centre.
+/// `None` when nothing is seen (or the message is not understood).
+pub fn sighting(payload: &[u8]) -> Option<Sighting> {
+    #[derive(Deserialize)]
+    struct Frame {
+        width: f64,
+        height: f64,
+    }
+    #[derive(Deserialize)]
+    struct Face {
+        x: f64,
+        y: f64,
+        w: f64,
+        h: f64,
+    }
+    #[derive(Deserialize)]
+    struct Point {
+        x: f64,
+        y: f64,
+    }
+    #[derive(Deserialize)]
+    struct Motion {
+        moving: bool,
+        centre: Option<Point>,
+    }
+    #[derive(Deserialize)]
+    struct Gaze {
+        x: f64,
+        y: f64,
+        source: String,
+    }
+    #[derive(Deserialize)]
+    struct Detections {
+        frame: Frame,
+        faces: Option<Vec<Face>>,
+        motion: Option<Motion>,
+        gaze: Option<Gaze>,
+    }
+    let message: Detections = serde_json::from_slice(payload).ok()?;
+    let inside = |x: f64, y: f64| (0.0..=1.0).contains(&x) && (0.0..=1.0).contains(&y);
+    if let Some(gaze) = message.gaze {
+        let source = match gaze.source.as_str() {
+            "face" => "face",
+            "motion" => "motion",
+            _ => return None,
+        };
+        return inside(gaze.x, gaze.y).then_some(Sighting {
+            x: gaze.x,
+            y: gaze.y,
+            source,
+        });
+    }
+    let (width, height) = (message.frame.width, message.frame.height);
+    if width <= 0.0 || height <= 0.0 {
+        return None;
+    }
+    let largest = message
+        .faces
+        .unwrap_or_default()
+        .into_iter()
+        .max_by(|a, b| (a.w * a.h).total_cmp(&(b.w * b.h)));
+    let (x, y, source) = match (largest, message.motion) {
+        (Some(face), _) => (
+            (face.x + face.w / 2.0) / width,
+            (face.y + face.h / 2.0) / height,
+            "face",
+        ),
+        (
+            None,
+            Some(Motion {
+                moving: true,
+                centre: Some(centre),
+            }),
+        ) => (centre.x / width, centre.y / height, "motion"),
+        _ => return None,
+    };
+    inside(x, y).then_some(Sighting { x, y, source })
+}
+
+/// An avatar command, as `docs/browser-link.md` lists them.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AvatarCommand {
+    /// Three phases at their own speeds: closing, closed, opening.
+    Blink {
+        close_ms: u32,
+        hold_ms: u32,
+        open_ms: u32,
+    },
+    Gaze {
+        x: f64,
+        y: f64,
+        source: &'static str,
+    },
+    Mood {
+        mood: &'static str,
+        intensity: f64,
+    },
+    /// Viseme cues in ms from sample 0 of `utterance`.
+    Visemes {
+        utterance: u64,
+        items: Vec<(f64, Viseme)>,
+    },
+    SpeechStop {
+        utterance: Option<u64>,
+    },
+    /// The caption shown while the agent speaks.
+    Say {
+        text: String,
+    },
+}
+
+impl AvatarCommand {
+    pub fn to_json(&self) -> Bytes {
+        let value = match self {
+            AvatarCommand::Blink {
+                close_ms,
+                hold_ms,
+                open_ms,
+            } => {
+                json!({ "cmd": "blink", "close_ms": close_ms, "hold_ms": hold_ms, "open_ms": open_ms })
+            }
+            AvatarCommand::Gaze { x, y, source } => {
+                json!({ "cmd": "gaze", "x": round3(*x), "y": round3(*y), "source": source })
+            }
+            AvatarCommand::Mood { mood, intensity } => {
+                json!({ "cmd": "mood", "mood": mood, "intensity": round3(*intensity) })
+            }
+            AvatarCommand::Visemes { utterance, items } => {
+                let items: Vec<serde_json::Value> = items
+                    .iter()
+                    .map(|(t_ms, viseme)| json!({ "t_ms": (t_ms * 10.0).round() / 10.0, "v": viseme.name() }))
+                    .collect();
+                json!({ "cmd": "visemes", "utterance": utterance, "items": items })
+            }
+            AvatarCommand::SpeechStop {
+                utterance: Some(utterance),
+            } => {
+                json!({ "cmd": "speech_stop", "utterance": utterance })
+            }
+            AvatarCommand::SpeechStop { utterance: None } => json!({ "cmd": "speech_stop" }),
+            AvatarCommand::Say { text } => json!({ "cmd": "say", "text": text }),
+        };
+        Bytes::from(value.to_string())
+    }
+}
+
+fn round3(value: f64) -> f64 {
+    (value * 1000.0).round() / 1000.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn say_requests() {
+        assert_eq!(
+            say_request(br#"{"text":"Ciao","voice":"it"}"#),
+            Ok(SayRequest::Say {
+                text: "Ciao".into(),
+                choice: VoiceChoice {
+                    voice: Some("it".into()),
+                    ..VoiceChoice::default()
+                }
+            })
+        );
+        assert_eq!(
+            say_request(br#"{"cancel":"all"}"#),
+            Ok(SayRequest::Cancel(CancelTarget::All))
+        );
+        assert_eq!(
+            say_request(br#"{"cancel":7}"#),
+            Ok(SayRequest::Cancel(CancelTarget::One(7)))
+        );
+        assert!(say_request(br#"{"cancel":"some"}"#).is_err());
+        assert!(say_request(br#"{"text":"  "}"#).is_err());
+        assert!(say_request(br#"{"txt":"hi"}"#).is_err_and(|e| e.contains("txt")));
+        assert!(say_request(b"hello").is_err());
+    }
+
+    #[test]
+    fn ctrl_and_hearing() {
+        assert!(matches!(
+            ctrl_request(br#"{"say":"hi"}"#),
+            Some(SayRequest::Say { .. })
+        ));
+        assert_eq!(
+            ctrl_request(br#"{"speech":"stop"}"#),
+            Some(SayRequest::Cancel(CancelTarget::All))
+        );
+        assert_eq!(ctrl_request(br#"{"asr":false}"#), None);
+        assert_eq!(hearing(br#"{"vad":"start"}"#), Some(Hearing::Speaking));
+        assert_eq!(hearing(br#"{"vad":"end"}"#), Some(Hearing::Paused));
+        assert_eq!(
+            hearing(br#"{"text":"what ti","final":false}"#),
+            Some(Hearing::Speaking)
+        );
+        assert_eq!(
+            hearing(br#"{"text":"what time is it","final":true}"#),
+            Some(Hearing::Said)
+        );
+        assert_eq!(hearing(b"what time is it"), Some(Hearing::Said));
+        assert_eq!(hearing(br#"{"other":1}"#), None);
+    }
+
+    #[test]
+    fn sightings() {
+        let vision = br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"faces":[],"gaze":{"x":0.25,"y":0.5,"source":"face"}}"#;
+        assert_eq!(
+            sighting(vision),
+            Some(Sighting {
+                x: 0.25,
+                y: 0.5,
+                source: "face"
+            })
+        );
+        let idle =
+            br#"{"frame":{"width":640,"height":360},"gaze":{"x":0.5,"y":0.5,"source":"idle"}}"#;
+        assert_eq!(sighting(idle), None);
+        let faces = br#"{"frame":{"width":640,"height":360},"faces":[{"x":0,"y":0,"w":10,"h":10},{"x":300,"y":100,"w":40,"h":40}]}"#;
+        assert_eq!(
+            sighting(faces),
+            Some(Sighting {
+                x: 0.5,
+                y: 120.0 / 360.0,
+                source: "face"
+            })
+        );
+        let motion = br#"{"frame":{"width":640,"height":360},"motion":{"moving":true,"centre":{"x":64,"y":36}}}"#;
+        assert_eq!(
+            sighting(motion),
+            Some(Sighting {
+                x: 0.1,
+                y: 0.1,
+                source: "motion"
+            })
+        );
+        assert_eq!(sighting(b"junk"), None);
+    }
+
+    #[test]
+    fn wire_formats() {
+        let payload = speech_payload(3, 441, &[1, -1]);
+        assert_eq!(&payload[..], &[3, 0, 0, 0, 0xB9, 1, 0, 0, 1, 0, 0xFF, 0xFF]);
+        let visemes = AvatarCommand::Visemes {
+            utterance: 2,
+            items: vec![(0.0, Viseme::Sil), (62.35, Viseme::U)],
+        };
+        assert_eq!(
+            visemes.to_json(),
+            r#"{"cmd":"visemes","items":[{"t_ms":0.0,"v":"sil"},{"t_ms":62.4,"v":"U"}],"utterance":2}"#
+        );
+        assert_eq!(
+            AvatarCommand::SpeechStop { utterance: None }.to_json(),
+            r#"{"cmd":"speech_stop"}"#
+        );
+    }
+}

@@ -1,0 +1,423 @@
+//! The TTS module and the behaviour controllers through a real robot-agent: `Agent.say` requests become framed
+//! speech on `Agent.speech` with visemes and a caption on `Agent.avatar`; cancel and barge-in stop the speech
+//! mid-utterance; blinks come by themselves, the gaze follows a detected face and looks away while thinking.
+//!
+//! Build the binaries first: `cargo build -p robot-agent` (`make test` does).
+
+use std::time::Duration;
+
+use agent_tests::{Agent, AgentOptions, DataDir, PATIENCE};
+use anyhow::{Context, bail};
+use flow::{Client, Subscription};
+use serde_json::{Value, json};
+
+/// `Agent.speech` sample rate.
+const RATE: f64 = 22050.0;
+
+/// An utterance is taken as complete when no more of its speech arrives for this long (it is paced to real time
+/// with a lead of a few hundred milliseconds).
+const QUIET: Duration = Duration::from_millis(1500);
+
+/// A robot-agent with only the TTS module's behaviour in play (no brain answering, no vision owning
+/// `Agent.detections`), and a satellite watching its output.
+struct Rig {
+    _dir: DataDir,
+    agent: Agent,
+    satellite: Client,
+    speech: Subscription,
+    avatar: Subscription,
+}
+
+impl Rig {
+    async fn start() -> anyhow::Result<Rig> {
+        let dir = DataDir::new()?;
+        let config =
+            "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n".to_owned();
+        let agent = Agent::start_with(
+            &dir,
+            AgentOptions {
+                config: Some(config),
+                ..AgentOptions::default()
+            },
+        )
+        .await?;
+        agent
+            .output
+            .wait_for("tts: speaking on", 1, PATIENCE)
+            .await?;
+        let satellite = agent.client("voice-test").await?;
+        let speech = satellite.subscribe("Agent.speech").await?;
+        let avatar = satellite.subscribe("Agent.avatar").await?;
+        Ok(Rig {
+            _dir: dir,
+            agent,
+            satellite,
+            speech,
+            avatar,
+        })
+    }
+
+    /// Calls `Agent.say`; returns the answer.
+    async fn say(&self, request: Value) -> anyhow::Result<Value> {
+        let answer = self
+            .satellite
+            .call("Agent.say", request.to_string().into_bytes(), PATIENCE)
+            .await?;
+        Ok(serde_json::from_slice(&answer)?)
+    }
+
+    /// Queues `text` and returns its utterance number.
+    async fn speak(&self, text: &str) -> anyhow::Result<u64> {
+        let answer = self.say(json!({ "text": text })).await?;
+        answer["utterance"]
+            .as_u64()
+            .with_context(|| format!("no utterance number in {answer}"))
+    }
+
+    /// Waits for subscribers on a channel this test publishes, so nothing it sends is lost.
+    async fn until_subscribed(&self, channel: &str) -> anyhow::Result<()> {
+        tokio::time::timeout(PATIENCE, async {
+            while !self
+                .satellite
+                .channel(channel)
+                .await
+                .is_ok_and(|info| info.stats.subscribers >= 1)
+            {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+        .await
+        .with_context(|| format!("nobody subscribed to {channel}"))
+    }
+
+    /// The next avatar command named `cmd`, skipping others.
+    async fn next_command(&self, cmd: &str) -> anyhow::Result<Value> {
+        tokio::time::timeout(PATIENCE, async {
+            loop {
+                let data = self.avatar.recv().await.context("Agent.avatar closed")?;
+                let command: Value = serde_json::from_slice(&data.payload)?;
+                if command["cmd"] == cmd {
+                    return Ok(command);
+                }
+            }
+        })
+        .await
+        .with_context(|| format!("no {cmd} command"))?
+    }
+}
+
+/// One `Agent.speech` payload: `[utterance u32][offset u32][s16le PCM]`.
+fn speech_frame(payload: &[u8]) -> anyhow::Result<(u64, u64, usize)> {
+    if payload.len() < 8 || !payload.len().is_multiple_of(2) {
+        bail!(
+            "speech payload of {} bytes is not framed PCM",
+            payload.len()
+        );
+    }
+    let word = |at: usize| {
+        u64::from(u32::from_le_bytes([
+            payload[at],
+            payload[at + 1],
+            payload[at + 2],
+            payload[at + 3],
+        ]))
+    };
+    Ok((word(0), word(4), (payload.len() - 8) / 2))
+}
+
+/// Speech of `utterance` until none has come for `quiet`: returns the samples, checking the offsets are contiguous.
+async fn collect_speech(
+    speech: &Subscription,
+    utterance: u64,
+    quiet: Duration,
+) -> anyhow::Result<u64> {
+    let mut samples = 0;
+    loop {
+        let wait = if samples == 0 { PATIENCE } else { quiet };
+        let Ok(data) = tokio::time::timeout(wait, speech.recv()).await else {
+            if samples == 0 {
+                bail!("no speech for utterance {utterance}");
+            }
+            return Ok(samples);
+        };
+        let (id, offset, count) = speech_frame(&data.context("Agent.speech closed")?.payload)?;
+        if id != utterance {
+            continue;
+        }
+        if offset != samples {
+            bail!(
+                "utterance {utterance}: chunk at offset {offset}, expected {samples} (a gap or a repeat)"
+            );
+        }
+        samples += count as u64;
+    }
+}
+
+/// Samples of any speech arriving within `window` (after a stop, only what was already on its way).
+async fn speech_within(speech: &Subscription, window: Duration) -> anyhow::Result<u64> {
+    let deadline = tokio::time::Instant::now() + window;
+    let mut samples = 0;
+    while let Ok(data) = tokio::time::timeout_at(deadline, speech.recv()).await {
+        samples += speech_frame(&data.context("Agent.speech closed")?.payload)?.2 as u64;
+    }
+    Ok(samples)
+}
+
+/// Waits until at least half a second of speech has arrived; returns its samples.
+async fn half_a_second_of_speech(speech: &Subscription) -> anyhow::Result<u64> {
+    let mut samples = 0;
+    while samples < 11025 {
+        let data = tokio::time::timeout(PATIENCE, speech.recv())
+            .await?
+            .context("Agent.speech closed")?;
+        samples += speech_frame(&data.payload)?.2 as u64;
+    }
+    Ok(samples)
+}
+
+#[tokio::test]
+async fn say_streams_framed_speech_with_visemes_and_a_caption() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    let header = rig.satellite.channel("Agent.speech").await?.header;
+    let header: Value = serde_json::from_str(&header)?;
+    assert_eq!(
+        (header["rate"].as_u64(), header["framing"].as_str()),
+        (Some(22050), Some("utterance-offset"))
+    );
+
+    let text = "Hello! My name is Robot, and I am pleased to meet you.";
+    let utterance = rig.speak(text).await?;
+    let samples = collect_speech(&rig.speech, utterance, QUIET).await?;
+    let total_ms = samples as f64 * 1000.0 / RATE;
+    assert!(total_ms > 1500.0, "only {total_ms} ms of speech");
+
+    // Everything the module said on Agent.avatar about this utterance: the caption and the viseme batches.
+    let mut caption = None;
+    let mut items = Vec::new();
+    while let Some(data) = rig.avatar.try_recv() {
+        let command: Value = serde_json::from_slice(&data.payload)?;
+        match command["cmd"].as_str() {
+            Some("say") => caption = command["text"].as_str().map(str::to_owned),
+            Some("visemes") => {
+                assert_eq!(command["utterance"].as_u64(), Some(utterance));
+                for item in command["items"].as_array().context("items")? {
+                    let t_ms = item["t_ms"].as_f64().context("t_ms")?;
+                    items.push((t_ms, item["v"].as_str().context("v")?.to_owned()));
+                }
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(caption.as_deref(), Some(text));
+    let known = [
+        "sil", "PP", "FF", "TH", "DD", "kk", "CH", "SS", "nn", "RR", "aa", "E", "I", "O", "U",
+    ];
+    assert!(items.len() > 20, "{} visemes", items.len());
+    for pair in items.windows(2) {
+        assert!(pair[0].0 <= pair[1].0, "visemes out of order: {pair:?}");
+    }
+    for (t_ms, viseme) in &items {
+        assert!(known.contains(&viseme.as_str()), "unknown viseme {viseme}");
+        assert!(
+            (0.0..=total_ms + 1.0).contains(t_ms),
+            "viseme at {t_ms} ms outside {total_ms} ms of audio"
+        );
+    }
+    // "My", "pleased", "meet": the lips close; the reply ends at rest.
+    assert!(items.iter().any(|(_, v)| v == "PP"));
+    assert_eq!(items.last().map(|(_, v)| v.as_str()), Some("sil"));
+    Ok(())
+}
+
+#[tokio::test]
+async fn italian_and_a_changed_rate_speak_too_and_bad_requests_are_refused() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    let answer = rig
+        .say(json!({ "text": "Ciao, come stai? Sono contento di vederti.", "voice": "it" }))
+        .await?;
+    let italian = answer["utterance"].as_u64().context("utterance")?;
+    assert!(collect_speech(&rig.speech, italian, QUIET).await? > 22050);
+
+    // One after the other: `collect_speech` skips (and so loses) other utterances' chunks.
+    let slow = rig
+        .say(json!({ "text": "Slowly now.", "rate_wpm": 90 }))
+        .await?;
+    let slow = collect_speech(
+        &rig.speech,
+        slow["utterance"].as_u64().context("slow")?,
+        QUIET,
+    )
+    .await?;
+    let fast = rig
+        .say(json!({ "text": "Slowly now.", "rate_wpm": 300 }))
+        .await?;
+    let fast = collect_speech(
+        &rig.speech,
+        fast["utterance"].as_u64().context("fast")?,
+        QUIET,
+    )
+    .await?;
+    assert!(
+        slow > fast * 2,
+        "90 wpm gave {slow} samples, 300 wpm {fast}"
+    );
+
+    let typo = rig
+        .say(json!({ "txt": "hello" }))
+        .await
+        .expect_err("an unknown field is refused");
+    assert!(format!("{typo:#}").contains("txt"), "{typo:#}");
+    let too_fast = rig
+        .say(json!({ "text": "hi", "rate_wpm": 5000 }))
+        .await
+        .expect_err("5000 wpm is refused");
+    assert!(format!("{too_fast:#}").contains("rate_wpm"), "{too_fast:#}");
+    // A voice espeak-ng does not have is accepted by the queue and reported when the engine tries it.
+    rig.say(json!({ "text": "hi", "voice": "xx-none" })).await?;
+    rig.agent.output.wait_for("xx-none", 1, PATIENCE).await?;
+    Ok(())
+}
+
+/// A reply of about twenty seconds.
+const LONG_REPLY: &str = "This is a long answer that goes on for a while. It has several sentences, each of them \
+    with a good number of words. Nobody would want to hear all of it. The listener will stop it long before the end. \
+    And yet it keeps going, sentence after sentence, until somebody says stop.";
+
+#[tokio::test]
+async fn cancel_stops_speech_mid_utterance() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    let utterance = rig.speak(LONG_REPLY).await?;
+    // Let half a second of audio arrive, then cancel.
+    let samples = half_a_second_of_speech(&rig.speech).await?;
+    let answer = rig.say(json!({ "cancel": utterance })).await?;
+    assert_eq!(answer["cancelled"], json!([utterance]));
+    let stop = rig.next_command("speech_stop").await?;
+    assert_eq!(stop["utterance"].as_u64(), Some(utterance));
+    // At most what was already on its way follows; the reply (~20 s) is far from complete.
+    let rest = speech_within(&rig.speech, QUIET).await?;
+    let heard_s = (samples + rest) as f64 / RATE;
+    assert!(heard_s < 5.0, "{heard_s} s of a cancelled reply were sent");
+    // The next request speaks normally.
+    let next = rig.speak("Fine.").await?;
+    assert!(collect_speech(&rig.speech, next, QUIET).await? > 0);
+    Ok(())
+}
+
+#[tokio::test]
+async fn the_user_speaking_barges_in() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    // This satellite plays the ASR: its voice activity goes on Agent.transcript.
+    let transcript = rig
+        .satellite
+        .publisher("Agent.transcript", r#"{"format":"json"}"#)
+        .await?;
+    rig.until_subscribed("Agent.transcript").await?;
+    let utterance = rig.speak(LONG_REPLY).await?;
+    let samples = half_a_second_of_speech(&rig.speech).await?;
+    transcript
+        .publish(json!({ "vad": "start" }).to_string().into_bytes())
+        .await?;
+    // The page is told to stop playing at once, and the module stops sending.
+    let stop = rig.next_command("speech_stop").await?;
+    assert!(
+        stop.get("utterance")
+            .is_none_or(|u| u.as_u64() == Some(utterance)),
+        "{stop}"
+    );
+    let rest = speech_within(&rig.speech, QUIET).await?;
+    let heard_s = (samples + rest) as f64 / RATE;
+    assert!(heard_s < 5.0, "{heard_s} s were sent despite the barge-in");
+    rig.agent.output.wait_for("barge-in", 1, PATIENCE).await?;
+    Ok(())
+}
+
+#[tokio::test]
+async fn ctrl_say_and_stop() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    let ctrl = rig
+        .satellite
+        .publisher("Agent.ctrl", r#"{"format":"json"}"#)
+        .await?;
+    rig.until_subscribed("Agent.ctrl").await?;
+    ctrl.publish(
+        json!({ "say": "Spoken from the control channel." })
+            .to_string()
+            .into_bytes(),
+    )
+    .await?;
+    let data = tokio::time::timeout(PATIENCE, rig.speech.recv())
+        .await?
+        .context("closed")?;
+    let (utterance, offset, _) = speech_frame(&data.payload)?;
+    assert_eq!(offset, 0);
+    ctrl.publish(json!({ "speech": "stop" }).to_string().into_bytes())
+        .await?;
+    let stop = loop {
+        let stop = rig.next_command("speech_stop").await?;
+        if stop
+            .get("utterance")
+            .is_none_or(|u| u.as_u64() == Some(utterance))
+        {
+            break stop;
+        }
+    };
+    assert_eq!(stop["cmd"], "speech_stop");
+    Ok(())
+}
+
+#[tokio::test]
+async fn blinks_gaze_at_a_face_and_thinking() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    // Spontaneous blinks: at least two (450 ms - 4 s apart), each with three phases.
+    for _ in 0..2 {
+        let blink = rig.next_command("blink").await?;
+        let phase = |key: &str| {
+            blink[key]
+                .as_u64()
+                .with_context(|| format!("{key} in {blink}"))
+        };
+        let (close, hold, open) = (phase("close_ms")?, phase("hold_ms")?, phase("open_ms")?);
+        assert!(close < open && hold > 0, "{blink}");
+    }
+    // A face right of centre, as the vision module reports it.
+    let detections = rig
+        .satellite
+        .publisher("Agent.detections", r#"{"format":"json"}"#)
+        .await?;
+    rig.until_subscribed("Agent.detections").await?;
+    let frame = json!({
+        "frame": { "seq": 1, "ts_us": 0, "width": 640, "height": 360 },
+        "faces": [{ "x": 448, "y": 90, "w": 64, "h": 64 }],
+    });
+    detections.publish(frame.to_string().into_bytes()).await?;
+    let gaze = loop {
+        let gaze = rig.next_command("gaze").await?;
+        if gaze["source"] == "face" {
+            break gaze;
+        }
+    };
+    let (x, y) = (
+        gaze["x"].as_f64().context("x")?,
+        gaze["y"].as_f64().context("y")?,
+    );
+    assert!(
+        (x - 0.75).abs() < 0.01 && (y - 0.339).abs() < 0.01,
+        "{gaze}"
+    );
+    // The user said something: the avatar looks away to think.
+    let transcript = rig
+        .satellite
+        .publisher("Agent.transcript", r#"{"format":"json"}"#)
+        .await?;
+    rig.until_subscribed("Agent.transcript").await?;
+    transcript
+        .publish(
+            json!({ "text": "what time is it", "final": true })
+                .to_string()
+                .into_bytes(),
+        )
+        .await?;
+    let mood = rig.next_command("mood").await?;
+    assert_eq!(mood["mood"], "thinking");
+    Ok(())
+}
