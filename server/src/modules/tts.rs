@@ -68,9 +68,12 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
             &wire::speech_header(synth.sample_rate(), params.chunk_ms),
         )
         .await?;
-    let avatar = AvatarOut(Arc::new(
-        client.publisher(wire::AVATAR, wire::AVATAR_HEADER).await?,
-    ));
+    // The visemes, captions and behaviour commands all need this channel; another owner (a module started
+    // earlier) would leave the avatar without lip-sync, so that is an error naming the cause.
+    let avatar = client.publisher(wire::AVATAR, wire::AVATAR_HEADER).await.with_context(|| {
+        format!("[modules.tts] cannot own {}: start the tts module before any other publisher of it", wire::AVATAR)
+    })?;
+    let avatar = AvatarOut(Arc::new(avatar));
     let mut service = client.serve(wire::SAY_SERVICE, wire::SAY_HEADER).await?;
     let ctrl = client.subscribe(wire::CTRL).await?;
     let transcripts = client.subscribe(wire::TRANSCRIPT).await?;
