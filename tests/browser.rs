@@ -18,6 +18,10 @@ use anyhow::{Context, bail, ensure};
 use serde_json::json;
 
 const PAGE_READY: Duration = Duration::from_secs(30);
+
+/// One browser at a time: the tests of this file run in parallel threads, and several Chromiums encoding video on a
+/// 2-core machine would measure the machine, not the page.
+static ONE_BROWSER: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 const RATE: usize = 22050;
 
 /// Converted fixtures shared by the tests of this process.
@@ -69,6 +73,7 @@ async fn collect(sub: &flow::Subscription, duration: Duration) -> Vec<(u64, byte
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
 -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
     let (speech, _) = media();
     let data = DataDir::new()?;
     let agent = Agent::start(&data).await?;
@@ -295,6 +300,7 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn spectrum_peaks_at_the_test_tone() -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
     let (_, tone) = media();
     let data = DataDir::new()?;
     let agent = Agent::start(&data).await?;
@@ -329,6 +335,15 @@ async fn spectrum_peaks_at_the_test_tone() -> anyhow::Result<()> {
             "tone magnitude {magnitude:.3}"
         );
     }
+    // Nobody subscribes to Agent.video.y in this test: the Y module stays idle while the camera streams.
+    let y = hub.channel("Agent.video.y").await?;
+    ensure!(
+        y.stats.msgs == 0,
+        "Agent.video.y produced {} frames with no subscriber",
+        y.stats.msgs
+    );
+    let video = hub.channel("Agent.video").await?;
+    ensure!(video.stats.msgs > 0, "the camera was not streaming");
     // The page draws it: its own peak readout agrees.
     browser
         .wait_for(
@@ -344,6 +359,7 @@ async fn spectrum_peaks_at_the_test_tone() -> anyhow::Result<()> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -> anyhow::Result<()>
 {
+    let _one = ONE_BROWSER.lock().await;
     let (speech, _) = media();
     let data = DataDir::new()?;
     let agent = Agent::start(&data).await?;
@@ -411,6 +427,7 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn page_explains_denied_permission_and_missing_devices() -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
     let data = DataDir::new()?;
     let agent = Agent::start(&data).await?;
     for (devices, expected) in [

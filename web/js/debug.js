@@ -13,6 +13,7 @@ export function installDebugHook({ avatar, link, page, camera, mic, spectrum, ov
   define("mood", () => avatar.debugState().mood);
   define("viseme", () => avatar.debugState().viseme);
   define("jaw", () => avatar.debugState().jaw);
+  define("avatarDrawMs", () => avatar.debugState().drawMs);
   define("role", () => page.role);
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));

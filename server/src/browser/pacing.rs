@@ -1,12 +1,15 @@
 //! The camera frame rate the server advises a page to use, from how many video frames it had to drop.
 //!
-//! Each second with drops lowers the advice by 3 fps (not below 5); five quiet seconds in a row raise it by 1 fps
-//! (up to 15). Dropping fast and recovering slowly keeps a congested link from oscillating.
+//! Each second with more than one drop lowers the advice by 3 fps (not below 5); five quiet seconds in a row raise
+//! it by 1 fps (up to 15). A single drop is a scheduling hiccup, not congestion. Dropping fast and recovering slowly
+//! keeps a congested link from oscillating.
 
 pub const MAX_FPS: u32 = 15;
 pub const MIN_FPS: u32 = 5;
 const STEP_DOWN: u32 = 3;
 const QUIET_SECONDS_TO_RAISE: u32 = 5;
+/// Drops in one second that count as congestion.
+const CONGESTED: u64 = 2;
 
 #[derive(Debug, Clone)]
 pub struct FpsAdvice {
@@ -30,8 +33,10 @@ impl FpsAdvice {
     pub fn tick(&mut self, total_drops: u64) -> u32 {
         let new = total_drops.saturating_sub(self.last_drops);
         self.last_drops = total_drops;
-        if new > 0 {
+        if new >= CONGESTED {
             self.fps = self.fps.saturating_sub(STEP_DOWN).max(MIN_FPS);
+            self.quiet_seconds = 0;
+        } else if new > 0 {
             self.quiet_seconds = 0;
         } else {
             self.quiet_seconds += 1;
@@ -52,6 +57,7 @@ mod tests {
     fn drops_lower_fast_and_quiet_raises_slowly() {
         let mut a = FpsAdvice::default();
         assert_eq!(a.tick(0), 15);
+        assert_eq!(a.tick(1), 15, "one drop is a hiccup");
         assert_eq!(a.tick(4), 12);
         assert_eq!(a.tick(9), 9);
         assert_eq!(a.tick(20), 6);

@@ -2,7 +2,7 @@
 //!
 //! Each medium has a lane: a bounded drop-oldest queue between the socket and a task that publishes. The socket
 //! never waits for the hub; when the hub side is slower than the page, the oldest waiting item is dropped and
-//! counted (video keeps 2 frames, audio 1 s). Closing a lane ends its task, whose `Publisher` is dropped, which
+//! counted (video keeps 4 frames, audio 1 s). Closing a lane ends its task, whose `Publisher` is dropped, which
 //! removes the channel from the hub.
 
 use std::sync::Arc;
@@ -13,8 +13,9 @@ use tokio::task::JoinHandle;
 
 use super::channels;
 
-/// Frames kept while the hub side catches up: old video is worthless, so only the two newest frames wait.
-const VIDEO_QUEUE: usize = 2;
+/// Frames kept while the hub side catches up (about a quarter second at 15 fps): enough to ride out a scheduling
+/// hiccup on a busy machine; anything older is worthless and dropped.
+const VIDEO_QUEUE: usize = 4;
 /// 50 chunks of 20 ms: a second of audio, enough to ride out a hiccup without losing speech.
 const AUDIO_QUEUE: usize = 50;
 

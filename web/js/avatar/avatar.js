@@ -67,7 +67,12 @@ export class Avatar {
     this.last = now;
     this.lastDraw = now;
     this.step(now, dt);
-    if (this.size.w > 0) drawFace(this.ctx, this.size.w, this.size.h, this.pose);
+    if (this.size.w > 0) {
+      const t0 = performance.now();
+      drawFace(this.ctx, this.size.w, this.size.h, this.pose);
+      // A running mean of the drawing cost, for the debug hook (the page must leave time for the camera).
+      this.drawMs = this.drawMs === undefined ? performance.now() - t0 : this.drawMs * 0.95 + (performance.now() - t0) * 0.05;
+    }
   }
 
   step(now, dt) {
@@ -119,6 +124,7 @@ export class Avatar {
       mood: this.moodName,
       viseme: this.viseme,
       jaw: this.pose.jaw,
+      drawMs: this.drawMs ?? 0,
     };
   }
 }
