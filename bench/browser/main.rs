@@ -281,7 +281,8 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     let token = session_token(&http).await?;
     let mut req = format!("ws://{http}/link?session={token}").into_client_request()?;
     req.headers_mut().insert("Origin", origin.parse()?);
-    let (ws, _) = tokio_tungstenite::connect_async(req).await?;
+    // Browsers send WebSocket frames with Nagle's algorithm off; so does this page stand-in.
+    let (ws, _) = tokio_tungstenite::connect_async_with_config(req, None, true).await?;
     let (mut tx, mut rx) = ws.split();
     tokio::spawn(async move { while let Some(Ok(_)) = rx.next().await {} });
     tx.send(Message::Text(r#"{"type":"claim"}"#.into())).await?;
