@@ -289,6 +289,11 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
         )
         .await?;
 
+    // The artifact shows the overlay: detections again, and one more to be sure it is on screen.
+    detections.publish(boxes.to_string()).await?;
+    browser
+        .wait_for(&tab, "agentDebug.detections > 1", Duration::from_secs(5))
+        .await?;
     let png = browser.screenshot(&tab).await?;
     std::fs::create_dir_all(artifacts_dir())?;
     let shot = artifacts_dir().join("browser-page.png");

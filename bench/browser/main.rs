@@ -196,6 +196,8 @@ async fn browser_phase(
     let phase = measure(&agent, &hub, window).await?;
     let sent = browser.eval(&tab, "agentDebug.sent").await?;
     println!("browser phase: page sent {sent}");
+    let status = agent_tests::http::get_json(agent.http, "/api/status").await?;
+    println!("browser phase: Y module {}", status["modules"]["video_y"]);
     browser.quit().await;
     Ok(phase)
 }
