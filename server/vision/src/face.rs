@@ -1,0 +1,498 @@
+//! Frontal face detection with OpenCV cascade classifiers from Debian's `opencv-data`.
+//!
+//! Cost grows with the number of pixels scanned, so the frame is first shrunk to the smallest size at which the
+//! smallest face we care about (`min_face_px`) still fills the cascade's native window; the boxes are mapped back to
+//! frame pixels.
+
+use std::path::{Path, PathBuf};
+
+use opencv::core::{Mat, MatTraitConst, Rect, Size, Vector};
+use opencv::imgproc;
+use opencv::objdetect::{CascadeClassifier, CascadeClassifierTrait, CascadeClassifierTraitConst};
+
+use crate::error::VisionError;
+use crate::frame::GreyFrame;
+use crate::geometry::BoxPx;
+
+/// Where Debian's `opencv-data` installs the cascades.
+pub const DEBIAN_CASCADE_DIR: &str = "/usr/share/opencv4";
+
+/// The frontal-face cascades shipped by `opencv-data`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cascade {
+    HaarDefault,
+    HaarAlt,
+    HaarAlt2,
+    Lbp,
+    LbpImproved,
+}
+
+impl Cascade {
+    pub const ALL: [Cascade; 5] = [
+        Cascade::HaarDefault,
+        Cascade::HaarAlt,
+        Cascade::HaarAlt2,
+        Cascade::Lbp,
+        Cascade::LbpImproved,
+    ];
+
+    /// The name used in configuration files and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Cascade::HaarDefault => "haar_default",
+            Cascade::HaarAlt => "haar_alt",
+            Cascade::HaarAlt2 => "haar_alt2",
+            Cascade::Lbp => "lbp",
+            Cascade::LbpImproved => "lbp_improved",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Cascade> {
+        Cascade::ALL
+            .into_iter()
+            .find(|cascade| cascade.name() == name)
+    }
+
+    /// Path of the cascade file below the `opencv-data` directory.
+    pub fn relative_path(self) -> &'static str {
+        match self {
+            Cascade::HaarDefault => "haarcascades/haarcascade_frontalface_default.xml",
+            Cascade::HaarAlt => "haarcascades/haarcascade_frontalface_alt.xml",
+            Cascade::HaarAlt2 => "haarcascades/haarcascade_frontalface_alt2.xml",
+            Cascade::Lbp => "lbpcascades/lbpcascade_frontalface.xml",
+            Cascade::LbpImproved => "lbpcascades/lbpcascade_frontalface_improved.xml",
+        }
+    }
+}
+
+/// About 8 ms of Haar cascade work per frame on the 2-core reference machine (roughly 110-130 ns per scanned
+/// pixel, see `docs/bench-vision.md`).
+pub const DEFAULT_SCAN_BUDGET_PX: u64 = 64_000;
+
+/// Tuning of the face detector.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaceParams {
+    pub cascade: Cascade,
+    pub cascade_dir: PathBuf,
+    /// Step between pyramid levels; larger is faster and misses more faces between levels.
+    pub scale_factor: f64,
+    /// Overlapping raw hits needed to keep a detection; the main lever against false positives.
+    pub min_neighbors: i32,
+    /// The smallest face side, in frame pixels, that must still be found.
+    pub min_face_px: u32,
+    /// Frames wider than this are shrunk to it before detection, whatever `min_face_px` says.
+    pub max_detect_width: u32,
+    /// Histogram equalisation before detection, which helps in dim or low-contrast frames.
+    pub equalize: bool,
+    /// Pixels the cascade may scan per frame (summed over pyramid levels) when scanning with [`FaceScanner`];
+    /// `None` scans the whole pyramid on every frame.
+    pub scan_budget_px: Option<u64>,
+}
+
+impl Default for FaceParams {
+    fn default() -> Self {
+        Self {
+            cascade: Cascade::HaarDefault,
+            cascade_dir: PathBuf::from(DEBIAN_CASCADE_DIR),
+            scale_factor: 1.1,
+            min_neighbors: 3,
+            min_face_px: 24,
+            max_detect_width: 640,
+            equalize: true,
+            scan_budget_px: Some(DEFAULT_SCAN_BUDGET_PX),
+        }
+    }
+}
+
+/// A loaded cascade with reusable scratch buffers; one per worker thread.
+pub struct FaceDetector {
+    params: FaceParams,
+    classifier: CascadeClassifier,
+    window: Size,
+    small: Mat,
+    equalized: Mat,
+    found: Vector<Rect>,
+}
+
+impl std::fmt::Debug for FaceDetector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FaceDetector")
+            .field("params", &self.params)
+            .field("window", &self.window)
+            .finish_non_exhaustive()
+    }
+}
+
+impl FaceDetector {
+    pub fn new(params: FaceParams) -> Result<Self, VisionError> {
+        let path = params.cascade_dir.join(params.cascade.relative_path());
+        let classifier = load_cascade(&path)?;
+        let window = classifier.get_original_window_size()?;
+        Ok(Self {
+            params,
+            classifier,
+            window,
+            small: Mat::default(),
+            equalized: Mat::default(),
+            found: Vector::new(),
+        })
+    }
+
+    pub fn params(&self) -> &FaceParams {
+        &self.params
+    }
+
+    /// The factor by which a frame of `width` pixels is shrunk before detection (1 = not at all).
+    pub fn detection_scale(&self, width: u32) -> f64 {
+        let by_width = f64::from(self.params.max_detect_width) / f64::from(width.max(1));
+        let by_face = f64::from(self.window.width) / f64::from(self.params.min_face_px.max(1));
+        by_width.min(by_face).min(1.0)
+    }
+
+    /// Scans the whole pyramid of the frame at once and returns the faces in frame pixels.
+    pub fn detect(&mut self, frame: &GreyFrame) -> Result<Vec<BoxPx>, VisionError> {
+        let factor = self.prepare(frame)?;
+        let whole = ScanUnit {
+            min_window: self.window,
+            max_window: Size::new(0, 0),
+            first_row: 0,
+            rows: i32::MAX,
+            cost: 0,
+        };
+        self.run_unit(&whole, factor)
+    }
+
+    /// Shrinks and equalises the frame into `self.equalized`; returns the shrink factor.
+    fn prepare(&mut self, frame: &GreyFrame) -> Result<f64, VisionError> {
+        let size = frame.size();
+        let factor = self.detection_scale(size.width);
+        let source = if factor < 1.0 {
+            let target = Size::new(
+                (f64::from(size.width) * factor).round().max(1.0) as i32,
+                (f64::from(size.height) * factor).round().max(1.0) as i32,
+            );
+            imgproc::resize(
+                frame.mat(),
+                &mut self.small,
+                target,
+                0.0,
+                0.0,
+                imgproc::INTER_AREA,
+            )?;
+            &self.small
+        } else {
+            frame.mat()
+        };
+        if self.params.equalize {
+            imgproc::equalize_hist(source, &mut self.equalized)?;
+        } else {
+            source.copy_to(&mut self.equalized)?;
+        }
+        Ok(factor)
+    }
+
+    /// Runs the cascade over one unit of the prepared image and maps the hits back to frame pixels.
+    fn run_unit(&mut self, unit: &ScanUnit, factor: f64) -> Result<Vec<BoxPx>, VisionError> {
+        let image_rows = self.equalized.rows();
+        let first_row = unit.first_row.min(image_rows);
+        let rows = unit.rows.min(image_rows - first_row);
+        if rows < self.window.height {
+            return Ok(Vec::new());
+        }
+        let stripe = Mat::roi(
+            &self.equalized,
+            Rect::new(0, first_row, self.equalized.cols(), rows),
+        )?;
+        self.classifier.detect_multi_scale(
+            &stripe,
+            &mut self.found,
+            self.params.scale_factor,
+            self.params.min_neighbors,
+            0,
+            unit.min_window,
+            unit.max_window,
+        )?;
+        Ok(self
+            .found
+            .iter()
+            .map(|r| {
+                BoxPx {
+                    x: r.x,
+                    y: r.y + first_row,
+                    width: r.width,
+                    height: r.height,
+                }
+                .unscale(factor)
+            })
+            .collect())
+    }
+}
+
+/// One piece of the full scan: a band of pyramid levels (window sizes) over a horizontal stripe of the prepared
+/// image.
+#[derive(Debug, Clone, PartialEq)]
+struct ScanUnit {
+    min_window: Size,
+    /// `Size(0, 0)` means no upper limit.
+    max_window: Size,
+    first_row: i32,
+    rows: i32,
+    /// Estimated pixels scanned.
+    cost: u64,
+}
+
+/// Splits the scan of a `width` x `height` prepared image into units of at most about `budget` scanned pixels.
+///
+/// Levels are grouped into bands from the smallest window (the largest, costliest image) upwards; each band also
+/// scans one level beyond each end so that faces on a band boundary keep the neighbouring hits that
+/// `min_neighbors` counts. A single level costlier than the budget is cut into horizontal stripes that overlap by
+/// the band's largest window, so every face lies whole inside some stripe.
+fn plan_units(
+    width: i32,
+    height: i32,
+    window: Size,
+    scale_factor: f64,
+    budget: u64,
+) -> Vec<ScanUnit> {
+    // Reproduce OpenCV's own level sequence: factor starts at 1 and is multiplied up while the window fits.
+    let mut levels: Vec<(Size, u64)> = Vec::new();
+    let mut factor = 1.0_f64;
+    loop {
+        let level_window = Size::new(
+            (f64::from(window.width) * factor).round() as i32,
+            (f64::from(window.height) * factor).round() as i32,
+        );
+        if level_window.width > width || level_window.height > height {
+            break;
+        }
+        let cost = (f64::from(width) / factor * (f64::from(height) / factor)) as u64;
+        levels.push((level_window, cost));
+        factor *= scale_factor.max(1.01);
+    }
+    if levels.is_empty() {
+        return Vec::new();
+    }
+    let budget = budget.max(1);
+    let mut units = Vec::new();
+    let mut start = 0;
+    while start < levels.len() {
+        let mut end = start;
+        let mut cost = levels[start].1;
+        while end + 1 < levels.len() && cost + levels[end + 1].1 <= budget {
+            end += 1;
+            cost += levels[end].1;
+        }
+        let min_window = levels[start.saturating_sub(1)].0;
+        let max_window = if end + 2 >= levels.len() {
+            Size::new(0, 0)
+        } else {
+            levels[end + 1].0
+        };
+        let stripes = cost.div_ceil(budget).max(1) as i32;
+        let overlap = if max_window.height > 0 {
+            max_window.height
+        } else {
+            height
+        };
+        let stripe_rows = (height + stripes - 1) / stripes;
+        for stripe in 0..stripes {
+            let first_row = stripe * stripe_rows;
+            let rows = (stripe_rows + overlap).min(height - first_row);
+            let stripe_cost = cost * rows.max(0) as u64 / height.max(1) as u64;
+            units.push(ScanUnit {
+                min_window,
+                max_window,
+                first_row,
+                rows,
+                cost: stripe_cost,
+            });
+        }
+        start = end + 1;
+    }
+    units
+}
+
+/// Result of one frame of budgeted scanning.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaceScan {
+    /// Faces from the most recent scan of every unit, merged, in frame pixels.
+    pub faces: Vec<BoxPx>,
+    /// Full passes over all units completed so far; a pass that starts and ends on the same scene has seen all of
+    /// it.
+    pub completed_cycles: u64,
+    /// Units in a full pass for the current frame size.
+    pub units_per_cycle: usize,
+}
+
+/// Spreads the cascade's full scan over consecutive frames so that each frame costs about `scan_budget_px`,
+/// and reports the union of the latest result of every part. A face is therefore found within one cycle (about
+/// 1.4 s for a 640x360 frame at the default budget and 15 fps) and its box refreshed once per cycle.
+#[derive(Debug)]
+pub struct FaceScanner {
+    detector: FaceDetector,
+    plan_for: Option<(i32, i32)>,
+    units: Vec<ScanUnit>,
+    latest: Vec<Vec<BoxPx>>,
+    next_unit: usize,
+    completed_cycles: u64,
+}
+
+impl FaceScanner {
+    pub fn new(params: FaceParams) -> Result<Self, VisionError> {
+        Ok(Self {
+            detector: FaceDetector::new(params)?,
+            plan_for: None,
+            units: Vec::new(),
+            latest: Vec::new(),
+            next_unit: 0,
+            completed_cycles: 0,
+        })
+    }
+
+    pub fn detector(&self) -> &FaceDetector {
+        &self.detector
+    }
+
+    /// Scans the next units of the frame within the budget.
+    pub fn scan(&mut self, frame: &GreyFrame) -> Result<FaceScan, VisionError> {
+        let Some(budget) = self.detector.params.scan_budget_px else {
+            let faces = self.detector.detect(frame)?;
+            self.completed_cycles += 1;
+            return Ok(FaceScan {
+                faces,
+                completed_cycles: self.completed_cycles,
+                units_per_cycle: 1,
+            });
+        };
+        let factor = self.detector.prepare(frame)?;
+        let prepared = (
+            self.detector.equalized.cols(),
+            self.detector.equalized.rows(),
+        );
+        if self.plan_for != Some(prepared) {
+            // A new frame size invalidates every stored result.
+            let params = &self.detector.params;
+            self.units = plan_units(
+                prepared.0,
+                prepared.1,
+                self.detector.window,
+                params.scale_factor,
+                budget,
+            );
+            self.latest = vec![Vec::new(); self.units.len()];
+            self.next_unit = 0;
+            self.plan_for = Some(prepared);
+        }
+        let mut spent = 0_u64;
+        let mut ran = 0;
+        while ran < self.units.len() {
+            let unit = &self.units[self.next_unit];
+            if ran > 0 && spent + unit.cost > budget {
+                break;
+            }
+            spent += unit.cost;
+            let unit = unit.clone();
+            self.latest[self.next_unit] = self.detector.run_unit(&unit, factor)?;
+            ran += 1;
+            self.next_unit += 1;
+            if self.next_unit == self.units.len() {
+                self.next_unit = 0;
+                self.completed_cycles += 1;
+            }
+        }
+        let faces = merge_overlapping(self.latest.iter().flatten().copied());
+        Ok(FaceScan {
+            faces,
+            completed_cycles: self.completed_cycles,
+            units_per_cycle: self.units.len(),
+        })
+    }
+}
+
+/// Units overlap in levels and rows, so one face can be reported by two of them; keep the larger box of any pair
+/// that overlaps by IoU > 0.3 or where one box lies mostly inside the other.
+fn merge_overlapping(boxes: impl Iterator<Item = BoxPx>) -> Vec<BoxPx> {
+    let mut all: Vec<BoxPx> = boxes.collect();
+    all.sort_by_key(|b| std::cmp::Reverse(b.area()));
+    let mut kept: Vec<BoxPx> = Vec::with_capacity(all.len());
+    for candidate in all {
+        let duplicate = kept.iter().any(|k| {
+            let inside = k.intersection_area(&candidate) as f64 / candidate.area().max(1) as f64;
+            k.iou(&candidate) > 0.3 || inside > 0.7
+        });
+        if !duplicate {
+            kept.push(candidate);
+        }
+    }
+    kept
+}
+
+fn load_cascade(path: &Path) -> Result<CascadeClassifier, VisionError> {
+    let not_loaded = || VisionError::CascadeLoad {
+        path: path.to_path_buf(),
+    };
+    if !path.is_file() {
+        return Err(not_loaded());
+    }
+    let classifier = CascadeClassifier::new(path.as_os_str()).map_err(|_| not_loaded())?;
+    if classifier.empty()? {
+        return Err(not_loaded());
+    }
+    Ok(classifier)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plan_covers_every_level_and_row() {
+        let window = Size::new(24, 24);
+        let units = plan_units(640, 360, window, 1.1, 64_000);
+        assert!(units.len() > 10, "{}", units.len());
+        // Every stripe of a band reaches the bottom, and the band after the last one has no upper limit.
+        assert_eq!(units.first().map(|u| u.min_window), Some(window));
+        assert_eq!(units.last().map(|u| u.max_window), Some(Size::new(0, 0)));
+        for unit in &units {
+            assert!(unit.first_row + unit.rows <= 360);
+        }
+        let whole: u64 = plan_units(640, 360, window, 1.1, u64::MAX)
+            .iter()
+            .map(|u| u.cost)
+            .sum();
+        assert_eq!(plan_units(640, 360, window, 1.1, u64::MAX).len(), 1);
+        assert!(whole > 1_000_000 && whole < 1_500_000, "{whole}");
+    }
+
+    #[test]
+    fn merge_drops_nested_and_overlapping_boxes() {
+        let big = BoxPx {
+            x: 0,
+            y: 0,
+            width: 40,
+            height: 40,
+        };
+        let inner = BoxPx {
+            x: 5,
+            y: 5,
+            width: 20,
+            height: 20,
+        };
+        let shifted = BoxPx {
+            x: 4,
+            y: 2,
+            width: 40,
+            height: 40,
+        };
+        let apart = BoxPx {
+            x: 100,
+            y: 0,
+            width: 30,
+            height: 30,
+        };
+        assert_eq!(
+            merge_overlapping([inner, big, shifted, apart].into_iter()),
+            vec![big, apart]
+        );
+    }
+}

@@ -1,0 +1,177 @@
+//! One processed frame end to end: decode once, run the enabled detectors on the same grey pixels, de-duplicate
+//! codes, update the gaze policy, and time every stage.
+
+use std::time::{Duration, Instant};
+
+use crate::appearance::{AppearanceTracker, SeenCode};
+use crate::codes::{CodeParams, CodeReader};
+use crate::error::{ProcessError, VisionError};
+use crate::face::{FaceParams, FaceScanner};
+use crate::frame::{self, GreyFrame};
+use crate::gaze::{GazeParams, GazePolicy, GazeTarget};
+use crate::geometry::{BoxPx, FrameSize};
+use crate::motion::{Motion, MotionDetector, MotionParams};
+
+/// Which detectors run and how they are tuned; `None` switches a detector off.
+#[derive(Debug, Clone)]
+pub struct PipelineParams {
+    pub faces: Option<FaceParams>,
+    pub motion: Option<MotionParams>,
+    pub codes: Option<CodeParams>,
+    /// A code not decoded for this long has left the view; its next sighting is a new appearance.
+    pub code_forget_after_us: u64,
+    pub gaze: GazeParams,
+    pub max_frame_pixels: u64,
+}
+
+impl Default for PipelineParams {
+    fn default() -> Self {
+        Self {
+            faces: Some(FaceParams::default()),
+            motion: Some(MotionParams::default()),
+            codes: Some(CodeParams::default()),
+            code_forget_after_us: 1_000_000,
+            gaze: GazeParams::default(),
+            max_frame_pixels: frame::DEFAULT_MAX_PIXELS,
+        }
+    }
+}
+
+/// Wall time spent in each stage of one frame; `None` for a detector that is switched off.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StageTimings {
+    pub decode: Duration,
+    pub faces: Option<Duration>,
+    pub motion: Option<Duration>,
+    pub codes: Option<Duration>,
+    pub total: Duration,
+}
+
+/// Everything found in one frame. Detector fields are `None` when that detector is switched off.
+#[derive(Debug, Clone)]
+pub struct FrameDetections {
+    pub seq: u64,
+    pub frame_us: u64,
+    pub size: FrameSize,
+    pub faces: Option<Vec<BoxPx>>,
+    /// Completed full face-scan cycles (see [`FaceScanner`]); 0 when face detection is off.
+    pub face_cycles: u64,
+    pub motion: Option<Motion>,
+    pub codes: Option<Vec<SeenCode>>,
+    pub gaze: GazeTarget,
+    pub timings: StageTimings,
+}
+
+/// The detectors of one video stream with their state.
+#[derive(Debug)]
+pub struct VisionPipeline {
+    faces: Option<FaceScanner>,
+    motion: Option<MotionDetector>,
+    codes: Option<CodeReader>,
+    appearances: AppearanceTracker,
+    gaze: GazePolicy,
+    gaze_params: GazeParams,
+    code_forget_after_us: u64,
+    max_frame_pixels: u64,
+}
+
+impl VisionPipeline {
+    pub fn new(params: PipelineParams) -> Result<Self, VisionError> {
+        Ok(Self {
+            faces: params.faces.map(FaceScanner::new).transpose()?,
+            motion: params.motion.map(MotionDetector::new).transpose()?,
+            codes: params.codes.map(CodeReader::new).transpose()?,
+            appearances: AppearanceTracker::new(params.code_forget_after_us),
+            gaze: GazePolicy::new(params.gaze.clone()),
+            gaze_params: params.gaze,
+            code_forget_after_us: params.code_forget_after_us,
+            max_frame_pixels: params.max_frame_pixels,
+        })
+    }
+
+    /// Forgets everything learned from the current stream (previous frame, codes in view, gaze); called when the
+    /// source channel starts over.
+    pub fn reset_stream(&mut self) {
+        if let Some(motion) = self.motion.as_mut() {
+            motion.reset();
+        }
+        self.appearances = AppearanceTracker::new(self.code_forget_after_us);
+        self.gaze = GazePolicy::new(self.gaze_params.clone());
+    }
+
+    /// Decodes and processes one JPEG frame with sequence number `seq` taken at `frame_us`.
+    pub fn process_jpeg(
+        &mut self,
+        jpeg: &[u8],
+        seq: u64,
+        frame_us: u64,
+    ) -> Result<FrameDetections, ProcessError> {
+        let started = Instant::now();
+        let frame = frame::decode_jpeg(jpeg, self.max_frame_pixels)?;
+        let decode = started.elapsed();
+        let mut detections = self.process(&frame, seq, frame_us)?;
+        detections.timings.decode = decode;
+        detections.timings.total = started.elapsed();
+        Ok(detections)
+    }
+
+    /// Processes an already decoded frame.
+    pub fn process(
+        &mut self,
+        frame: &GreyFrame,
+        seq: u64,
+        frame_us: u64,
+    ) -> Result<FrameDetections, VisionError> {
+        let started = Instant::now();
+        let mut timings = StageTimings::default();
+        let (faces, face_cycles) = match self.faces.as_mut() {
+            Some(scanner) => {
+                let scan = timed(&mut timings.faces, || scanner.scan(frame))?;
+                (Some(scan.faces), scan.completed_cycles)
+            }
+            None => (None, 0),
+        };
+        let motion = match self.motion.as_mut() {
+            Some(detector) => Some(timed(&mut timings.motion, || {
+                detector.process(frame, frame_us)
+            })?),
+            None => None,
+        };
+        let codes = match self.codes.as_mut() {
+            Some(reader) => {
+                let decoded = timed(&mut timings.codes, || reader.read(frame))?;
+                Some(self.appearances.observe(frame_us, decoded))
+            }
+            None => None,
+        };
+        let size = frame.size();
+        let gaze = self.gaze.update(
+            frame_us,
+            size,
+            faces.as_deref().unwrap_or_default(),
+            motion.as_ref().and_then(Motion::centre),
+        );
+        timings.total = started.elapsed();
+        Ok(FrameDetections {
+            seq,
+            frame_us,
+            size,
+            faces,
+            face_cycles,
+            motion,
+            codes,
+            gaze,
+            timings,
+        })
+    }
+}
+
+fn timed<T>(
+    slot: &mut Option<Duration>,
+    work: impl FnOnce() -> Result<T, VisionError>,
+) -> Result<T, VisionError> {
+    let started = Instant::now();
+    let result = work();
+    *slot = Some(started.elapsed());
+    result
+}
