@@ -3,11 +3,15 @@
 //! The library holds the pieces; `src/main.rs` wires them into the `whisper-sat` command (convert, transcribe, run,
 //! bench).
 
+pub mod claim;
 pub mod convert;
+pub mod ledger;
 pub mod model_path;
 pub mod offline;
 pub mod resample;
 pub mod segmenter;
+pub mod stream;
 pub mod transcriber;
+pub mod transcript;
 pub mod wav;
 pub mod wer;

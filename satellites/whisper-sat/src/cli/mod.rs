@@ -1,7 +1,10 @@
 //! The `whisper-sat` subcommands.
 
+mod bench;
 mod convert;
 mod progress;
+mod run;
+mod satellite;
 mod transcribe;
 
 use clap::{Parser, Subcommand};
@@ -20,6 +23,17 @@ enum Action {
     Convert(convert::Args),
     /// Transcribe a WAV file offline (VAD segmentation + Whisper), printing one line per utterance.
     Transcribe(transcribe::Args),
+    /// Run as a satellite: segment Agent.audio, claim and transcribe utterances, publish Agent.transcript.
+    Run(run::Args),
+    /// Benchmark against faster-whisper: RTF, end-of-speech latency, 1 vs 2 satellites, peak RSS.
+    Bench(bench::Args),
+    /// Print the word error rate of a hypothesis against a reference (case and punctuation ignored).
+    Wer {
+        /// Reference transcript.
+        reference: String,
+        /// Recognised text.
+        hypothesis: String,
+    },
 }
 
 impl Command {
@@ -28,6 +42,19 @@ impl Command {
         match self.action {
             Action::Convert(a) => convert::run(a),
             Action::Transcribe(a) => transcribe::run(a),
+            Action::Run(a) => run::run(a),
+            Action::Bench(a) => bench::run(a),
+            Action::Wer {
+                reference,
+                hypothesis,
+            } => {
+                let (errors, words) = whisper_sat::wer::word_errors(&reference, &hypothesis);
+                println!(
+                    "{:.4} {errors} {words}",
+                    errors as f64 / words.max(1) as f64
+                );
+                Ok(())
+            }
         }
     }
 }

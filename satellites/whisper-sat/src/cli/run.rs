@@ -1,0 +1,103 @@
+//! `whisper-sat run`: the ASR satellite on a flow hub.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use flow::{Client, ConnectOptions, FlowAddr};
+use whisper_sat::segmenter::SegmenterConfig;
+use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
+
+use super::satellite::{self, Settings};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Hub address: tcp://HOST:PORT, unix:PATH or ws://HOST:PORT/flow.
+    #[arg(long, env = "FLOW_ADDR", default_value = "tcp://127.0.0.1:9000")]
+    addr: String,
+    /// Login token; by default read from DATA_DIR/token.
+    #[arg(long, env = "FLOW_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// The server's data directory, where the token file is.
+    #[arg(long, env = "ROBOT_AGENT_DATA", default_value = "data")]
+    data_dir: PathBuf,
+    /// Satellite name (login name and presence channel); unique per hub. Default: whisper-<pid>.
+    #[arg(long)]
+    name: Option<String>,
+    /// ggml model file (default: models/ggml-tiny.en.bin in the repository, or WHISPER_MODEL).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Inference threads.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// End-of-speech hangover in milliseconds.
+    #[arg(long, default_value_t = SegmenterConfig::default().hangover_ms)]
+    hangover_ms: u32,
+    /// Pre-roll kept before the detected onset, in milliseconds.
+    #[arg(long, default_value_t = SegmenterConfig::default().pre_roll_ms)]
+    pre_roll_ms: u32,
+    /// Run the full 30 s encoder window instead of fitting it to the utterance.
+    #[arg(long)]
+    full_window: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let addr: FlowAddr = args.addr.parse().map_err(anyhow::Error::msg)?;
+    let token = match &args.token {
+        Some(t) => t.clone(),
+        None => {
+            let file = args.data_dir.join("token");
+            std::fs::read_to_string(&file)
+                .with_context(|| {
+                    format!(
+                        "no token: pass --token or point --data-dir at the server's data ({})",
+                        file.display()
+                    )
+                })?
+                .trim()
+                .to_owned()
+        }
+    };
+    let name = args
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("whisper-{}", std::process::id()));
+    let model = args
+        .model
+        .clone()
+        .unwrap_or_else(whisper_sat::model_path::default_model);
+    let cfg = TranscriberConfig {
+        threads: args.threads,
+        audio_context: if args.full_window {
+            AudioContext::Full
+        } else {
+            AudioContext::Fit
+        },
+        ..TranscriberConfig::default()
+    };
+    // Load the model before connecting, so a bad path fails at once with a clear message.
+    let transcriber = Transcriber::load(&model, cfg)?;
+    let settings = Settings {
+        name: name.clone(),
+        segmenter: SegmenterConfig {
+            hangover_ms: args.hangover_ms,
+            pre_roll_ms: args.pre_roll_ms,
+            ..SegmenterConfig::default()
+        },
+        claim_retention: Duration::from_secs(30),
+    };
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    runtime.block_on(async move {
+        let opts = ConnectOptions::new(name.clone(), token);
+        let client = Client::connect(&addr, opts)
+            .await
+            .with_context(|| format!("connecting to {addr}"))?;
+        tracing::info!(%name, model = %model.display(), "whisper satellite connected to {addr}");
+        let result = satellite::run(client.clone(), transcriber, settings).await;
+        client.close();
+        result
+    })
+}

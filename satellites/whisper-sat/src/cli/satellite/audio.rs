@@ -1,0 +1,180 @@
+//! The listening side: `Agent.audio` subscribed while ASR is enabled, segmented on a thread of its own.
+//!
+//! The segmenter holds the WebRTC detector, which is not `Send`, so it lives on a dedicated thread fed through a
+//! bounded queue. Overflow policy: when the thread falls behind by `QUEUE` messages (about 20 s of audio) new
+//! messages are dropped and counted; the pipeline notices the hole in the hub clock and restarts cleanly.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc as std_mpsc;
+use std::time::Duration;
+
+use bytes::Bytes;
+use flow::Client;
+use tokio::sync::{mpsc, watch};
+use whisper_sat::segmenter::SegmenterConfig;
+use whisper_sat::stream::{AudioMessage, AudioStream, ClockedUtterance, StreamEvent};
+
+/// Messages the segmentation thread may fall behind by before new ones are dropped.
+const QUEUE: usize = 1024;
+/// An open utterance is closed when the stream has been silent (no messages) this long.
+const STALL: Duration = Duration::from_millis(800);
+
+/// Work for the segmentation thread.
+#[derive(Debug)]
+pub enum Feed {
+    Audio {
+        seq: u64,
+        ts_us: u64,
+        pcm: Bytes,
+    },
+    /// The stream ended (channel removed): close what is open.
+    Flush,
+    /// ASR was switched off: forget everything.
+    Discard,
+}
+
+/// Handle on the segmentation thread.
+#[derive(Debug, Clone)]
+pub struct Listener {
+    feed: std_mpsc::SyncSender<Feed>,
+    pub dropped: Arc<AtomicU64>,
+}
+
+impl Listener {
+    /// Starts the segmentation thread; utterances come out of the returned receiver.
+    pub fn start(
+        cfg: SegmenterConfig,
+    ) -> anyhow::Result<(Listener, mpsc::Receiver<ClockedUtterance>)> {
+        // Built here to report a bad configuration to the caller, and again on the thread that owns it.
+        drop(AudioStream::new(cfg.clone())?);
+        let (feed, rx) = std_mpsc::sync_channel::<Feed>(QUEUE);
+        // Utterances are a few per minute; 64 is ample, and the sender waits rather than lose one.
+        let (utt_tx, utt_rx) = mpsc::channel(64);
+        std::thread::Builder::new().name("segmenter".into()).spawn(
+            move || match AudioStream::new(cfg) {
+                Ok(mut stream) => segment(&mut stream, &rx, &utt_tx),
+                Err(e) => tracing::error!("audio pipeline: {e}"),
+            },
+        )?;
+        Ok((
+            Listener {
+                feed,
+                dropped: Arc::new(AtomicU64::new(0)),
+            },
+            utt_rx,
+        ))
+    }
+
+    /// Queues work without waiting; counts what the full queue refuses.
+    pub fn send(&self, item: Feed) {
+        if let Err(std_mpsc::TrySendError::Full(_)) = self.feed.try_send(item) {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+fn segment(
+    stream: &mut AudioStream,
+    rx: &std_mpsc::Receiver<Feed>,
+    out: &mpsc::Sender<ClockedUtterance>,
+) {
+    let mut events = Vec::new();
+    // While audio flows, a stall closes open speech; while none does, the thread sleeps until work arrives.
+    let mut flowing = false;
+    loop {
+        let item = if flowing {
+            match rx.recv_timeout(STALL) {
+                Ok(item) => item,
+                Err(std_mpsc::RecvTimeoutError::Timeout) => Feed::Flush,
+                Err(std_mpsc::RecvTimeoutError::Disconnected) => return,
+            }
+        } else {
+            match rx.recv() {
+                Ok(item) => item,
+                Err(_) => return,
+            }
+        };
+        flowing = matches!(item, Feed::Audio { .. });
+        let result = match item {
+            Feed::Audio { seq, ts_us, pcm } => stream.push(
+                AudioMessage {
+                    seq,
+                    ts_us,
+                    pcm: &pcm,
+                },
+                &mut events,
+            ),
+            Feed::Flush => stream.finish(&mut events),
+            Feed::Discard => {
+                let r = stream.finish(&mut events);
+                events.clear();
+                r
+            }
+        };
+        if let Err(e) = result {
+            tracing::error!("audio pipeline: {e}");
+        }
+        for ev in events.drain(..) {
+            match ev {
+                StreamEvent::Utterance(u) => {
+                    tracing::debug!(id = %u.id, seconds = u.audio.len() as f64 / 16_000.0, "utterance found");
+                    if out.blocking_send(u).is_err() {
+                        return;
+                    }
+                }
+                StreamEvent::Started { start_us } => tracing::trace!(start_us, "speech started"),
+                StreamEvent::Restarted => tracing::debug!("audio stream restarted"),
+            }
+        }
+    }
+}
+
+/// Keeps the `Agent.audio` subscription open exactly while ASR is enabled, feeding the listener.
+pub async fn follow_audio(
+    client: Client,
+    listener: Listener,
+    mut enabled: watch::Receiver<bool>,
+) -> anyhow::Result<()> {
+    loop {
+        while !*enabled.borrow_and_update() {
+            enabled.changed().await?;
+        }
+        let sub = client.subscribe("Agent.audio").await?;
+        tracing::info!("ASR enabled: listening to Agent.audio");
+        loop {
+            tokio::select! {
+                data = sub.recv() => {
+                    let Some(d) = data else { return Ok(()) };
+                    listener.send(Feed::Audio { seq: d.seq, ts_us: d.ts_us, pcm: d.payload });
+                }
+                changed = enabled.changed() => {
+                    changed?;
+                    if !*enabled.borrow() {
+                        break;
+                    }
+                }
+            }
+        }
+        // Dropping the subscription unsubscribes: a disabled satellite costs the hub nothing.
+        drop(sub);
+        listener.send(Feed::Discard);
+        tracing::info!("ASR disabled: stopped listening");
+    }
+}
+
+/// Follows `Agent.ctrl` for `{"asr": true|false}`.
+pub async fn follow_ctrl(client: Client, enabled: watch::Sender<bool>) -> anyhow::Result<()> {
+    let sub = client.subscribe("Agent.ctrl").await?;
+    while let Some(d) = sub.recv().await {
+        match serde_json::from_slice::<serde_json::Value>(&d.payload) {
+            Ok(v) => {
+                if let Some(on) = v.get("asr").and_then(serde_json::Value::as_bool) {
+                    enabled.send_replace(on);
+                }
+            }
+            Err(e) => tracing::warn!("ignoring Agent.ctrl message that is not JSON: {e}"),
+        }
+    }
+    Ok(())
+}

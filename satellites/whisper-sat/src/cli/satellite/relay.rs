@@ -1,0 +1,92 @@
+//! The transcript relay: the one connection that owns `Agent.transcript`.
+//!
+//! Only a channel's owner may publish on it, and several satellites produce transcripts, so one of them (whichever
+//! creates `Agent.transcript` first) also serves `Agent.asr.submit` and publishes what the others submit. If it
+//! dies, the hub removes both channels and tells everyone; the survivors race to take the role over. The relay
+//! publishes each utterance once, whatever is submitted twice.
+
+use std::collections::VecDeque;
+
+use flow::{Client, ClientEvent, ErrorCode};
+use whisper_sat::claim::overlaps;
+use whisper_sat::ledger::SAME_SPEECH_US;
+use whisper_sat::transcript::TranscriptMessage;
+
+/// The service that accepts transcripts for publication.
+pub const SUBMIT: &str = "Agent.asr.submit";
+pub const TRANSCRIPT: &str = "Agent.transcript";
+
+/// Takes the relay role whenever it is free, until the client shuts down.
+pub async fn relay(client: Client, satellite: String) -> anyhow::Result<()> {
+    let mut events = client.events();
+    loop {
+        match client
+            .publisher(TRANSCRIPT, r#"{"mime":"application/json"}"#)
+            .await
+        {
+            Ok(publisher) => {
+                let mut service = match client.serve(SUBMIT, r#"{"mime":"application/json"}"#).await
+                {
+                    Ok(s) => s,
+                    Err(e) => {
+                        // Someone else's submit service is still there: give the role back.
+                        tracing::warn!("could not serve {SUBMIT}: {e}");
+                        drop(publisher);
+                        wait_removed(&mut events, SUBMIT).await?;
+                        continue;
+                    }
+                };
+                tracing::info!(%satellite, "relaying transcripts on {TRANSCRIPT}");
+                let mut published: VecDeque<(String, u64, u64)> = VecDeque::new();
+                while let Some(call) = service.next().await {
+                    let reply = match serde_json::from_slice::<TranscriptMessage>(&call.payload) {
+                        Ok(t) => {
+                            let dup = published.iter().any(|(id, s, e)| {
+                                *id == t.utterance
+                                    || overlaps((*s, *e), (t.start_us, t.end_us), SAME_SPEECH_US)
+                            });
+                            if dup {
+                                tracing::warn!(utterance = %t.utterance, "duplicate transcript not published");
+                                Ok(bytes::Bytes::from_static(b"\"duplicate\""))
+                            } else {
+                                published.push_back((t.utterance.clone(), t.start_us, t.end_us));
+                                while published.len() > 1024 {
+                                    published.pop_front();
+                                }
+                                publisher
+                                    .publish(bytes::Bytes::copy_from_slice(&call.payload))
+                                    .await
+                                    .map(|()| bytes::Bytes::from_static(b"\"published\""))
+                                    .map_err(|e| e.to_string())
+                            }
+                        }
+                        Err(e) => Err(format!("not a transcript: {e}")),
+                    };
+                    if let Err(e) = call.respond(reply).await {
+                        tracing::warn!("answering a submission: {e}");
+                    }
+                }
+                return Ok(());
+            }
+            Err(e) if e.code() == Some(ErrorCode::Exists) => {
+                wait_removed(&mut events, TRANSCRIPT).await?
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+async fn wait_removed(
+    events: &mut tokio::sync::broadcast::Receiver<ClientEvent>,
+    name: &str,
+) -> anyhow::Result<()> {
+    loop {
+        match events.recv().await {
+            Ok(ClientEvent::ChannelRemoved { name: n, .. }) if n == name => return Ok(()),
+            // Missed events: the channel may be gone already, so try again.
+            Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => return Ok(()),
+            Err(e) => return Err(e.into()),
+            Ok(_) => {}
+        }
+    }
+}

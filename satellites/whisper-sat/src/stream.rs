@@ -1,0 +1,291 @@
+//! The hub audio stream turned into clocked utterances: s16le 22050 Hz messages in, utterances with start and end
+//! on the hub's clock out.
+//!
+//! Every satellite runs this same deterministic pipeline on the same messages, so they find the same utterances
+//! with the same ids: an utterance's id is its start time on the hub clock, derived from the per-message hub
+//! timestamps (identical for every subscriber) plus the sample offset within the stream. The pipeline restarts when
+//! the stream does (the channel's sequence goes backwards, or a gap in the hub timestamps), so satellites that saw
+//! the stream start stay in step; see docs/asr.md for what a satellite that joins mid-stream does.
+
+use std::collections::VecDeque;
+
+use crate::resample::{ResampleError, StreamResampler, pcm_s16le_to_f32};
+use crate::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig, SegmenterError, Utterance};
+
+/// The hub's audio rate (`Agent.audio`).
+pub const HUB_RATE: u32 = 22_050;
+
+/// A jump of the hub clock beyond the audio's own duration by more than this restarts the pipeline.
+const MAX_CLOCK_SLIP_US: i64 = 500_000;
+
+/// One message of `Agent.audio` as the SDK delivers it.
+#[derive(Debug, Clone, Copy)]
+pub struct AudioMessage<'a> {
+    pub seq: u64,
+    pub ts_us: u64,
+    pub pcm: &'a [u8],
+}
+
+/// An utterance located on the hub clock.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClockedUtterance {
+    /// Stable id shared by every satellite: `u<start in ms on the hub clock>`.
+    pub id: String,
+    /// Start of the audio (pre-roll included) on the hub clock, µs since the Unix epoch.
+    pub start_us: u64,
+    /// End of speech on the hub clock.
+    pub speech_end_us: u64,
+    /// 16 kHz audio to transcribe.
+    pub audio: Vec<f32>,
+}
+
+/// What the pipeline reports.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StreamEvent {
+    Started {
+        start_us: u64,
+    },
+    Utterance(ClockedUtterance),
+    /// The stream restarted or jumped; anything open was closed first.
+    Restarted,
+}
+
+/// Errors of the pipeline.
+#[derive(Debug, thiserror::Error)]
+pub enum StreamError {
+    #[error(transparent)]
+    Resample(#[from] ResampleError),
+    #[error(transparent)]
+    Segmenter(#[from] SegmenterError),
+}
+
+/// The stateful pipeline: resampler, segmenter and the clock mapping.
+#[derive(Debug)]
+pub struct AudioStream {
+    cfg: SegmenterConfig,
+    resampler: StreamResampler,
+    segmenter: Segmenter,
+    /// Hub timestamp of the stream's first sample, and samples (22050 Hz) received since.
+    origin_us: Option<u64>,
+    received: u64,
+    last_seq: Option<u64>,
+    /// (16 kHz sample index, hub µs) marks of the last messages, to locate samples on the hub clock.
+    marks: VecDeque<(u64, u64)>,
+    scratch: Vec<f32>,
+    resampled: Vec<f32>,
+    events: Vec<SegmentEvent>,
+}
+
+impl AudioStream {
+    /// A pipeline waiting for its first message.
+    pub fn new(cfg: SegmenterConfig) -> Result<Self, StreamError> {
+        Ok(Self {
+            resampler: StreamResampler::new(HUB_RATE, RATE)?,
+            segmenter: Segmenter::new(cfg.clone())?,
+            cfg,
+            origin_us: None,
+            received: 0,
+            last_seq: None,
+            marks: VecDeque::new(),
+            scratch: Vec::new(),
+            resampled: Vec::new(),
+            events: Vec::new(),
+        })
+    }
+
+    /// Feeds one hub message.
+    pub fn push(
+        &mut self,
+        msg: AudioMessage<'_>,
+        out: &mut Vec<StreamEvent>,
+    ) -> Result<(), StreamError> {
+        let restart = match (self.last_seq, self.origin_us) {
+            (Some(last), Some(origin)) => {
+                let expected_us = origin + self.received * 1_000_000 / u64::from(HUB_RATE);
+                msg.seq <= last || (msg.ts_us as i64 - expected_us as i64).abs() > MAX_CLOCK_SLIP_US
+            }
+            _ => false,
+        };
+        if restart {
+            self.finish(out)?;
+            out.push(StreamEvent::Restarted);
+        }
+        if self.origin_us.is_none() {
+            self.origin_us = Some(msg.ts_us);
+        }
+        self.last_seq = Some(msg.seq);
+        // The hub stamps a message when it is published; its first sample is that far into the stream.
+        let first16 = self.received * u64::from(RATE) / u64::from(HUB_RATE);
+        self.marks.push_back((first16, msg.ts_us));
+        while self.marks.len() > 4096 {
+            self.marks.pop_front();
+        }
+        self.scratch.clear();
+        pcm_s16le_to_f32(msg.pcm, &mut self.scratch);
+        self.received += self.scratch.len() as u64;
+        self.resampled.clear();
+        self.resampler.push(&self.scratch, &mut self.resampled)?;
+        self.segmenter.push(&self.resampled, &mut self.events);
+        self.emit(out);
+        Ok(())
+    }
+
+    /// Ends the stream: flushes the resampler and closes an open utterance.
+    pub fn finish(&mut self, out: &mut Vec<StreamEvent>) -> Result<(), StreamError> {
+        if self.origin_us.is_some() {
+            self.resampled.clear();
+            self.resampler.flush(&mut self.resampled)?;
+            self.segmenter.push(&self.resampled, &mut self.events);
+            self.segmenter.finish(&mut self.events);
+            self.emit(out);
+        }
+        self.resampler = StreamResampler::new(HUB_RATE, RATE)?;
+        self.segmenter = Segmenter::new(self.cfg.clone())?;
+        self.origin_us = None;
+        self.received = 0;
+        self.last_seq = None;
+        self.marks.clear();
+        Ok(())
+    }
+
+    /// Hub time of a 16 kHz sample index: the last message mark at or before it plus the offset.
+    pub fn clock_of(&self, sample: u64) -> u64 {
+        let (idx, ts) = self
+            .marks
+            .iter()
+            .rev()
+            .find(|(i, _)| *i <= sample)
+            .or_else(|| self.marks.front())
+            .copied()
+            .unwrap_or((0, self.origin_us.unwrap_or(0)));
+        let offset = (sample as i64 - idx as i64) * 1_000_000 / i64::from(RATE);
+        (ts as i64 + offset).max(0) as u64
+    }
+
+    fn emit(&mut self, out: &mut Vec<StreamEvent>) {
+        for ev in std::mem::take(&mut self.events) {
+            match ev {
+                SegmentEvent::Started { start } => out.push(StreamEvent::Started {
+                    start_us: self.clock_of(start),
+                }),
+                SegmentEvent::Ended(u) => out.push(StreamEvent::Utterance(self.locate(u))),
+                SegmentEvent::Dropped { .. } => {}
+            }
+        }
+    }
+
+    fn locate(&self, u: Utterance) -> ClockedUtterance {
+        let start_us = self.clock_of(u.start);
+        ClockedUtterance {
+            id: format!("u{}", start_us / 1000),
+            start_us,
+            speech_end_us: self.clock_of(u.speech_end),
+            audio: u.audio,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tone_pcm(ms: u32, loud: bool) -> Vec<u8> {
+        let n = (HUB_RATE * ms / 1000) as usize;
+        (0..n)
+            .flat_map(|i| {
+                let t = i as f32 / HUB_RATE as f32;
+                let env = 0.6 + 0.4 * (2.0 * std::f32::consts::PI * 4.0 * t).sin();
+                let s: f32 = (1..=12)
+                    .map(|h| (2.0 * std::f32::consts::PI * 140.0 * h as f32 * t).sin() / h as f32)
+                    .sum();
+                let v = if loud { 0.15 * env * s } else { 0.0 };
+                ((v * 32767.0) as i16).to_le_bytes()
+            })
+            .collect()
+    }
+
+    /// Publishes PCM as 20 ms messages stamped like a real-time publisher starting at `t0`.
+    fn feed(stream: &mut AudioStream, pcm: &[u8], seq0: u64, t0: u64) -> Vec<StreamEvent> {
+        let mut out = Vec::new();
+        for (n, chunk) in pcm.chunks(882).enumerate() {
+            let msg = AudioMessage {
+                seq: seq0 + n as u64,
+                ts_us: t0 + n as u64 * 20_000,
+                pcm: chunk,
+            };
+            stream.push(msg, &mut out).expect("push");
+        }
+        out
+    }
+
+    fn utterances(ev: &[StreamEvent]) -> Vec<&ClockedUtterance> {
+        ev.iter()
+            .filter_map(|e| match e {
+                StreamEvent::Utterance(u) => Some(u),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn utterances_are_located_on_the_hub_clock() {
+        let pcm = [
+            tone_pcm(1000, false),
+            tone_pcm(1200, true),
+            tone_pcm(1000, false),
+        ]
+        .concat();
+        let t0 = 1_700_000_000_000_000;
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let ev = feed(&mut s, &pcm, 1, t0);
+        let u = utterances(&ev);
+        assert_eq!(u.len(), 1, "{ev:?}");
+        // Speech from 1.0 s to 2.2 s after t0; the start includes up to 300 ms of pre-roll.
+        assert!(
+            (t0 + 650_000..=t0 + 1_000_000).contains(&u[0].start_us),
+            "{}",
+            u[0].start_us - t0
+        );
+        assert!(
+            u[0].speech_end_us.abs_diff(t0 + 2_200_000) <= 60_000,
+            "{}",
+            u[0].speech_end_us - t0
+        );
+        assert_eq!(u[0].id, format!("u{}", u[0].start_us / 1000));
+    }
+
+    #[test]
+    fn two_subscribers_find_identical_utterances() {
+        let pcm = [
+            tone_pcm(500, false),
+            tone_pcm(900, true),
+            tone_pcm(800, false),
+            tone_pcm(700, true),
+            tone_pcm(900, false),
+        ]
+        .concat();
+        let mut a = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let mut b = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let ea = feed(&mut a, &pcm, 1, 5_000_000);
+        let eb = feed(&mut b, &pcm, 1, 5_000_000);
+        assert_eq!(utterances(&ea).len(), 2);
+        assert_eq!(ea, eb);
+    }
+
+    #[test]
+    fn a_new_stream_restarts_the_pipeline_and_closes_open_speech() {
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let mut ev = feed(
+            &mut s,
+            &[tone_pcm(300, false), tone_pcm(800, true)].concat(),
+            1,
+            1_000_000,
+        );
+        // The publisher went away mid-word; a new stream starts at seq 1 ten seconds later.
+        ev.extend(feed(&mut s, &tone_pcm(600, false), 1, 11_000_000));
+        assert!(ev.contains(&StreamEvent::Restarted));
+        let u = utterances(&ev);
+        assert_eq!(u.len(), 1, "{ev:?}");
+        assert!(u[0].start_us < 2_000_000);
+    }
+}

@@ -1,0 +1,397 @@
+//! Whisper ASR satellites through a real hub: fixture speech streamed in real time with `flowctl pub-wav`,
+//! transcripts read from `Agent.transcript`; parallel satellites; a satellite killed mid-utterance; silence and
+//! noise.
+//!
+//! Needs the binaries (`cargo build -p robot-agent -p flowctl -p whisper-sat`) and the model (`make model`);
+//! `make test` provides both.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use agent_tests::{Agent, DataDir, PATIENCE, command, fixture, run};
+use anyhow::Context;
+use flow::ClientEvent;
+use serde_json::Value;
+use tokio::process::Child;
+
+/// Speech clips with their reference transcripts.
+const CLIPS: [&str; 5] = [
+    "jfk",
+    "LJ001-0001",
+    "LJ001-0002",
+    "LJ001-0004",
+    "sb_example1",
+];
+
+/// Transcripts may take long on a machine busy building: inference runs on two shared cores.
+const TRANSCRIPT_PATIENCE: Duration = Duration::from_secs(120);
+/// After the last transcript, this long without another means the satellites are done with a clip.
+const QUIET: Duration = Duration::from_secs(4);
+
+/// A satellite process.
+struct Satellite {
+    name: String,
+    child: Child,
+}
+
+async fn start_satellite(agent: &Agent, name: &str) -> anyhow::Result<Satellite> {
+    let mut cmd = command("whisper-sat")?;
+    cmd.arg("run")
+        .arg("--addr")
+        .arg(agent.tcp().to_string())
+        .arg("--token")
+        .arg(agent.token())
+        .arg("--name")
+        .arg(name)
+        .env(
+            "RUST_LOG",
+            std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info".into()),
+        )
+        .stdin(std::process::Stdio::null());
+    let child = cmd.spawn().context("starting whisper-sat")?;
+    let sat = Satellite {
+        name: name.to_owned(),
+        child,
+    };
+    wait_channel(agent, &format!("Agent.asr.sat.{name}")).await?;
+    Ok(sat)
+}
+
+/// Waits until a channel exists (the satellite has loaded its model and joined).
+async fn wait_channel(agent: &Agent, name: &str) -> anyhow::Result<()> {
+    let client = agent.client("asr-test-watch").await?;
+    let mut events = client.events();
+    let deadline = tokio::time::Instant::now() + TRANSCRIPT_PATIENCE;
+    loop {
+        if client.channels().await?.iter().any(|c| c.name == name) {
+            return Ok(());
+        }
+        tokio::select! {
+            _ = events.recv() => {}
+            () = tokio::time::sleep_until(deadline) => anyhow::bail!("channel {name} did not appear"),
+        }
+    }
+}
+
+/// Everything published on `Agent.transcript`, collected in the background.
+#[derive(Clone, Default)]
+struct Transcripts(Arc<Mutex<Vec<Value>>>);
+
+impl Transcripts {
+    async fn collect(agent: &Agent) -> anyhow::Result<Transcripts> {
+        let client = agent.client("asr-test-transcripts").await?;
+        let sub = client.subscribe("Agent.transcript").await?;
+        let all = Transcripts::default();
+        let sink = all.clone();
+        tokio::spawn(async move {
+            let _keep = client;
+            while let Some(d) = sub.recv().await {
+                if let Ok(v) = serde_json::from_slice::<Value>(&d.payload) {
+                    sink.lock().push(v);
+                }
+            }
+        });
+        Ok(all)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Value>> {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn snapshot(&self) -> Vec<Value> {
+        self.lock().clone()
+    }
+
+    /// Waits for at least `min` more transcripts than `before`, then until none arrives for `QUIET`.
+    async fn settle(&self, before: usize, min: usize) -> anyhow::Result<Vec<Value>> {
+        let deadline = tokio::time::Instant::now() + TRANSCRIPT_PATIENCE;
+        while self.lock().len() < before + min {
+            anyhow::ensure!(
+                tokio::time::Instant::now() < deadline,
+                "expected {min} transcript(s), got {:?}",
+                &self.snapshot()[before..]
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        let mut seen = self.lock().len();
+        loop {
+            tokio::time::sleep(QUIET).await;
+            let now = self.lock().len();
+            if now == seen {
+                return Ok(self.snapshot()[before..].to_vec());
+            }
+            seen = now;
+        }
+    }
+}
+
+/// Streams a WAV file in real time onto `Agent.audio`, with a second of silence after it.
+async fn pub_wav(agent: &Agent, wav: &Path) -> anyhow::Result<()> {
+    let mut cmd = agent.flowctl()?;
+    cmd.arg("pub-wav")
+        .arg("Agent.audio")
+        .arg(wav)
+        .arg("--realtime")
+        .arg("--tail-ms")
+        .arg("1000");
+    run(cmd, b"", TRANSCRIPT_PATIENCE).await?.ok()?;
+    Ok(())
+}
+
+fn reference(clip: &str) -> anyhow::Result<String> {
+    Ok(std::fs::read_to_string(fixture(&format!(
+        "audio/{clip}.txt"
+    ))?)?)
+}
+
+/// Word errors and reference words, from `whisper-sat wer` (the crate's own WER).
+async fn word_errors(reference: &str, hypothesis: &str) -> anyhow::Result<(f64, f64)> {
+    let mut cmd = command("whisper-sat")?;
+    cmd.arg("wer").arg(reference).arg(hypothesis);
+    let out = run(cmd, b"", PATIENCE).await?.ok()?;
+    let fields: Vec<f64> = out
+        .split_whitespace()
+        .filter_map(|f| f.parse().ok())
+        .collect();
+    anyhow::ensure!(fields.len() == 3, "unexpected wer output {out:?}");
+    Ok((fields[1], fields[2]))
+}
+
+/// The transcripts' texts in audio order.
+fn joined(transcripts: &[Value]) -> String {
+    let mut ordered: Vec<&Value> = transcripts.iter().collect();
+    ordered.sort_by_key(|t| t["start_us"].as_u64());
+    ordered
+        .iter()
+        .filter_map(|t| t["text"].as_str())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Each utterance once: no repeated id and no two transcripts of overlapping audio.
+fn assert_each_once(transcripts: &[Value]) {
+    let ids: Vec<&str> = transcripts
+        .iter()
+        .filter_map(|t| t["utterance"].as_str())
+        .collect();
+    let unique: HashSet<&&str> = ids.iter().collect();
+    assert_eq!(
+        unique.len(),
+        ids.len(),
+        "an utterance was transcribed twice: {transcripts:?}"
+    );
+    let mut spans: Vec<(u64, u64)> = transcripts
+        .iter()
+        .filter_map(|t| Some((t["start_us"].as_u64()?, t["end_us"].as_u64()?)))
+        .collect();
+    spans.sort_unstable();
+    for w in spans.windows(2) {
+        assert!(
+            w[0].1 <= w[1].0,
+            "overlapping transcripts {w:?}: {transcripts:?}"
+        );
+    }
+}
+
+/// Writes a 22050 Hz mono WAV made of parts (fixture clips and generated audio).
+fn write_wav(path: &Path, parts: &[Vec<i16>]) -> anyhow::Result<()> {
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: 22_050,
+        bits_per_sample: 16,
+        sample_format: hound::SampleFormat::Int,
+    };
+    let mut w = hound::WavWriter::create(path, spec)?;
+    for s in parts.iter().flatten() {
+        w.write_sample(*s)?;
+    }
+    w.finalize()?;
+    Ok(())
+}
+
+/// A 22050 Hz fixture clip's samples.
+fn clip_samples(clip: &str) -> anyhow::Result<Vec<i16>> {
+    let mut r = hound::WavReader::open(fixture(&format!("audio/{clip}.wav"))?)?;
+    anyhow::ensure!(
+        r.spec().sample_rate == 22_050 && r.spec().channels == 1,
+        "{clip} is not 22050 Hz mono"
+    );
+    Ok(r.samples::<i16>().collect::<Result<_, _>>()?)
+}
+
+fn silence(ms: usize) -> Vec<i16> {
+    vec![0; 22_050 * ms / 1000]
+}
+
+fn temp_wav(dir: &DataDir, name: &str) -> PathBuf {
+    dir.path().join(name)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fixture_speech_through_the_hub_has_low_word_error_rate() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let _sat = start_satellite(&agent, "asr-one").await?;
+    let (mut errors, mut words) = (0.0, 0.0);
+    for clip in CLIPS {
+        // jfk.wav is 16 kHz; flowctl resamples it to the hub's 22050 Hz.
+        let before = transcripts.lock().len();
+        pub_wav(&agent, &fixture(&format!("audio/{clip}.wav"))?).await?;
+        let got = transcripts.settle(before, 1).await?;
+        assert_each_once(&got);
+        let text = joined(&got);
+        let (e, n) = word_errors(&reference(clip)?, &text).await?;
+        println!("{clip}: WER {:.1}% ({e}/{n}) : {text}", 100.0 * e / n);
+        for t in &got {
+            assert_eq!(t["final"], true);
+            assert_eq!(t["satellite"], "asr-one");
+            assert_eq!(t["model"], "tiny.en");
+            assert!(t["end_us"].as_u64() > t["start_us"].as_u64(), "{t}");
+            assert!(t["processing_ms"].as_u64().is_some(), "{t}");
+        }
+        errors += e;
+        words += n;
+    }
+    let overall = errors / words;
+    println!("overall WER {:.1}% ({errors}/{words})", overall * 100.0);
+    assert!(overall <= 0.20, "overall WER {overall:.3}");
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_satellites_share_consecutive_utterances_each_once() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let _a = start_satellite(&agent, "asr-a").await?;
+    let _b = start_satellite(&agent, "asr-b").await?;
+    // Three sentences with short pauses: the next one ends while the previous one may still be transcribed.
+    let wav = temp_wav(&dir, "three.wav");
+    write_wav(
+        &wav,
+        &[
+            clip_samples("LJ001-0004")?,
+            silence(700),
+            clip_samples("LJ001-0002")?,
+            silence(700),
+            clip_samples("LJ001-0004")?,
+        ],
+    )?;
+    pub_wav(&agent, &wav).await?;
+    let got = transcripts.settle(0, 3).await?;
+    println!("{got:#?}");
+    assert_each_once(&got);
+    let by: HashSet<&str> = got.iter().filter_map(|t| t["satellite"].as_str()).collect();
+    assert_eq!(
+        by,
+        HashSet::from(["asr-a", "asr-b"]),
+        "work was not shared: {got:?}"
+    );
+    let reference = format!(
+        "{} {} {}",
+        reference("LJ001-0004")?,
+        reference("LJ001-0002")?,
+        reference("LJ001-0004")?
+    );
+    let (e, n) = word_errors(&reference, &joined(&got)).await?;
+    assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&got));
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn utterance_of_a_killed_satellite_is_transcribed_once_by_another() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let mut sats = vec![
+        start_satellite(&agent, "asr-x").await?,
+        start_satellite(&agent, "asr-y").await?,
+    ];
+    let watcher = agent.client("asr-test-claims").await?;
+    let mut events = watcher.events();
+    let wav = fixture("audio/LJ001-0002.wav")?;
+    let publishing = {
+        let mut cmd = agent.flowctl()?;
+        cmd.arg("pub-wav")
+            .arg("Agent.audio")
+            .arg(&wav)
+            .arg("--realtime")
+            .arg("--tail-ms")
+            .arg("1000");
+        tokio::spawn(run(cmd, b"", TRANSCRIPT_PATIENCE))
+    };
+    // The first claim names the utterance and, through the channel's owner, the satellite working on it.
+    let (utterance, owner) = tokio::time::timeout(TRANSCRIPT_PATIENCE, async {
+        loop {
+            if let Ok(ClientEvent::ChannelAdded(info)) = events.recv().await
+                && let Some(id) = info.name.strip_prefix("Agent.asr.claim.")
+            {
+                return (id.to_owned(), info.owner);
+            }
+        }
+    })
+    .await
+    .context("no satellite claimed the utterance")?;
+    let victim = sats
+        .iter()
+        .position(|s| owner.starts_with(&s.name))
+        .with_context(|| format!("claim owner {owner} is not one of the satellites"))?;
+    let mut killed = sats.remove(victim);
+    killed.child.start_kill()?; // SIGKILL: nothing of the satellite runs after this
+    killed.child.wait().await?;
+    println!("killed {} holding {utterance}", killed.name);
+    publishing.await??.ok()?;
+    let got = transcripts.settle(0, 1).await?;
+    println!("{got:#?}");
+    assert_each_once(&got);
+    let of_it: Vec<&Value> = got
+        .iter()
+        .filter(|t| t["utterance"] == utterance.as_str())
+        .collect();
+    assert_eq!(
+        of_it.len(),
+        1,
+        "utterance {utterance} not transcribed exactly once: {got:?}"
+    );
+    assert_eq!(of_it[0]["satellite"], sats[0].name.as_str());
+    let (e, n) = word_errors(&reference("LJ001-0002")?, &joined(&got)).await?;
+    assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&got));
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn silence_and_noise_give_no_transcript() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let _sat = start_satellite(&agent, "asr-quiet").await?;
+    // Deterministic white noise at about -25 dBFS between stretches of digital silence.
+    let mut x = 0x9e37_79b9_u32;
+    let noise: Vec<i16> = (0..22_050 * 3)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            ((x >> 16) as i32 - 32_768) as i16 / 6
+        })
+        .collect();
+    let wav = temp_wav(&dir, "noise.wav");
+    write_wav(&wav, &[silence(2000), noise, silence(2000)])?;
+    pub_wav(&agent, &wav).await?;
+    tokio::time::sleep(QUIET * 2).await;
+    assert!(
+        transcripts.snapshot().is_empty(),
+        "transcribed non-speech: {:?}",
+        transcripts.snapshot()
+    );
+    // The satellite was listening all along: speech right after is transcribed.
+    pub_wav(&agent, &fixture("audio/sb_example1.wav")?).await?;
+    let got = transcripts.settle(0, 1).await?;
+    assert!(joined(&got).to_lowercase().contains("canoe"), "{got:?}");
+    Ok(())
+}
