@@ -4,7 +4,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use crate::phrase::{echo_score, normalise};
+use crate::phrase::{common_words, normalise};
 
 /// How long espeak-ng takes per word at its default rate (175 words per minute), to estimate when an utterance
 /// ends; a transcript of its tail can arrive that long after it started, plus the ASR's own delay.
@@ -12,6 +12,11 @@ const SECONDS_PER_WORD: f64 = 60.0 / 175.0;
 
 /// At most this many utterances are remembered; older ones are forgotten first.
 const REMEMBERED: usize = 16;
+
+/// The fewest words a transcript must share with an utterance to be taken for its echo (fewer if the utterance
+/// itself is shorter): one common word, such as the user's "hello" after the agent's "Hello! How can I help
+/// you?", is no evidence of an echo.
+const MIN_COMMON_WORDS: usize = 3;
 
 /// Recent utterances of the agent, each with when it may still be heard.
 #[derive(Debug, Clone)]
@@ -44,13 +49,23 @@ impl EchoFilter {
         self.recent.push_back((until, text.to_owned()));
     }
 
-    /// The recent utterance a transcript heard at `at` echoes, if any.
+    /// The recent utterance a transcript heard at `at` echoes, if any: one with which the transcript shares, in
+    /// order, at least `threshold` of its own words and at least three words (or all of a shorter utterance).
     pub fn echo_of(&mut self, at: Instant, transcript: &str) -> Option<&str> {
         self.recent.retain(|(until, _)| *until >= at);
+        let heard = normalise(transcript);
+        if heard.is_empty() {
+            return None;
+        }
         self.recent
             .iter()
             .rev()
-            .find(|(_, said)| echo_score(transcript, said) >= self.threshold)
+            .find(|(_, said)| {
+                let said_words = normalise(said);
+                let common = common_words(&heard, &said_words);
+                common as f64 >= self.threshold * heard.len() as f64
+                    && common >= MIN_COMMON_WORDS.min(said_words.len())
+            })
             .map(|(_, said)| said.as_str())
     }
 }
@@ -73,6 +88,18 @@ mod tests {
         assert!(filter.echo_of(soon, "quarter past three").is_some());
         assert!(filter.echo_of(soon, "what time is it").is_none());
         assert!(filter.echo_of(soon, "how many people do you see").is_none());
+    }
+
+    #[test]
+    fn one_common_word_is_not_an_echo_unless_that_was_all_the_agent_said() {
+        let t0 = Instant::now();
+        let mut filter = EchoFilter::new(Duration::from_secs(3), 0.6);
+        filter.said(t0, "Hello! How can I help you?");
+        assert!(filter.echo_of(t0, "hello").is_none());
+        assert!(filter.echo_of(t0, "help you").is_none());
+        assert!(filter.echo_of(t0, "can I help you").is_some());
+        filter.said(t0, "Okay.");
+        assert!(filter.echo_of(t0, "okay").is_some());
     }
 
     #[test]

@@ -29,8 +29,42 @@ const CONTRACTIONS: [(&str, &str); 24] = [
     ("won't", "will not"),
 ];
 
+/// Number words written as digits, since recognisers write "3" or "three" as they please (and the agent's own
+/// sentences, spoken from digits, come back either way).
+const NUMBERS: [(&str, &str); 28] = [
+    ("zero", "0"),
+    ("one", "1"),
+    ("two", "2"),
+    ("three", "3"),
+    ("four", "4"),
+    ("five", "5"),
+    ("six", "6"),
+    ("seven", "7"),
+    ("eight", "8"),
+    ("nine", "9"),
+    ("ten", "10"),
+    ("eleven", "11"),
+    ("twelve", "12"),
+    ("thirteen", "13"),
+    ("fourteen", "14"),
+    ("fifteen", "15"),
+    ("sixteen", "16"),
+    ("seventeen", "17"),
+    ("eighteen", "18"),
+    ("nineteen", "19"),
+    ("twenty", "20"),
+    ("thirty", "30"),
+    ("forty", "40"),
+    ("fifty", "50"),
+    ("sixty", "60"),
+    ("seventy", "70"),
+    ("eighty", "80"),
+    ("ninety", "90"),
+];
+
 /// Splits recognised text into lower-case words: drops bracketed annotations such as Whisper's `[BLANK_AUDIO]` or
-/// `(music)`, turns punctuation into spaces, unifies apostrophes and expands common contractions.
+/// `(music)`, turns punctuation into spaces, unifies apostrophes, expands common contractions and writes number
+/// words as digits.
 pub fn normalise(text: &str) -> Vec<String> {
     let mut cleaned = String::with_capacity(text.len());
     let mut depth = 0usize;
@@ -50,9 +84,12 @@ pub fn normalise(text: &str) -> Vec<String> {
         if word.is_empty() {
             continue;
         }
-        match CONTRACTIONS.iter().find(|(short, _)| *short == word) {
-            Some((_, long)) => words.extend(long.split(' ').map(str::to_owned)),
-            None => words.push(word.to_owned()),
+        if let Some((_, long)) = CONTRACTIONS.iter().find(|(short, _)| *short == word) {
+            words.extend(long.split(' ').map(str::to_owned));
+        } else if let Some((_, digits)) = NUMBERS.iter().find(|(name, _)| *name == word) {
+            words.push((*digits).to_owned());
+        } else {
+            words.push(word.to_owned());
         }
     }
     words
@@ -166,13 +203,20 @@ pub fn matches(text: &str, pattern: &str) -> bool {
 /// agent's own voice. Recognition of synthetic speech is partial and noisy, hence in-order and fuzzy.
 pub fn echo_score(transcript: &str, said: &str) -> f64 {
     let heard = normalise(transcript);
-    let said = normalise(said);
-    if heard.is_empty() || said.is_empty() {
+    if heard.is_empty() {
         return 0.0;
+    }
+    common_words(&heard, &normalise(said)) as f64 / heard.len() as f64
+}
+
+/// How many words two normalised texts share in order, allowing small slips (a longest common subsequence).
+pub fn common_words(heard: &[String], said: &[String]) -> usize {
+    if heard.is_empty() || said.is_empty() {
+        return 0;
     }
     let mut previous = vec![0usize; said.len() + 1];
     let mut current = vec![0usize; said.len() + 1];
-    for h in &heard {
+    for h in heard {
         for (j, s) in said.iter().enumerate() {
             current[j + 1] = if same_word(h, s) {
                 previous[j] + 1
@@ -182,7 +226,7 @@ pub fn echo_score(transcript: &str, said: &str) -> f64 {
         }
         std::mem::swap(&mut previous, &mut current);
     }
-    previous[said.len()] as f64 / heard.len() as f64
+    previous[said.len()]
 }
 
 #[cfg(test)]
@@ -199,6 +243,10 @@ mod tests {
         assert_eq!(
             normalise("I don\u{2019}t know."),
             ["i", "do", "not", "know"]
+        );
+        assert_eq!(
+            normalise("Two people, 3 cats"),
+            ["2", "people", "3", "cats"]
         );
     }
 
