@@ -82,6 +82,7 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
     let audio = hub.subscribe("Agent.audio").await?;
     let video = hub.subscribe("Agent.video").await?;
     let grey = hub.subscribe("Agent.video.y").await?;
+    let ctrl = hub.subscribe("Agent.ctrl").await?;
     let avatar = hub
         .publisher("Agent.avatar", r#"{"format":"json"}"#)
         .await?;
@@ -288,6 +289,24 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
             Duration::from_secs(5),
         )
         .await?;
+
+    // The holder's controls reach Agent.ctrl: switching listening off asks the ASR to stop.
+    browser
+        .wait_for(
+            &tab,
+            "!document.getElementById('asr-btn').disabled",
+            Duration::from_secs(5),
+        )
+        .await?;
+    browser
+        .eval(&tab, "document.getElementById('asr-btn').click()")
+        .await?;
+    let sent = tokio::time::timeout(Duration::from_secs(5), ctrl.recv())
+        .await
+        .context("no Agent.ctrl message")?;
+    let sent: serde_json::Value =
+        serde_json::from_slice(&sent.context("Agent.ctrl ended")?.payload)?;
+    assert_eq!(sent, json!({"asr": false}));
 
     // The artifact shows the overlay: detections again, and one more to be sure it is on screen.
     detections.publish(boxes.to_string()).await?;

@@ -128,6 +128,28 @@ function refreshButtons() {
   set("cam-btn", page.wantCam, "camera");
 }
 
+// Agent controls go to Agent.ctrl (docs/asr.md, docs/voice.md); the server accepts them only from the holder.
+let asrOn = true;
+$("asr-btn").addEventListener("click", () => {
+  if (link.sendJson({ type: "ctrl", data: { asr: !asrOn } })) {
+    asrOn = !asrOn;
+    $("asr-btn").dataset.on = String(asrOn);
+    $("asr-btn").textContent = `Listening: ${asrOn ? "on" : "off"}`;
+  }
+});
+$("hush-btn").addEventListener("click", () => link.sendJson({ type: "ctrl", data: { speech: "stop" } }));
+$("say-form").addEventListener("submit", (ev) => {
+  ev.preventDefault();
+  const text = $("say-text").value.trim();
+  if (text && link.sendJson({ type: "ctrl", data: { say: text } })) $("say-text").value = "";
+});
+
+function refreshAgentControls() {
+  const holder = page.role === "holder";
+  for (const id of ["asr-btn", "hush-btn", "say-text", "say-btn"]) $(id).disabled = !holder;
+  $("agent-meta").textContent = holder ? "you are talking to the agent" : "only while you hold the microphone";
+}
+
 // ---- link events ---------------------------------------------------------------------------------------------
 
 link.addEventListener("state", (ev) => {
@@ -274,6 +296,7 @@ setInterval(() => {
     performance.now(),
   );
   reportMedia();
+  refreshAgentControls();
 }, 500);
 
 installDebugHook({ avatar, link, page, camera, mic, spectrum, overlay, rules, speech });

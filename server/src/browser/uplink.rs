@@ -1,4 +1,5 @@
-//! The role holder's media into the hub: `Agent.audio` and `Agent.video` exist while the page sends them.
+//! The role holder's media into the hub: `Agent.audio` and `Agent.video` exist while the page sends them, and
+//! `Agent.ctrl` (the page's switches for other modules) while it sends any.
 //!
 //! Each medium has a lane: a bounded drop-oldest queue between the socket and a task that publishes. The socket
 //! never waits for the hub; when the hub side is slower than the page, the oldest waiting item is dropped and
@@ -94,6 +95,11 @@ impl Uplink {
         if video && self.video.is_none() {
             self.video =
                 Some(Lane::open(client, channels::VIDEO, VIDEO_HEADER, VIDEO_QUEUE).await?);
+        }
+        // Agent.ctrl exists while the holder sends media, so that its readers (ASR, TTS) are subscribed before the
+        // first control message: a channel created for one message would lose it to sticky subscribers.
+        if (audio || video) && self.ctrl.is_none() {
+            self.ctrl = Some(client.publisher(channels::CTRL, CTRL_HEADER).await?);
         }
         Ok(())
     }
