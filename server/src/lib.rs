@@ -2,6 +2,7 @@
 //! pulses), its transports (TCP, Unix socket, WebSocket), the HTTP edge and
 //! the internal modules. See ARCHITECTURE.md for the map.
 
+pub mod browser;
 pub mod config;
 pub mod http;
 pub mod hub;

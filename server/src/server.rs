@@ -128,7 +128,10 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         .await
         .with_context(|| format!("binding HTTP {http_addr}"))?;
     let http = listener.local_addr()?;
-    let app = crate::http::app(shared.clone()).into_make_service_with_connect_info::<SocketAddr>();
+    let browser = crate::browser::BrowserLink::from_config(&shared.config, shared.shutdown.subscribe())?;
+    let app = crate::http::app(shared.clone())
+        .merge(browser.router())
+        .into_make_service_with_connect_info::<SocketAddr>();
     let mut stop = shared.shutdown.subscribe();
     tasks.push(tokio::spawn(async move {
         let graceful = axum::serve(listener, app).with_graceful_shutdown(async move {
@@ -138,7 +141,8 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
             tracing::error!("http server failed: {e}");
         }
     }));
-    for module in crate::modules::builtin(&shared.config) {
+    let browser_modules = browser.modules().into_iter().filter(|m| shared.config.module_enabled(m.name()));
+    for module in crate::modules::builtin(&shared.config).into_iter().chain(browser_modules) {
         tasks.push(crate::module::spawn(shared.clone(), module).await?);
     }
     info!(%http, ?flow_tcp, ?flow_unix, "robot-agent is up");
