@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use agent_tests::browser_chromium::{Chromium, Devices, FakeMedia, Tab};
-use agent_tests::browser_link::post_session;
+use agent_tests::browser_link::{post_session, start_link_only};
 use agent_tests::browser_media::{
     TONE_HZ, best_loop_correlation, envelope, jpeg_shape, pcm_samples, prepare, read_wav,
     spectrum_peak, speech_fixture,
@@ -76,7 +76,7 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
     let _one = ONE_BROWSER.lock().await;
     let (speech, _) = media();
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let hub = agent.client("browser-test").await?;
     // Sticky subscriptions: they start delivering when the page's role creates the channels.
     let audio = hub.subscribe("Agent.audio").await?;
@@ -327,7 +327,7 @@ async fn spectrum_peaks_at_the_test_tone() -> anyhow::Result<()> {
     let _one = ONE_BROWSER.lock().await;
     let (_, tone) = media();
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let hub = agent.client("fft-test").await?;
     let fft = hub.subscribe("Agent.audio.fft").await?;
     let browser = Chromium::launch(tone).await?;
@@ -386,7 +386,7 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
     let _one = ONE_BROWSER.lock().await;
     let (speech, _) = media();
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let hub = agent.client("role-test").await?;
     let audio = hub.subscribe("Agent.audio").await?;
     let browser = Chromium::launch(speech).await?;
@@ -453,7 +453,7 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
 async fn page_explains_denied_permission_and_missing_devices() -> anyhow::Result<()> {
     let _one = ONE_BROWSER.lock().await;
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     for (devices, expected) in [
         (
             Devices::Denied,
@@ -506,7 +506,7 @@ async fn link_refuses_foreign_origins_and_closes_on_malformed_frames() -> anyhow
     use tokio_tungstenite::tungstenite::{Error as WsError, Message};
 
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let own = format!("http://{}", agent.http);
     let http = agent.http.to_string();
     // A cross-site page can neither get a session nor open the link.

@@ -13,7 +13,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use agent_tests::browser_chromium::Chromium;
-use agent_tests::browser_link::session_token;
+use agent_tests::browser_link::{session_token, start_link_only};
 use agent_tests::browser_media::{prepare, read_wav, speech_fixture};
 use agent_tests::fixtures::fixtures;
 use agent_tests::{Agent, DataDir};
@@ -181,7 +181,7 @@ async fn browser_phase(
     window: Duration,
 ) -> anyhow::Result<Phase> {
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let hub = agent.client("bench").await?;
     let browser = Chromium::launch(media).await?;
     let tab = browser.open(&kiosk_url(&agent)).await?;
@@ -206,7 +206,7 @@ async fn browser_phase(
 /// fixture in 20 ms chunks.
 async fn satellite_phase(window: Duration) -> anyhow::Result<Phase> {
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let hub = agent.client("bench").await?;
     let sat = agent.client("satellite").await?;
     let frames =
@@ -268,7 +268,7 @@ fn load_frames(dir: &Path) -> anyhow::Result<Vec<Bytes>> {
 /// publisher -> the same subscriber), interleaved so both see the same machine load.
 async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     let data = DataDir::new()?;
-    let agent = Agent::start(&data).await?;
+    let agent = start_link_only(&data).await?;
     let hub = agent.client("bench").await?;
     let link_sub = hub.subscribe("Agent.audio").await?;
     let direct_sub = hub.subscribe("Bench.direct").await?;

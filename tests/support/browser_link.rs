@@ -1,4 +1,5 @@
-//! The HTTP side of the browser link as a page uses it, for tests and the benchmark that play the page's part.
+//! The HTTP side of the browser link as a page uses it, for tests and the benchmark that play the page's part,
+//! and the server set-up they share.
 
 use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -34,4 +35,27 @@ pub async fn session_token(http: &str) -> anyhow::Result<String> {
         .as_str()
         .context("no session in the answer")?
         .to_string())
+}
+
+/// Server configuration for the browser tests and benchmark: the modules that publish avatar commands, speech and
+/// detections themselves (or process the camera) are off, so the test owns those channels and measures the link
+/// alone. Their own tests cover them.
+pub const LINK_ONLY_CONFIG: &str = "\
+[modules.tts]
+enabled = false
+[modules.brain]
+enabled = false
+[modules.vision]
+enabled = false
+[modules.behaviour]
+enabled = false
+";
+
+/// Starts a robot-agent with [`LINK_ONLY_CONFIG`] in `data`.
+pub async fn start_link_only(data: &crate::DataDir) -> anyhow::Result<crate::Agent> {
+    let opts = crate::AgentOptions {
+        config: Some(LINK_ONLY_CONFIG.into()),
+        ..Default::default()
+    };
+    crate::Agent::start_with(data, opts).await
 }
