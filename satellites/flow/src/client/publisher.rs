@@ -49,7 +49,14 @@ impl Owned {
     }
 
     pub(super) fn id(&self) -> Option<ChanId> {
-        ChanId::try_from(self.id.load(Ordering::Acquire)).ok()
+        // The "no channel" marker -1 fits in an i16 too, so it must be excluded
+        // explicitly: only 0..=32767 are channel ids.
+        let raw = self.id.load(Ordering::Acquire);
+        if raw < 0 {
+            None
+        } else {
+            ChanId::try_from(raw).ok()
+        }
     }
 
     pub(super) fn set_id(&self, id: Option<ChanId>) {
