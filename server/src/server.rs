@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context;
+use axum::serve::ListenerExt;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
@@ -128,6 +129,10 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         .await
         .with_context(|| format!("binding HTTP {http_addr}"))?;
     let http = listener.local_addr()?;
+    // Speech and avatar commands are small writes that must not wait for Nagle.
+    let listener = listener.tap_io(|tcp| {
+        let _ = tcp.set_nodelay(true);
+    });
     let browser = crate::browser::BrowserLink::from_config(&shared.config, shared.shutdown.subscribe())?;
     let app = crate::http::app(shared.clone())
         .merge(browser.router())
