@@ -126,6 +126,10 @@ struct State {
     sub_ids: HashMap<ChanId, String>,
     owned: HashMap<String, Arc<Owned>>,
     owned_ids: HashMap<ChanId, Arc<Owned>>,
+    /// Start/stop-publishing news for a channel whose creation reply has not
+    /// been read yet: another client may subscribe as soon as it sees the
+    /// channel added, so the hub's news can overtake the reply.
+    early_listening: HashMap<ChanId, bool>,
     db: Option<String>,
     session: Option<SessionInfo>,
 }

@@ -262,8 +262,12 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
         }
         Event::StartPublishing { id } | Event::StopPublishing { id } => {
             let listening = matches!(event, Event::StartPublishing { .. });
-            if let Some(owned) = lock(&inner.state).owned_ids.get(&id) {
-                owned.set_listening(listening);
+            let mut state = lock(&inner.state);
+            match state.owned_ids.get(&id) {
+                Some(owned) => owned.set_listening(listening),
+                None => {
+                    state.early_listening.insert(id, listening);
+                }
             }
         }
         Event::ChannelAdded(info) => {
@@ -289,6 +293,7 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
             {
                 let mut state = lock(&inner.state);
                 state.sub_ids.remove(&id);
+                state.early_listening.remove(&id);
                 if let Some(owned) = state.owned_ids.remove(&id) {
                     owned.set_id(None);
                 }
@@ -331,7 +336,11 @@ fn on_reply(inner: &Arc<Inner>, req: u32, result: Result<Reply, crate::protocol:
         }
         (Some(Hook::Added(owned)), Ok(Reply::Channel(info))) => {
             owned.set_id(Some(info.id));
-            lock(&inner.state).owned_ids.insert(info.id, owned.clone());
+            let mut state = lock(&inner.state);
+            state.owned_ids.insert(info.id, owned.clone());
+            if let Some(listening) = state.early_listening.remove(&info.id) {
+                owned.set_listening(listening);
+            }
         }
         (Some(Hook::CallAsync), _) => {
             let result = match result {
@@ -359,6 +368,7 @@ fn forget_session(inner: &Arc<Inner>, reason: &str) {
             owned.set_id(None);
         }
         state.owned_ids.clear();
+        state.early_listening.clear();
         state.session = None;
         std::mem::take(&mut state.pending)
     };
