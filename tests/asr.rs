@@ -47,7 +47,7 @@ async fn start_satellite(agent: &Agent, name: &str) -> anyhow::Result<Satellite>
         .arg(name)
         .env(
             "RUST_LOG",
-            std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info".into()),
+            std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info,whisper_rs=warn".into()),
         )
         .stdin(std::process::Stdio::null());
     let child = cmd.spawn().context("starting whisper-sat")?;
@@ -106,27 +106,50 @@ impl Transcripts {
         self.lock().clone()
     }
 
-    /// Waits for at least `min` more transcripts than `before`, then until none arrives for `QUIET`.
-    async fn settle(&self, before: usize, min: usize) -> anyhow::Result<Vec<Value>> {
-        let deadline = tokio::time::Instant::now() + TRANSCRIPT_PATIENCE;
-        while self.lock().len() < before + min {
+    /// Waits for at least `min` more transcripts than `before`, then until the satellites have finished every
+    /// utterance they claimed (each claim channel's header says `"done":true`) and claimed nothing new for
+    /// `QUIET`. Satellites claim as soon as they are idle, so a quiet, all-done hub means no work is left.
+    async fn settle(&self, agent: &Agent, before: usize, min: usize) -> anyhow::Result<Vec<Value>> {
+        let client = agent.client("asr-test-settle").await?;
+        let deadline = tokio::time::Instant::now() + TRANSCRIPT_PATIENCE * 3;
+        let mut quiet_since: Option<(tokio::time::Instant, usize)> = None;
+        loop {
             anyhow::ensure!(
                 tokio::time::Instant::now() < deadline,
-                "expected {min} transcript(s), got {:?}",
+                "satellites did not finish: {:?}",
                 &self.snapshot()[before..]
             );
-            tokio::time::sleep(Duration::from_millis(100)).await;
-        }
-        let mut seen = self.lock().len();
-        loop {
-            tokio::time::sleep(QUIET).await;
-            let now = self.lock().len();
-            if now == seen {
-                return Ok(self.snapshot()[before..].to_vec());
+            let claims: Vec<String> = client
+                .channels()
+                .await?
+                .into_iter()
+                .filter(|c| c.name.starts_with("Agent.asr.claim."))
+                .map(|c| c.header)
+                .collect();
+            let all_done = claims.iter().all(|h| h.contains("\"done\":true"));
+            let state = (claims.len(), self.lock().len());
+            if all_done && state.1 >= before + min {
+                match quiet_since {
+                    Some((since, n)) if n == state.0 + state.1 => {
+                        if since.elapsed() >= QUIET {
+                            return Ok(self.snapshot()[before..].to_vec());
+                        }
+                    }
+                    _ => quiet_since = Some((tokio::time::Instant::now(), state.0 + state.1)),
+                }
+            } else {
+                quiet_since = None;
             }
-            seen = now;
+            tokio::time::sleep(Duration::from_millis(200)).await;
         }
     }
+}
+
+/// Wall clock in µs since the Unix epoch (the hub's clock on this machine).
+fn now_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
 }
 
 /// Streams a WAV file in real time onto `Agent.audio`, with a second of silence after it.
@@ -237,13 +260,27 @@ async fn fixture_speech_through_the_hub_has_low_word_error_rate() -> anyhow::Res
     let agent = Agent::start(&dir).await?;
     let transcripts = Transcripts::collect(&agent).await?;
     let _sat = start_satellite(&agent, "asr-one").await?;
-    let (mut errors, mut words) = (0.0, 0.0);
+    // Stream every clip, noting when each was on the air; transcripts are matched to clips by their start time.
+    let mut windows = Vec::new();
     for clip in CLIPS {
         // jfk.wav is 16 kHz; flowctl resamples it to the hub's 22050 Hz.
-        let before = transcripts.lock().len();
+        let begin = now_us();
         pub_wav(&agent, &fixture(&format!("audio/{clip}.wav"))?).await?;
-        let got = transcripts.settle(before, 1).await?;
-        assert_each_once(&got);
+        windows.push((clip, begin, now_us()));
+    }
+    let all = transcripts.settle(&agent, 0, CLIPS.len()).await?;
+    assert_each_once(&all);
+    let (mut errors, mut words) = (0.0, 0.0);
+    for (clip, begin, end) in windows {
+        let got: Vec<Value> = all
+            .iter()
+            .filter(|t| {
+                t["start_us"]
+                    .as_u64()
+                    .is_some_and(|s| (begin..end).contains(&s))
+            })
+            .cloned()
+            .collect();
         let text = joined(&got);
         let (e, n) = word_errors(&reference(clip)?, &text).await?;
         println!("{clip}: WER {:.1}% ({e}/{n}) : {text}", 100.0 * e / n);
@@ -283,7 +320,7 @@ async fn two_satellites_share_consecutive_utterances_each_once() -> anyhow::Resu
         ],
     )?;
     pub_wav(&agent, &wav).await?;
-    let got = transcripts.settle(0, 3).await?;
+    let got = transcripts.settle(&agent, 0, 3).await?;
     println!("{got:#?}");
     assert_each_once(&got);
     let by: HashSet<&str> = got.iter().filter_map(|t| t["satellite"].as_str()).collect();
@@ -346,7 +383,7 @@ async fn utterance_of_a_killed_satellite_is_transcribed_once_by_another() -> any
     killed.child.wait().await?;
     println!("killed {} holding {utterance}", killed.name);
     publishing.await??.ok()?;
-    let got = transcripts.settle(0, 1).await?;
+    let got = transcripts.settle(&agent, 0, 1).await?;
     println!("{got:#?}");
     assert_each_once(&got);
     let of_it: Vec<&Value> = got
@@ -383,7 +420,8 @@ async fn silence_and_noise_give_no_transcript() -> anyhow::Result<()> {
     let wav = temp_wav(&dir, "noise.wav");
     write_wav(&wav, &[silence(2000), noise, silence(2000)])?;
     pub_wav(&agent, &wav).await?;
-    tokio::time::sleep(QUIET * 2).await;
+    // Whatever the satellite found in there is finished (claims done) before looking at the transcripts.
+    transcripts.settle(&agent, 0, 0).await?;
     assert!(
         transcripts.snapshot().is_empty(),
         "transcribed non-speech: {:?}",
@@ -391,7 +429,7 @@ async fn silence_and_noise_give_no_transcript() -> anyhow::Result<()> {
     );
     // The satellite was listening all along: speech right after is transcribed.
     pub_wav(&agent, &fixture("audio/sb_example1.wav")?).await?;
-    let got = transcripts.settle(0, 1).await?;
+    let got = transcripts.settle(&agent, 0, 1).await?;
     assert!(joined(&got).to_lowercase().contains("canoe"), "{got:?}");
     Ok(())
 }

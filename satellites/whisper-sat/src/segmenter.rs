@@ -6,11 +6,17 @@
 //! little of that silence, which Whisper transcribes better than an abrupt cut. Frames quieter than an energy floor
 //! count as unvoiced whatever the detector says, which keeps faint hiss from opening utterances.
 //!
+//! Broadband noise can fool the detector (it is tuned for telephony), so an utterance must also contain some tonal
+//! frames: voiced speech has harmonics, so its spectrum is far from flat, while hiss, fans and static have a flat
+//! spectrum. Utterances with too few frames below a spectral-flatness limit are dropped as noise.
+//!
 //! `webrtc_vad::Vad` wraps a raw C pointer and is not `Send`; a segmenter therefore lives on one thread (the
 //! satellite gives it a thread of its own).
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 
+use realfft::{RealFftPlanner, RealToComplex};
 use webrtc_vad::{SampleRate, Vad, VadMode};
 
 /// The rate the segmenter works at (Whisper's input rate; also one WebRTC VAD supports).
@@ -37,6 +43,10 @@ pub struct SegmenterConfig {
     pub post_roll_ms: u32,
     /// Frames below this RMS level (dBFS) count as unvoiced.
     pub energy_floor_dbfs: f32,
+    /// A frame is tonal when its spectral flatness (150 Hz - 4 kHz) is below this (white noise is about 0.56).
+    pub tonal_flatness: f32,
+    /// Utterances with less tonal voiced time than this are dropped as noise.
+    pub min_tonal_ms: u32,
 }
 
 impl Default for SegmenterConfig {
@@ -51,6 +61,8 @@ impl Default for SegmenterConfig {
             max_utterance_ms: 25_000,
             post_roll_ms: 150,
             energy_floor_dbfs: -50.0,
+            tonal_flatness: 0.3,
+            min_tonal_ms: 100,
         }
     }
 }
@@ -97,8 +109,53 @@ enum State {
         audio: Vec<f32>,
         speech_end: u64,
         voiced_frames: u32,
+        tonal_frames: u32,
         silent_frames: u32,
     },
+}
+
+/// Spectral flatness of 20 ms frames (geometric over arithmetic mean of the power spectrum).
+struct Flatness {
+    fft: Arc<dyn RealToComplex<f32>>,
+    window: Vec<f32>,
+    input: Vec<f32>,
+    spectrum: Vec<realfft::num_complex::Complex<f32>>,
+}
+
+impl Flatness {
+    fn new() -> Self {
+        let fft = RealFftPlanner::<f32>::new().plan_fft_forward(FRAME);
+        let window = (0..FRAME)
+            .map(|i| 0.5 - 0.5 * (2.0 * std::f32::consts::PI * i as f32 / FRAME as f32).cos())
+            .collect();
+        Self {
+            input: fft.make_input_vec(),
+            spectrum: fft.make_output_vec(),
+            fft,
+            window,
+        }
+    }
+
+    fn of(&mut self, frame: &[f32]) -> f32 {
+        for ((x, s), w) in self.input.iter_mut().zip(frame).zip(&self.window) {
+            *x = s * w;
+        }
+        if self
+            .fft
+            .process(&mut self.input, &mut self.spectrum)
+            .is_err()
+        {
+            return 1.0;
+        }
+        // Bins are 50 Hz apart: 150 Hz .. 4 kHz, where voiced speech has its harmonics.
+        let band = &self.spectrum[3..=80];
+        let powers = band.iter().map(|c| c.norm_sqr() + 1e-12);
+        let (log_sum, sum) = powers.fold((0.0f64, 0.0f64), |(l, s), p| {
+            (l + f64::from(p).ln(), s + f64::from(p))
+        });
+        let n = band.len() as f64;
+        ((log_sum / n).exp() / (sum / n)) as f32
+    }
 }
 
 /// The streaming segmenter.
@@ -112,8 +169,10 @@ pub struct Segmenter {
     position: u64,
     /// Recent audio while idle, for the pre-roll and the onset window.
     recent: VecDeque<f32>,
-    /// Voiced flags of the frames in the onset window.
+    /// Voiced flags of the frames in the onset window, and how many of them were tonal.
     onset: VecDeque<bool>,
+    onset_tonal: VecDeque<bool>,
+    flatness: Flatness,
 }
 
 impl std::fmt::Debug for Segmenter {
@@ -158,6 +217,8 @@ impl Segmenter {
             position: 0,
             recent: VecDeque::new(),
             onset: VecDeque::new(),
+            onset_tonal: VecDeque::new(),
+            flatness: Flatness::new(),
         })
     }
 
@@ -206,6 +267,7 @@ impl Segmenter {
         self.state = State::Idle;
         self.recent.clear();
         self.onset.clear();
+        self.onset_tonal.clear();
     }
 
     /// Moves the position forward without audio (the stream skipped), closing anything open first.
@@ -213,6 +275,13 @@ impl Segmenter {
         self.finish(events);
         self.partial.clear();
         self.position = position;
+    }
+
+    /// Whether the frame is voiced, and whether it is also tonal.
+    fn classify(&mut self, frame: &[f32]) -> (bool, bool) {
+        let voiced = self.voiced(frame);
+        let tonal = voiced && self.flatness.of(frame) < self.cfg.tonal_flatness;
+        (voiced, tonal)
     }
 
     fn voiced(&mut self, frame: &[f32]) -> bool {
@@ -228,7 +297,7 @@ impl Segmenter {
     }
 
     fn frame(&mut self, frame: &[f32], events: &mut Vec<SegmentEvent>) {
-        let voiced = self.voiced(frame);
+        let (voiced, tonal) = self.classify(frame);
         let frame_end = self.position + FRAME as u64;
         match &mut self.state {
             State::Idle => {
@@ -238,8 +307,10 @@ impl Segmenter {
                     self.recent.pop_front();
                 }
                 self.onset.push_back(voiced);
+                self.onset_tonal.push_back(tonal);
                 while self.onset.len() > frames(self.cfg.onset_ms) as usize {
                     self.onset.pop_front();
+                    self.onset_tonal.pop_front();
                 }
                 let voiced_in_window = self.onset.iter().filter(|&&v| v).count() as u32;
                 if voiced && voiced_in_window >= frames(self.cfg.onset_voiced_ms) {
@@ -257,13 +328,16 @@ impl Segmenter {
                         .skip((start - recent_start) as usize)
                         .copied()
                         .collect();
+                    let tonal_frames = self.onset_tonal.iter().filter(|&&t| t).count() as u32;
                     self.recent.clear();
                     self.onset.clear();
+                    self.onset_tonal.clear();
                     self.state = State::Speech {
                         start,
                         audio,
                         speech_end: frame_end,
                         voiced_frames: voiced_in_window,
+                        tonal_frames,
                         silent_frames: 0,
                     };
                     events.push(SegmentEvent::Started { start });
@@ -273,6 +347,7 @@ impl Segmenter {
                 audio,
                 speech_end,
                 voiced_frames,
+                tonal_frames,
                 silent_frames,
                 ..
             } => {
@@ -280,6 +355,7 @@ impl Segmenter {
                 if voiced {
                     *speech_end = frame_end;
                     *voiced_frames += 1;
+                    *tonal_frames += u32::from(tonal);
                     *silent_frames = 0;
                 } else {
                     *silent_frames += 1;
@@ -300,12 +376,15 @@ impl Segmenter {
             mut audio,
             speech_end,
             voiced_frames,
+            tonal_frames,
             ..
         } = std::mem::replace(&mut self.state, State::Idle)
         else {
             return;
         };
-        if voiced_frames < frames(self.cfg.min_voiced_ms) {
+        if voiced_frames < frames(self.cfg.min_voiced_ms)
+            || tonal_frames < frames(self.cfg.min_tonal_ms)
+        {
             events.push(SegmentEvent::Dropped { start });
             return;
         }
@@ -324,6 +403,7 @@ impl Segmenter {
                 audio: Vec::new(),
                 speech_end: end,
                 voiced_frames: 0,
+                tonal_frames: 0,
                 silent_frames: 0,
             };
             events.push(SegmentEvent::Started { start: end });
@@ -463,6 +543,28 @@ mod tests {
             })
             .collect();
         assert!(ended(&run(SegmenterConfig::default(), &hiss)).is_empty());
+    }
+
+    #[test]
+    fn loud_white_noise_is_dropped_even_when_the_detector_fires() {
+        let mut x = 0x9e37_79b9_u32;
+        let noise: Vec<f32> = (0..samples(3000))
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                (x as f32 / u32::MAX as f32 - 0.5) * 0.35
+            })
+            .collect();
+        let audio = [silence(500), noise, silence(1000)].concat();
+        assert!(ended(&run(SegmenterConfig::default(), &audio)).is_empty());
+        // The same noise with a voice over it is speech.
+        let voiced: Vec<f32> = audio
+            .iter()
+            .zip([silence(700), voice(1500), silence(2300)].concat())
+            .map(|(n, v)| n * 0.3 + v)
+            .collect();
+        assert_eq!(ended(&run(SegmenterConfig::default(), &voiced)).len(), 1);
     }
 
     #[test]

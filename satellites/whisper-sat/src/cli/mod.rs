@@ -3,6 +3,7 @@
 mod bench;
 mod convert;
 mod progress;
+mod recognition;
 mod run;
 mod satellite;
 mod transcribe;

@@ -5,9 +5,9 @@ use std::time::Duration;
 
 use anyhow::Context;
 use flow::{Client, ConnectOptions, FlowAddr};
-use whisper_sat::segmenter::SegmenterConfig;
-use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
+use whisper_sat::transcriber::Transcriber;
 
+use super::recognition::RecognitionArgs;
 use super::satellite::{self, Settings};
 
 #[derive(Debug, clap::Args)]
@@ -24,21 +24,8 @@ pub struct Args {
     /// Satellite name (login name and presence channel); unique per hub. Default: whisper-<pid>.
     #[arg(long)]
     name: Option<String>,
-    /// ggml model file (default: models/ggml-tiny.en.bin in the repository, or WHISPER_MODEL).
-    #[arg(long)]
-    model: Option<PathBuf>,
-    /// Inference threads.
-    #[arg(long, default_value_t = 2)]
-    threads: usize,
-    /// End-of-speech hangover in milliseconds.
-    #[arg(long, default_value_t = SegmenterConfig::default().hangover_ms)]
-    hangover_ms: u32,
-    /// Pre-roll kept before the detected onset, in milliseconds.
-    #[arg(long, default_value_t = SegmenterConfig::default().pre_roll_ms)]
-    pre_roll_ms: u32,
-    /// Run the full 30 s encoder window instead of fitting it to the utterance.
-    #[arg(long)]
-    full_window: bool,
+    #[command(flatten)]
+    recognition: RecognitionArgs,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -62,28 +49,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .name
         .clone()
         .unwrap_or_else(|| format!("whisper-{}", std::process::id()));
-    let model = args
-        .model
-        .clone()
-        .unwrap_or_else(whisper_sat::model_path::default_model);
-    let cfg = TranscriberConfig {
-        threads: args.threads,
-        audio_context: if args.full_window {
-            AudioContext::Full
-        } else {
-            AudioContext::Fit
-        },
-        ..TranscriberConfig::default()
-    };
+    let model = args.recognition.model();
     // Load the model before connecting, so a bad path fails at once with a clear message.
-    let transcriber = Transcriber::load(&model, cfg)?;
+    let transcriber = Transcriber::load(&model, args.recognition.transcriber())?;
     let settings = Settings {
         name: name.clone(),
-        segmenter: SegmenterConfig {
-            hangover_ms: args.hangover_ms,
-            pre_roll_ms: args.pre_roll_ms,
-            ..SegmenterConfig::default()
-        },
+        segmenter: args.recognition.segmenter(),
         claim_retention: Duration::from_secs(30),
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()

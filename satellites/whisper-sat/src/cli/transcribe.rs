@@ -4,44 +4,25 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use whisper_sat::offline::{UtteranceResult, joined_text, transcribe_clip};
-use whisper_sat::segmenter::SegmenterConfig;
-use whisper_sat::transcriber::{AudioContext, Outcome, Transcriber, TranscriberConfig};
+use whisper_sat::transcriber::{Outcome, Transcriber};
+
+use super::recognition::RecognitionArgs;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// WAV file (16-bit or float, any rate, mono or stereo).
     file: PathBuf,
-    /// ggml model file (default: models/ggml-tiny.en.bin in the repository, or WHISPER_MODEL).
-    #[arg(long)]
-    model: Option<PathBuf>,
-    /// Inference threads.
-    #[arg(long, default_value_t = 2)]
-    threads: usize,
-    /// End-of-speech hangover in milliseconds.
-    #[arg(long, default_value_t = SegmenterConfig::default().hangover_ms)]
-    hangover_ms: u32,
-    /// Run the full 30 s encoder window instead of fitting it to the utterance.
-    #[arg(long)]
-    full_window: bool,
+    #[command(flatten)]
+    recognition: RecognitionArgs,
     /// Transcribe the whole file as one utterance (no VAD).
     #[arg(long)]
     whole: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let model = args
-        .model
-        .unwrap_or_else(whisper_sat::model_path::default_model);
+    let model = args.recognition.model();
     let clip = whisper_sat::wav::read_mono(&args.file)?;
-    let cfg = TranscriberConfig {
-        threads: args.threads,
-        audio_context: if args.full_window {
-            AudioContext::Full
-        } else {
-            AudioContext::Fit
-        },
-        ..TranscriberConfig::default()
-    };
+    let cfg = args.recognition.transcriber();
     let mut transcriber = Transcriber::load(&model, cfg)?;
     if args.whole {
         let audio = whisper_sat::resample::resample_clip(&clip.samples, clip.rate, 16_000)?;
@@ -57,10 +38,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    let seg = SegmenterConfig {
-        hangover_ms: args.hangover_ms,
-        ..SegmenterConfig::default()
-    };
+    let seg = args.recognition.segmenter();
     let results = transcribe_clip(&clip.samples, clip.rate, seg, &mut transcriber)
         .with_context(|| format!("transcribing {}", args.file.display()))?;
     for r in &results {

@@ -84,7 +84,8 @@ pub async fn run(
         .map(|c| c.name)
         .collect();
 
-    let mut ledger = Ledger::new(Duration::from_secs(120));
+    // Generous: on a loaded machine a backlog may take minutes to clear, and losing speech is worse than lateness.
+    let mut ledger = Ledger::new(Duration::from_secs(600));
     let mut transcriber = Some(transcriber);
     let mut running: Option<Running> = None;
     let mut retained: VecDeque<(Instant, Publisher)> = VecDeque::new();
