@@ -1,1 +1,20 @@
-//! Shared support for the integration tests: starting a real robot-agent on free ports.
+//! Shared support for the integration tests: starting a real robot-agent on
+//! free ports, running the workspace's binaries, raw protocol connections and
+//! the shared fixtures.
+
+pub mod agent;
+pub mod binaries;
+pub mod fixtures;
+pub mod http;
+pub mod raw;
+pub mod wait;
+
+pub use agent::{Agent, AgentOptions, DataDir};
+pub use binaries::{binary, command, run};
+pub use fixtures::fixture;
+pub use raw::RawConn;
+pub use wait::{recv, until_subscribed, until_unsubscribed};
+
+/// A generous bound for anything a test waits on: the machine may be busy
+/// building other crates, and tests never assert on durations.
+pub const PATIENCE: std::time::Duration = std::time::Duration::from_secs(30);

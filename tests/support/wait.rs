@@ -1,0 +1,35 @@
+//! Waiting on hub events with the tests' generous bound, failing with a clear
+//! message instead of hanging.
+
+use anyhow::Context;
+use flow::{Data, Publisher, Subscription};
+
+use crate::PATIENCE;
+
+/// The next message of a subscription, or an error after [`PATIENCE`].
+pub async fn recv(sub: &Subscription) -> anyhow::Result<Data> {
+    tokio::time::timeout(PATIENCE, sub.recv())
+        .await
+        .with_context(|| format!("no message on {} in time", sub.name()))?
+        .context("subscription ended")
+}
+
+/// Waits until the hub tells `publisher` that someone subscribes to its channel.
+pub async fn until_subscribed(publisher: &Publisher) -> anyhow::Result<()> {
+    let mut watch = publisher.subscribers();
+    tokio::time::timeout(PATIENCE, watch.wait_for(|on| *on))
+        .await
+        .with_context(|| format!("nobody subscribed to {} in time", publisher.name()))?
+        .context("client closed")?;
+    Ok(())
+}
+
+/// Waits until the last subscriber of `publisher`'s channel has left.
+pub async fn until_unsubscribed(publisher: &Publisher) -> anyhow::Result<()> {
+    let mut watch = publisher.subscribers();
+    tokio::time::timeout(PATIENCE, watch.wait_for(|on| !*on))
+        .await
+        .with_context(|| format!("{} kept its subscribers", publisher.name()))?
+        .context("client closed")?;
+    Ok(())
+}
