@@ -27,9 +27,15 @@ impl Outcome {
     /// The percept this outcome becomes.
     pub fn percept(self) -> (&'static str, Vec<Value>) {
         match self {
-            Outcome::Output { command, text } => ("output", vec![Value::Text(command), Value::Text(text)]),
-            Outcome::Reply { service, text } => ("reply", vec![Value::Text(service), Value::Text(text)]),
-            Outcome::Failed { name, reason } => ("failed", vec![Value::Text(name), Value::Text(reason)]),
+            Outcome::Output { command, text } => {
+                ("output", vec![Value::Text(command), Value::Text(text)])
+            }
+            Outcome::Reply { service, text } => {
+                ("reply", vec![Value::Text(service), Value::Text(text)])
+            }
+            Outcome::Failed { name, reason } => {
+                ("failed", vec![Value::Text(name), Value::Text(reason)])
+            }
         }
     }
 }
@@ -56,7 +62,12 @@ pub struct Actuators {
 }
 
 impl Actuators {
-    pub fn new(client: Client, speech: Speech, params: &BrainParams, outcomes: mpsc::Sender<Outcome>) -> Self {
+    pub fn new(
+        client: Client,
+        speech: Speech,
+        params: &BrainParams,
+        outcomes: mpsc::Sender<Outcome>,
+    ) -> Self {
         Actuators {
             client,
             speech,
@@ -69,10 +80,6 @@ impl Actuators {
             outcomes,
             dropped_outcomes: 0,
         }
-    }
-
-    pub fn speech(&self) -> &Speech {
-        &self.speech
     }
 
     /// Performs one effect. Problems are reported as `failed(...)` percepts when the program can react to them,
@@ -136,18 +143,27 @@ impl Actuators {
 
     async fn publish(&mut self, channel: &str, payload: &Value) {
         if !self.publishers.contains_key(channel) {
-            match self.client.publisher(channel, "{\"format\":\"json\",\"from\":\"brain\"}").await {
+            match self
+                .client
+                .publisher(channel, "{\"format\":\"json\",\"from\":\"brain\"}")
+                .await
+            {
                 Ok(publisher) => {
                     self.publishers.insert(channel.to_owned(), publisher);
                 }
                 Err(e) => {
                     warn!(channel, "brain: cannot publish: {e}");
-                    self.report(Outcome::Failed { name: channel.to_owned(), reason: e.to_string() });
+                    self.report(Outcome::Failed {
+                        name: channel.to_owned(),
+                        reason: e.to_string(),
+                    });
                     return;
                 }
             }
         }
-        let Some(publisher) = self.publishers.get(channel) else { return };
+        let Some(publisher) = self.publishers.get(channel) else {
+            return;
+        };
         let bytes = serde_json::to_vec(payload).unwrap_or_default();
         match publisher.try_publish(bytes) {
             Ok(true) => {}
@@ -164,8 +180,14 @@ impl Actuators {
         let body = serde_json::to_vec(payload).unwrap_or_default();
         tokio::spawn(async move {
             let outcome = match client.call(&service, body, timeout).await {
-                Ok(answer) => Outcome::Reply { text: answer_text(&answer, chars), service },
-                Err(e) => Outcome::Failed { name: service, reason: e.to_string() },
+                Ok(answer) => Outcome::Reply {
+                    text: answer_text(&answer, chars),
+                    service,
+                },
+                Err(e) => Outcome::Failed {
+                    name: service,
+                    reason: e.to_string(),
+                },
             };
             send(&outcomes, outcome);
         })
@@ -205,7 +227,10 @@ fn send(outcomes: &mpsc::Sender<Outcome>, outcome: Outcome) -> bool {
 
 /// Runs a whitelisted command line (no shell) with a time limit and turns its result into an outcome.
 async fn run_command(name: &str, argv: &[String], timeout: Duration, chars: usize) -> Outcome {
-    let failed = |reason: String| Outcome::Failed { name: name.to_owned(), reason };
+    let failed = |reason: String| Outcome::Failed {
+        name: name.to_owned(),
+        reason,
+    };
     let Some((program, args)) = argv.split_first() else {
         return failed("it is not on the whitelist".into());
     };
@@ -217,15 +242,25 @@ async fn run_command(name: &str, argv: &[String], timeout: Duration, chars: usiz
         .kill_on_drop(true)
         .output();
     match tokio::time::timeout(timeout, child).await {
-        Err(_) => failed(format!("it took longer than {} seconds", timeout.as_secs_f64())),
+        Err(_) => failed(format!(
+            "it took longer than {} seconds",
+            timeout.as_secs_f64()
+        )),
         Ok(Err(e)) => failed(format!("it could not start ({e})")),
         Ok(Ok(output)) if output.status.success() => {
             let text = spoken_text(&String::from_utf8_lossy(&output.stdout), chars);
-            Outcome::Output { command: name.to_owned(), text: if text.is_empty() { "done".into() } else { text } }
+            Outcome::Output {
+                command: name.to_owned(),
+                text: if text.is_empty() { "done".into() } else { text },
+            }
         }
         Ok(Ok(output)) => {
             let stderr = spoken_text(&String::from_utf8_lossy(&output.stderr), chars);
-            failed(if stderr.is_empty() { format!("it ended with {}", output.status) } else { stderr })
+            failed(if stderr.is_empty() {
+                format!("it ended with {}", output.status)
+            } else {
+                stderr
+            })
         }
     }
 }
@@ -246,8 +281,16 @@ fn answer_text(answer: &[u8], chars: usize) -> String {
 
 /// Collapses lines and runs of spaces into one line and cuts it to `chars` characters.
 fn spoken_text(text: &str, chars: usize) -> String {
-    let lines: Vec<&str> = text.lines().map(str::trim).filter(|line| !line.is_empty()).collect();
-    let joined = lines.join(". ").split_whitespace().collect::<Vec<_>>().join(" ");
+    let lines: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|line| !line.is_empty())
+        .collect();
+    let joined = lines
+        .join(". ")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ");
     joined.chars().take(chars).collect()
 }
 
@@ -260,7 +303,10 @@ mod tests {
         assert_eq!(answer_text(br#""Turning left.""#, 100), "Turning left.");
         assert_eq!(answer_text(br#"{"text":"ok","code":0}"#, 100), "ok");
         assert_eq!(answer_text(br#"{"code":0}"#, 100), r#"{"code":0}"#);
-        assert_eq!(answer_text(b"line one\n\n  line   two\n", 100), "line one. line two");
+        assert_eq!(
+            answer_text(b"line one\n\n  line   two\n", 100),
+            "line one. line two"
+        );
         assert_eq!(answer_text("ééééé".as_bytes(), 3), "ééé");
     }
 
@@ -269,16 +315,26 @@ mod tests {
         let echo = ["echo".to_owned(), "up  1 hour".to_owned()];
         assert_eq!(
             run_command("echo", &echo, Duration::from_secs(5), 100).await,
-            Outcome::Output { command: "echo".into(), text: "up 1 hour".into() }
+            Outcome::Output {
+                command: "echo".into(),
+                text: "up 1 hour".into()
+            }
         );
         let sleep = ["sleep".to_owned(), "5".to_owned()];
         let outcome = run_command("sleep", &sleep, Duration::from_millis(100), 100).await;
-        assert!(matches!(outcome, Outcome::Failed { ref reason, .. } if reason.contains("longer than")), "{outcome:?}");
+        assert!(
+            matches!(outcome, Outcome::Failed { ref reason, .. } if reason.contains("longer than")),
+            "{outcome:?}"
+        );
         let missing = ["/nonexistent/program".to_owned()];
         let outcome = run_command("missing", &missing, Duration::from_secs(1), 100).await;
-        assert!(matches!(outcome, Outcome::Failed { ref reason, .. } if reason.contains("could not start")));
+        assert!(
+            matches!(outcome, Outcome::Failed { ref reason, .. } if reason.contains("could not start"))
+        );
         let false_ = ["false".to_owned()];
         let outcome = run_command("false", &false_, Duration::from_secs(5), 100).await;
-        assert!(matches!(outcome, Outcome::Failed { ref reason, .. } if reason.contains("ended with")));
+        assert!(
+            matches!(outcome, Outcome::Failed { ref reason, .. } if reason.contains("ended with"))
+        );
     }
 }

@@ -12,7 +12,9 @@ mod wire;
 use std::collections::BTreeMap;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use agent_brain::{Action, Brain, Capabilities, EchoFilter, Effect, Now, PerceptError, Value, WallClock};
+use agent_brain::{
+    Action, Brain, Capabilities, EchoFilter, Effect, Now, PerceptError, Value, WallClock,
+};
 use flow::tick::Tick;
 use flow::{Client, Data, Publisher, Subscription};
 use tokio::sync::mpsc;
@@ -22,7 +24,7 @@ use tracing::{debug, info, warn};
 use crate::module::{Module, ModuleContext, ModuleFuture};
 use actuators::{Actuators, OUTCOME_QUEUE, Outcome};
 use params::BrainParams;
-use percepts::Percept;
+use percepts::{Hearing, Percept};
 use program_file::{ProgramFile, Reload};
 use speech::{PlayoutClock, Speech};
 
@@ -69,7 +71,9 @@ struct Mind {
 
 async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
     let params = BrainParams::from_json(&ctx.params)?;
-    let capabilities = Capabilities { commands: params.commands.keys().cloned().collect() };
+    let capabilities = Capabilities {
+        commands: params.commands.keys().cloned().collect(),
+    };
     let mut file = ProgramFile::new(params.program.clone(), capabilities);
     let program = file.load()?;
     info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
@@ -84,13 +88,20 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
     let mut mind = Mind {
         brain: Brain::new(program),
         file,
-        actuators: Actuators::new(client.clone(), Speech::start(client.clone()), &params, outcome_tx),
+        actuators: Actuators::new(
+            client.clone(),
+            Speech::start(client.clone()),
+            &params,
+            outcome_tx,
+        ),
         echo: EchoFilter::new(params.echo_window(), params.echo_threshold),
         rules,
         playout: PlayoutClock::default(),
         db: BTreeMap::new(),
         client: client.clone(),
-        utc_offset_s: params.utc_offset_minutes.map_or_else(wire::local_utc_offset_s, |minutes| minutes * 60),
+        utc_offset_s: params
+            .utc_offset_minutes
+            .map_or_else(wire::local_utc_offset_s, |minutes| minutes * 60),
         counters: Counters::default(),
     };
     mind.refresh_db().await;
@@ -144,13 +155,21 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
 
 impl Mind {
     fn now(&self) -> Now {
-        let unix_ms = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as i64);
-        Now { at: Instant::now().into_std(), clock: WallClock::from_unix_ms(unix_ms, self.utc_offset_s) }
+        let unix_ms = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as i64);
+        Now {
+            at: Instant::now().into_std(),
+            clock: WallClock::from_unix_ms(unix_ms, self.utc_offset_s),
+        }
     }
 
     fn next_wakeup(&self) -> Option<Instant> {
         let now = Instant::now();
-        let brain = self.brain.next_wakeup(now.into_std()).map(Instant::from_std);
+        let brain = self
+            .brain
+            .next_wakeup(now.into_std())
+            .map(Instant::from_std);
         let speech_end = self.playout.speaking_until(now);
         [brain, speech_end].into_iter().flatten().min()
     }
@@ -163,20 +182,34 @@ impl Mind {
 
     fn percept_rejected(&mut self, name: &str, error: &PerceptError) {
         self.counters.bad_messages += 1;
-        warn!(percept = name, "brain: the program's declaration does not fit: {error}");
+        warn!(
+            percept = name,
+            "brain: the program's declaration does not fit: {error}"
+        );
     }
 
-    /// A transcript: dropped when it is the agent hearing itself, otherwise `heard(text)`.
+    /// A transcript: dropped when it is the agent hearing itself, otherwise `heard(text)`; voice activity
+    /// makes `listening` hold while the user speaks.
     fn heard(&mut self, data: &Data) {
-        let text = match percepts::transcript(&data.payload) {
-            Ok(Some(text)) => text,
-            Ok(None) => return,
+        let text = match percepts::hearing(&data.payload) {
+            Ok(Hearing::Said(text)) => text,
+            Ok(Hearing::Speaking) => {
+                self.perceive("listening", Vec::new());
+                return;
+            }
+            Ok(Hearing::Paused) => {
+                self.brain.retract("listening");
+                return;
+            }
+            Ok(Hearing::Nothing) => return,
             Err(e) => {
                 self.counters.bad_messages += 1;
                 warn!("brain: bad message on Agent.transcript: {e}");
                 return;
             }
         };
+        // A final transcript means the user has finished this utterance.
+        self.brain.retract("listening");
         if let Some(said) = self.echo.echo_of(Instant::now().into_std(), &text) {
             self.counters.echoes_dropped += 1;
             info!(transcript = %text, said, "brain: dropped a transcript of the agent's own voice");
@@ -194,7 +227,10 @@ impl Mind {
                     match percept {
                         Percept::One { name, args } => self.perceive(name, args),
                         Percept::Set { name, sets } => {
-                            if let Err(e) = self.brain.perceive_set(Instant::now().into_std(), name, sets) {
+                            if let Err(e) =
+                                self.brain
+                                    .perceive_set(Instant::now().into_std(), name, sets)
+                            {
                                 self.percept_rejected(name, &e);
                             }
                         }
@@ -210,8 +246,11 @@ impl Mind {
 
     /// The agent's own speech: `speaking` holds while it is audible.
     fn spoke(&mut self, data: &Data, channel: &Subscription) {
-        let framed = channel.info().is_some_and(|info| wire::speech_is_framed(&info.header));
-        self.playout.chunk(Instant::now(), data.payload.len(), framed);
+        let framed = channel
+            .info()
+            .is_some_and(|info| wire::speech_is_framed(&info.header));
+        self.playout
+            .chunk(Instant::now(), data.payload.len(), framed);
     }
 
     /// A barge-in on `Agent.avatar` (`speech_stop`) ends speech at once.
@@ -238,7 +277,9 @@ impl Mind {
             }
             Reload::Failed(message) => {
                 self.counters.reload_errors += 1;
-                warn!("brain: the changed program does not load, the previous one keeps running:\n{message}");
+                warn!(
+                    "brain: the changed program does not load, the previous one keeps running:\n{message}"
+                );
                 self.counters.last_reload_error = Some(message);
             }
         }
@@ -267,7 +308,10 @@ impl Mind {
     async fn step(&mut self) {
         let now = self.now();
         // `speaking` follows the play-out of the agent's speech.
-        let speaking = self.playout.speaking_until(Instant::from_std(now.at)).is_some();
+        let speaking = self
+            .playout
+            .speaking_until(Instant::from_std(now.at))
+            .is_some();
         let was_speaking = self.brain.store().named("speaking").next().is_some();
         if speaking && !was_speaking {
             self.perceive("speaking", Vec::new());
@@ -288,7 +332,9 @@ impl Mind {
             }
         }
         for effect in step.effects {
-            if let Effect::Fire(Action::Say { text }) | Effect::Start(Action::Say { text }) = &effect {
+            if let Effect::Fire(Action::Say { text }) | Effect::Start(Action::Say { text }) =
+                &effect
+            {
                 self.echo.said(now.at, text);
             }
             if matches!(effect, Effect::Fire(Action::Cancel)) {
@@ -300,7 +346,12 @@ impl Mind {
 
     fn status(&self) -> serde_json::Value {
         let c = &self.counters;
-        let active: Vec<String> = self.brain.active().iter().map(ToString::to_string).collect();
+        let active: Vec<String> = self
+            .brain
+            .active()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
         serde_json::json!({
             "program": self.file.path().display().to_string(),
             "active": active,

@@ -10,9 +10,9 @@ use serde::Deserialize;
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BrainParams {
-    /// Read by the server to switch the module off; ignored here.
-    #[serde(default)]
-    pub enabled: Option<bool>,
+    /// Read by the server to switch the module off; accepted and ignored here.
+    #[serde(default, rename = "enabled")]
+    _enabled: serde::de::IgnoredAny,
     /// The teleo-reactive program; a relative path is taken from the working directory.
     #[serde(default = "default_program")]
     pub program: PathBuf,
@@ -48,7 +48,10 @@ fn default_program() -> PathBuf {
 
 fn default_commands() -> BTreeMap<String, Vec<String>> {
     BTreeMap::from([
-        ("uptime".to_owned(), vec!["uptime".to_owned(), "-p".to_owned()]),
+        (
+            "uptime".to_owned(),
+            vec!["uptime".to_owned(), "-p".to_owned()],
+        ),
         ("hostname".to_owned(), vec!["hostname".to_owned()]),
     ])
 }
@@ -78,7 +81,9 @@ impl BrainParams {
     pub fn from_json(params: &serde_json::Value) -> anyhow::Result<BrainParams> {
         let params: BrainParams = serde_path_to_error::deserialize(params)
             .map_err(|e| anyhow::anyhow!("[modules.brain] {}: {}", e.path(), e.inner()))?;
-        params.validate().map_err(|(key, reason)| anyhow::anyhow!("[modules.brain] {key}: {reason}"))?;
+        params
+            .validate()
+            .map_err(|(key, reason)| anyhow::anyhow!("[modules.brain] {key}: {reason}"))?;
         Ok(params)
     }
 
@@ -88,14 +93,22 @@ impl BrainParams {
                 return Err(("commands", "a command name is empty".into()));
             }
             if argv.first().is_none_or(|program| program.is_empty()) {
-                return Err(("commands", format!("command `{name}` has no program to run")));
+                return Err((
+                    "commands",
+                    format!("command `{name}` has no program to run"),
+                ));
             }
         }
         if !(0.0..=1.0).contains(&self.echo_threshold) {
-            return Err(("echo_threshold", format!("{} is outside 0..=1", self.echo_threshold)));
+            return Err((
+                "echo_threshold",
+                format!("{} is outside 0..=1", self.echo_threshold),
+            ));
         }
-        for (key, value) in [("command_timeout_ms", self.command_timeout_ms), ("call_timeout_ms", self.call_timeout_ms)]
-        {
+        for (key, value) in [
+            ("command_timeout_ms", self.command_timeout_ms),
+            ("call_timeout_ms", self.call_timeout_ms),
+        ] {
             if value == 0 {
                 return Err((key, "must be at least 1".into()));
             }
@@ -106,7 +119,10 @@ impl BrainParams {
         if let Some(minutes) = self.utc_offset_minutes
             && minutes.abs() > 14 * 60
         {
-            return Err(("utc_offset_minutes", format!("{minutes} is not a UTC offset (at most 14 hours)")));
+            return Err((
+                "utc_offset_minutes",
+                format!("{minutes} is not a UTC offset (at most 14 hours)"),
+            ));
         }
         Ok(())
     }
@@ -139,10 +155,20 @@ mod tests {
 
     #[test]
     fn errors_name_the_key() {
-        let error = |value| BrainParams::from_json(&value).err().map(|e| e.to_string()).unwrap_or_default();
+        let error = |value| {
+            BrainParams::from_json(&value)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default()
+        };
         assert!(error(json!({"progam": "x"})).contains("unknown field `progam`"));
-        assert!(error(json!({"echo_threshold": 2.0})).starts_with("[modules.brain] echo_threshold:"));
+        assert!(
+            error(json!({"echo_threshold": 2.0})).starts_with("[modules.brain] echo_threshold:")
+        );
         assert!(error(json!({"commands": {"x": []}})).contains("command `x` has no program"));
-        assert!(error(json!({"call_timeout_ms": "soon"})).starts_with("[modules.brain] call_timeout_ms:"));
+        assert!(
+            error(json!({"call_timeout_ms": "soon"}))
+                .starts_with("[modules.brain] call_timeout_ms:")
+        );
     }
 }

@@ -7,38 +7,74 @@ use serde::Deserialize;
 /// A percept to assert: `name(args...)`, or the whole current set of a predicate.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Percept {
-    One { name: &'static str, args: Vec<Value> },
-    Set { name: &'static str, sets: Vec<Vec<Value>> },
+    One {
+        name: &'static str,
+        args: Vec<Value>,
+    },
+    Set {
+        name: &'static str,
+        sets: Vec<Vec<Value>>,
+    },
 }
 
-/// What an `Agent.transcript` message says: a final transcript, or nothing to act on.
-///
-/// The message is JSON with a `text` field (partial results, marked `"final": false` or `"partial": true`, are
-/// ignored: the brain answers complete utterances); plain UTF-8 text is accepted too, for `flowctl` users.
-pub fn transcript(payload: &[u8]) -> Result<Option<String>, String> {
+/// What an `Agent.transcript` message tells the brain (the same reading as the TTS module's, docs/voice.md).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Hearing {
+    /// A final transcript: `heard(text)`.
+    Said(String),
+    /// The user is speaking (`{"vad": "start"}`, or a partial transcript): `listening` holds.
+    Speaking,
+    /// Voice activity ended (`{"vad": "end"}`): `listening` ends.
+    Paused,
+    /// Nothing to act on (an empty transcript).
+    Nothing,
+}
+
+/// Reads an `Agent.transcript` message: JSON with `text` (partial results, marked `"final": false` or
+/// `"partial": true`, only mean the user is speaking: the brain answers complete utterances), `{"vad": "start" |
+/// "end"}` voice-activity events, or plain UTF-8 text (for `flowctl` users).
+pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
     #[derive(Deserialize)]
     struct Message {
-        text: String,
-        #[serde(default = "yes", rename = "final")]
-        is_final: bool,
+        #[serde(default)]
+        text: Option<String>,
+        #[serde(default, rename = "final")]
+        is_final: Option<bool>,
         #[serde(default)]
         partial: bool,
-    }
-    fn yes() -> bool {
-        true
+        #[serde(default)]
+        vad: Option<String>,
     }
     let text = std::str::from_utf8(payload).map_err(|e| format!("transcript is not UTF-8: {e}"))?;
-    let text = if text.trim_start().starts_with('{') {
-        let message: Message = serde_json::from_str(text).map_err(|e| format!("transcript JSON: {e}"))?;
-        if !message.is_final || message.partial {
-            return Ok(None);
+    if !text.trim_start().starts_with('{') {
+        let text = text.trim();
+        return Ok(if text.is_empty() {
+            Hearing::Nothing
+        } else {
+            Hearing::Said(text.to_owned())
+        });
+    }
+    let message: Message =
+        serde_json::from_str(text).map_err(|e| format!("transcript JSON: {e}"))?;
+    match (message.vad.as_deref(), message.text) {
+        (Some("start"), _) => Ok(Hearing::Speaking),
+        (Some("end"), _) => Ok(Hearing::Paused),
+        (Some(other), _) => Err(format!(
+            "unknown voice activity {other:?} (expected \"start\" or \"end\")"
+        )),
+        (None, None) => Err("transcript JSON has neither `text` nor `vad`".into()),
+        (None, Some(_)) if message.is_final == Some(false) || message.partial => {
+            Ok(Hearing::Speaking)
         }
-        message.text
-    } else {
-        text.to_owned()
-    };
-    let text = text.trim();
-    Ok((!text.is_empty()).then(|| text.to_owned()))
+        (None, Some(text)) => {
+            let text = text.trim();
+            Ok(if text.is_empty() {
+                Hearing::Nothing
+            } else {
+                Hearing::Said(text.to_owned())
+            })
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -88,22 +124,41 @@ struct Code {
 /// Absence is not asserted: a frame without faces simply does not refresh `face`, which goes stale after its
 /// freshness window, so that a detector missing a few frames does not end a person's visit.
 pub fn detections(payload: &[u8]) -> Result<Vec<Percept>, String> {
-    let message: Detections = serde_json::from_slice(payload).map_err(|e| format!("detections JSON: {e}"))?;
+    let message: Detections =
+        serde_json::from_slice(payload).map_err(|e| format!("detections JSON: {e}"))?;
     let width = f64::from(message.frame.width.max(1));
     let mut percepts = Vec::new();
     if let Some(faces) = message.faces.filter(|faces| !faces.is_empty()) {
-        let largest = faces.iter().max_by(|a, b| (a.w * a.h).total_cmp(&(b.w * b.h)));
+        let largest = faces
+            .iter()
+            .max_by(|a, b| (a.w * a.h).total_cmp(&(b.w * b.h)));
         let dir = largest.map_or("centre", |face| direction((face.x + face.w / 2.0) / width));
-        percepts.push(Percept::One { name: "face", args: vec![Value::Num(faces.len() as f64), Value::from(dir)] });
+        percepts.push(Percept::One {
+            name: "face",
+            args: vec![Value::Num(faces.len() as f64), Value::from(dir)],
+        });
     }
-    if let Some(Motion { moving: true, centre: Some(centre) }) = message.motion {
-        percepts.push(Percept::One { name: "motion", args: vec![Value::from(direction(centre.x / width))] });
+    if let Some(Motion {
+        moving: true,
+        centre: Some(centre),
+    }) = message.motion
+    {
+        percepts.push(Percept::One {
+            name: "motion",
+            args: vec![Value::from(direction(centre.x / width))],
+        });
     }
     if let Some(codes) = message.codes {
-        let texts: Vec<Vec<Value>> =
-            codes.into_iter().filter_map(|code| code.text).map(|text| vec![Value::Text(text)]).collect();
+        let texts: Vec<Vec<Value>> = codes
+            .into_iter()
+            .filter_map(|code| code.text)
+            .map(|text| vec![Value::Text(text)])
+            .collect();
         if !texts.is_empty() {
-            percepts.push(Percept::Set { name: "code", sets: texts });
+            percepts.push(Percept::Set {
+                name: "code",
+                sets: texts,
+            });
         }
     }
     Ok(percepts)
@@ -127,13 +182,30 @@ mod tests {
 
     #[test]
     fn transcripts_in_json_or_plain_text() {
-        assert_eq!(transcript(br#"{"text":" What time is it? ","final":true}"#), Ok(Some("What time is it?".into())));
-        assert_eq!(transcript(br#"{"text":"what ti","final":false}"#), Ok(None));
-        assert_eq!(transcript(br#"{"text":"what ti","partial":true}"#), Ok(None));
-        assert_eq!(transcript(b"hello there"), Ok(Some("hello there".into())));
-        assert_eq!(transcript(b"   "), Ok(None));
-        assert!(transcript(br#"{"txt":"x"}"#).is_err());
-        assert!(transcript(&[0xff, 0xfe]).is_err());
+        let said = |text: &str| Ok(Hearing::Said(text.into()));
+        assert_eq!(
+            hearing(br#"{"text":" What time is it? ","final":true}"#),
+            said("What time is it?")
+        );
+        assert_eq!(
+            hearing(br#"{"text":"what ti","final":false}"#),
+            Ok(Hearing::Speaking)
+        );
+        assert_eq!(
+            hearing(br#"{"text":"what ti","partial":true}"#),
+            Ok(Hearing::Speaking)
+        );
+        assert_eq!(hearing(br#"{"vad":"start"}"#), Ok(Hearing::Speaking));
+        assert_eq!(
+            hearing(br#"{"vad":"end","at_ms":1200}"#),
+            Ok(Hearing::Paused)
+        );
+        assert_eq!(hearing(b"hello there"), said("hello there"));
+        assert_eq!(hearing(b"   "), Ok(Hearing::Nothing));
+        assert_eq!(hearing(br#"{"text":"  "}"#), Ok(Hearing::Nothing));
+        assert!(hearing(br#"{"txt":"x"}"#).is_err());
+        assert!(hearing(br#"{"vad":"maybe"}"#).is_err());
+        assert!(hearing(&[0xff, 0xfe]).is_err());
     }
 
     #[test]
@@ -147,9 +219,18 @@ mod tests {
         assert_eq!(
             percepts,
             Ok(vec![
-                Percept::One { name: "face", args: vec![Value::Num(2.0), Value::from("right")] },
-                Percept::One { name: "motion", args: vec![Value::from("centre")] },
-                Percept::Set { name: "code", sets: vec![vec![Value::from("HELLO")]] },
+                Percept::One {
+                    name: "face",
+                    args: vec![Value::Num(2.0), Value::from("right")]
+                },
+                Percept::One {
+                    name: "motion",
+                    args: vec![Value::from("centre")]
+                },
+                Percept::Set {
+                    name: "code",
+                    sets: vec![vec![Value::from("HELLO")]]
+                },
             ])
         );
     }

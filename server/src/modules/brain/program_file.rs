@@ -25,7 +25,11 @@ pub struct ProgramFile {
 
 impl ProgramFile {
     pub fn new(path: PathBuf, capabilities: Capabilities) -> Self {
-        ProgramFile { path, capabilities, stamp: None }
+        ProgramFile {
+            path,
+            capabilities,
+            stamp: None,
+        }
     }
 
     pub fn path(&self) -> &Path {
@@ -35,10 +39,15 @@ impl ProgramFile {
     /// Reads and loads the program; the error names the file, line and column.
     pub fn load(&mut self) -> anyhow::Result<Program> {
         self.stamp = self.current_stamp();
-        let source = std::fs::read_to_string(&self.path)
-            .map_err(|e| anyhow::anyhow!("cannot read the brain program {}: {e}", self.path.display()))?;
-        Program::load(&self.path.display().to_string(), &source, &self.capabilities)
-            .map_err(|e: LoadError| anyhow::anyhow!("{e}"))
+        let source = std::fs::read_to_string(&self.path).map_err(|e| {
+            anyhow::anyhow!("cannot read the brain program {}: {e}", self.path.display())
+        })?;
+        Program::load(
+            &self.path.display().to_string(),
+            &source,
+            &self.capabilities,
+        )
+        .map_err(|e: LoadError| anyhow::anyhow!("{e}"))
     }
 
     /// Reloads the program if the file changed since it was last read.
@@ -73,14 +82,23 @@ mod tests {
         let mut file = ProgramFile::new(path.clone(), Capabilities::default());
         assert_eq!(file.load()?.rule_count(), 1);
         assert!(matches!(file.reload_if_changed(), Reload::Unchanged));
-        std::fs::write(&path, "procedure main {\n  idle: true ~> ()\n  talk: heard(T) ++ say(T)\n}\n")?;
+        std::fs::write(
+            &path,
+            "procedure main {\n  idle: true ~> ()\n  talk: heard(T) ++ say(T)\n}\n",
+        )?;
         match file.reload_if_changed() {
-            Reload::Failed(message) => assert!(message.contains(":3:9: unknown predicate `heard`"), "{message}"),
+            Reload::Failed(message) => assert!(
+                message.contains(":3:9: unknown predicate `heard`"),
+                "{message}"
+            ),
             other => panic!("expected a failure, got {other:?}"),
         }
         // The broken version is not reported again until the file changes once more.
         assert!(matches!(file.reload_if_changed(), Reload::Unchanged));
-        std::fs::write(&path, format!("{GOOD}procedure other {{ a: true ~> () }}\n"))?;
+        std::fs::write(
+            &path,
+            format!("{GOOD}procedure other {{ a: true ~> () }}\n"),
+        )?;
         assert!(matches!(file.reload_if_changed(), Reload::Loaded(p) if p.rule_count() == 2));
         std::fs::remove_file(&path)?;
         Ok(())

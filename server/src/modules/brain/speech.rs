@@ -43,12 +43,17 @@ impl Speech {
 
     /// Speaks `text`; a durative utterance can be stopped with [`Speech::stop_durative`].
     pub async fn say(&self, text: &str, durative: bool) {
-        self.send(Request::Say { text: text.to_owned(), durative });
+        self.send(Request::Say {
+            text: text.to_owned(),
+            durative,
+        });
     }
 
     /// Stops the durative utterance of `text` (its rule is no longer active).
     pub async fn stop_durative(&self, text: &str) {
-        self.send(Request::StopDurative { text: text.to_owned() });
+        self.send(Request::StopDurative {
+            text: text.to_owned(),
+        });
     }
 
     /// Stops all speech now.
@@ -82,10 +87,16 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
         let body = serde_json::to_vec(&body).unwrap_or_default();
         match client.call(SAY_SERVICE, body, REQUEST_TIMEOUT).await {
             Ok(answer) => {
-                if let Request::Say { text, durative: true } = request {
+                if let Request::Say {
+                    text,
+                    durative: true,
+                } = request
+                {
                     let utterance = serde_json::from_slice::<serde_json::Value>(&answer)
                         .ok()
-                        .and_then(|answer| answer.get("utterance").and_then(serde_json::Value::as_u64));
+                        .and_then(|answer| {
+                            answer.get("utterance").and_then(serde_json::Value::as_u64)
+                        });
                     if let Some(utterance) = utterance {
                         durative.insert(text, utterance);
                     }
@@ -146,7 +157,10 @@ mod tests {
         // A chunk after a pause starts from its arrival.
         let later = t0 + Duration::from_secs(1);
         clock.chunk(later, 441 * 2, false);
-        assert_eq!(clock.speaking_until(later), Some(later + Duration::from_millis(20)));
+        assert_eq!(
+            clock.speaking_until(later),
+            Some(later + Duration::from_millis(20))
+        );
         clock.stop();
         assert_eq!(clock.speaking_until(later), None);
     }

@@ -13,12 +13,23 @@ pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
     let rule = if trace.path.is_empty() {
         "(none)".to_owned()
     } else {
-        trace.path.iter().map(ToString::to_string).collect::<Vec<_>>().join(" > ")
+        trace
+            .path
+            .iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(" > ")
     };
     let mut actions: Vec<String> = trace.effects.iter().map(ToString::to_string).collect();
     actions.extend(trace.updates.iter().cloned());
-    let because: Vec<String> = trace.because.iter().map(|evidence| evidence.fact.clone()).collect();
-    let program = std::path::Path::new(origin).file_name().map_or(origin.into(), |name| name.to_string_lossy());
+    let because: Vec<String> = trace
+        .because
+        .iter()
+        .map(|evidence| evidence.fact.clone())
+        .collect();
+    let program = std::path::Path::new(origin)
+        .file_name()
+        .map_or(origin.into(), |name| name.to_string_lossy());
     let message = json!({
         "ts_ms": trace.unix_ms,
         "program": program,
@@ -34,13 +45,15 @@ pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
 /// Whether `Agent.speech` payloads start with the 8-byte `[utterance u32][offset u32]` header, which its channel
 /// header announces with a `framing` field (docs/browser-link.md).
 pub fn speech_is_framed(header: &str) -> bool {
-    serde_json::from_str::<serde_json::Value>(header).is_ok_and(|header| header.get("framing").is_some())
+    serde_json::from_str::<serde_json::Value>(header)
+        .is_ok_and(|header| header.get("framing").is_some())
 }
 
 /// Whether an `Agent.avatar` command is a barge-in `speech_stop`.
 pub fn is_speech_stop(payload: &[u8]) -> bool {
-    serde_json::from_slice::<serde_json::Value>(payload)
-        .is_ok_and(|command| command.get("cmd").and_then(serde_json::Value::as_str) == Some("speech_stop"))
+    serde_json::from_slice::<serde_json::Value>(payload).is_ok_and(|command| {
+        command.get("cmd").and_then(serde_json::Value::as_str) == Some("speech_stop")
+    })
 }
 
 /// A pair-database value as the rule engine sees it (JSON `null` becomes an empty text).
@@ -50,10 +63,14 @@ pub fn value_from_json(value: serde_json::Value) -> Value {
         serde_json::Value::Bool(b) => Value::Bool(b),
         serde_json::Value::Number(n) => Value::Num(n.as_f64().unwrap_or_default()),
         serde_json::Value::String(text) => Value::Text(text),
-        serde_json::Value::Array(items) => Value::List(items.into_iter().map(value_from_json).collect()),
-        serde_json::Value::Object(map) => {
-            Value::Map(map.into_iter().map(|(key, value)| (key, value_from_json(value))).collect())
+        serde_json::Value::Array(items) => {
+            Value::List(items.into_iter().map(value_from_json).collect())
         }
+        serde_json::Value::Object(map) => Value::Map(
+            map.into_iter()
+                .map(|(key, value)| (key, value_from_json(value)))
+                .collect(),
+        ),
     }
 }
 
@@ -72,21 +89,38 @@ mod tests {
         let trace = Trace {
             unix_ms: 1_700_000_000_000,
             path: vec![
-                RuleRef { procedure: "main".into(), rule: "converse".into(), line: 30 },
-                RuleRef { procedure: "answer".into(), rule: "time".into(), line: 48 },
+                RuleRef {
+                    procedure: "main".into(),
+                    rule: "converse".into(),
+                    line: 30,
+                },
+                RuleRef {
+                    procedure: "answer".into(),
+                    rule: "time".into(),
+                    line: 48,
+                },
             ],
             previous: vec![],
             reentered: false,
-            because: vec![Evidence { fact: r#"heard("what time is it")"#.into(), age_ms: 3 }],
+            because: vec![Evidence {
+                fact: r#"heard("what time is it")"#.into(),
+                age_ms: 3,
+            }],
             bindings: vec![],
-            effects: vec![Effect::Fire(Action::Say { text: "It is noon.".into() })],
+            effects: vec![Effect::Fire(Action::Say {
+                text: "It is noon.".into(),
+            })],
             updates: vec!["forget(heard)".into()],
         };
-        let message: serde_json::Value = serde_json::from_slice(&trace_message(&trace, "config/brain.tr"))?;
+        let message: serde_json::Value =
+            serde_json::from_slice(&trace_message(&trace, "config/brain.tr"))?;
         assert_eq!(message["ts_ms"], 1_700_000_000_000_i64);
         assert_eq!(message["program"], "brain.tr");
         assert_eq!(message["rule"], "main.converse > answer.time");
-        assert_eq!(message["action"], r#"fire say("It is noon."); forget(heard)"#);
+        assert_eq!(
+            message["action"],
+            r#"fire say("It is noon."); forget(heard)"#
+        );
         assert_eq!(message["because"][0], r#"heard("what time is it")"#);
         assert_eq!(message["trace"]["path"][1]["line"], 48);
         Ok(())
@@ -94,7 +128,9 @@ mod tests {
 
     #[test]
     fn speech_header_and_barge_in() {
-        assert!(speech_is_framed(r#"{"rate":22050,"framing":"utterance-offset"}"#));
+        assert!(speech_is_framed(
+            r#"{"rate":22050,"framing":"utterance-offset"}"#
+        ));
         assert!(!speech_is_framed(r#"{"rate":22050}"#));
         assert!(is_speech_stop(br#"{"cmd":"speech_stop","utterance":3}"#));
         assert!(!is_speech_stop(br#"{"cmd":"blink"}"#));
@@ -103,7 +139,8 @@ mod tests {
 
     #[test]
     fn pair_database_values() {
-        let value = value_from_json(json!({"mode": "quiet", "level": 3, "on": true, "tags": ["a"]}));
+        let value =
+            value_from_json(json!({"mode": "quiet", "level": 3, "on": true, "tags": ["a"]}));
         assert_eq!(
             value,
             Value::Map(vec![
