@@ -17,7 +17,10 @@ test: deps model build-debug
 
 ## Benchmarks against their baselines, side by side (not part of the tests).
 bench: deps model-release build
-	$(CARGO) run --release -p agent-bench --bin hub-bench
+	$(CARGO) run --release -p agent-voice --bin voice-bench
+	$(CARGO) run --release -p agent-vision --bin vision-bench
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser
+	$(TARGET_DIR)/release/whisper-sat bench
 
 ## Coverage-guided fuzzing of the protocol decoder (not in CI).
 fuzz:

@@ -4,6 +4,9 @@
 
 pub mod agent;
 pub mod binaries;
+pub mod browser_chromium;
+pub mod browser_link;
+pub mod browser_media;
 pub mod fixtures;
 pub mod http;
 pub mod raw;

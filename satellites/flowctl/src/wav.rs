@@ -37,7 +37,7 @@ pub fn load_as_22050_mono(path: &Path) -> anyhow::Result<Vec<i16>> {
     };
     Ok(resampled
         .into_iter()
-        .map(|v| (v.clamp(-1.0, 1.0) * 32767.0).round() as i16)
+        .map(|v| (v * 32768.0).round().clamp(-32768.0, 32767.0) as i16)
         .collect())
 }
 

@@ -15,6 +15,8 @@ use crate::session::{Outcome, Session};
 
 /// Payload bytes taken from the outbox per write.
 const WRITE_BATCH: usize = 512 * 1024;
+/// Commands handled in a row before the reader yields to other tasks.
+const BURST: u32 = 16;
 /// How long a closing connection may take to flush what is queued.
 const FLUSH_GRACE: Duration = Duration::from_secs(2);
 
@@ -30,12 +32,21 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
     debug!(%peer, conn, "connection opened");
     let mut writer_task = tokio::spawn(write_loop(writer, outbox.clone()));
     let mut session = Session::new(conn, peer.clone(), outbox.clone(), shared.clone(), internal);
+    let mut handled = 0u32;
     let reason: Option<String> = loop {
         tokio::select! {
             frame = reader.read_frame() => match frame {
                 Ok(Some(raw)) => match decode_command(raw) {
                     Ok(env) => match session.handle(env).await {
-                        Outcome::Continue => {}
+                        Outcome::Continue => {
+                            // A burst already buffered would otherwise be handled without
+                            // a pause, filling subscribers' lanes faster than their writers
+                            // can run; let them drain now and then.
+                            handled = handled.wrapping_add(1);
+                            if handled % BURST == 0 {
+                                tokio::task::yield_now().await;
+                            }
+                        }
                         Outcome::Close(reason) => break Some(reason),
                     },
                     Err(e) => break Some(format!("undecodable command: {e}")),
