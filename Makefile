@@ -18,9 +18,11 @@ test: deps model build-debug
 ## Benchmarks against their baselines, side by side (not part of the tests).
 bench: deps model-release build
 	$(CARGO) run --release -p agent-voice --bin voice-bench
-	$(CARGO) run --release -p agent-vision --bin vision-bench
+	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
+	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-vision --bin vision-bench
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser
-	$(TARGET_DIR)/release/whisper-sat bench
+	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
+	$(TARGET_DIR)/release/whisper-sat bench --write docs/bench-asr.md
 
 ## Coverage-guided fuzzing of the protocol decoder (not in CI).
 fuzz:

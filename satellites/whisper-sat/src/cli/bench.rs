@@ -325,6 +325,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     let one = throughput(&model, &cfg, 1, &jobs)?;
     let two = throughput(&model, &cfg, 2, &jobs)?;
+    // Two satellites sharing the cores instead of oversubscribing them.
+    let split_cfg = TranscriberConfig {
+        threads: (args.threads / 2).max(1),
+        ..cfg.clone()
+    };
+    let two_split = throughput(&model, &split_cfg, 2, &jobs)?;
     line(String::new());
     line(format!(
         "SUMMARY asr rtf: {:.3} (baseline faster-whisper int8 {:.3}, ratio {:.2})",
@@ -357,6 +363,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         one / two,
         jobs.len(),
         args.threads
+    ));
+    line(format!(
+        "SUMMARY asr throughput 2 satellites x {} thread(s): {:.2} utterances/s (baseline 1 satellite x {} threads {:.2}/s, ratio {:.2})",
+        split_cfg.threads,
+        jobs.len() as f64 / two_split,
+        args.threads,
+        jobs.len() as f64 / one,
+        one / two_split
     ));
     line(format!(
         "SUMMARY asr peak rss one satellite: {rss_one:.0} MB (baseline faster-whisper process {fw_rss:.0} MB, ratio {:.2})",
