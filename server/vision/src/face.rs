@@ -65,9 +65,9 @@ impl Cascade {
     }
 }
 
-/// About 8 ms of Haar cascade work per frame on the 2-core reference machine (roughly 110-130 ns per scanned
-/// pixel, see `docs/bench-vision.md`).
-pub const DEFAULT_SCAN_BUDGET_PX: u64 = 64_000;
+/// About 10 ms of Haar cascade work per frame on the 2-core reference machine (the whole 640x360 scan, about
+/// 1.3 million scanned pixels, costs about 180 ms of CPU; see `docs/bench-vision.md`).
+pub const DEFAULT_SCAN_BUDGET_PX: u64 = 48_000;
 
 /// Tuning of the face detector.
 #[derive(Debug, Clone, PartialEq)]
@@ -326,7 +326,7 @@ pub struct FaceScan {
 
 /// Spreads the cascade's full scan over consecutive frames so that each frame costs about `scan_budget_px`,
 /// and reports the union of the latest result of every part. A face is therefore found within one cycle (about
-/// 1.4 s for a 640x360 frame at the default budget and 15 fps) and its box refreshed once per cycle.
+/// 2.5 s for a 640x360 frame at the default budget and 15 fps) and its box refreshed once per cycle.
 #[derive(Debug)]
 pub struct FaceScanner {
     detector: FaceDetector,

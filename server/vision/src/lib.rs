@@ -20,3 +20,10 @@ pub mod wire;
 
 pub use error::{FrameError, ProcessError, VisionError};
 pub use pipeline::{FrameDetections, PipelineParams, StageTimings, VisionPipeline};
+
+/// Sets how many threads OpenCV may use inside one call, process-wide. The vision module keeps it at one so that
+/// its cost stays on one core, next to the hub and the other modules on a small machine.
+pub fn set_opencv_threads(threads: u32) -> Result<(), VisionError> {
+    opencv::core::set_num_threads(i32::try_from(threads).unwrap_or(i32::MAX))?;
+    Ok(())
+}

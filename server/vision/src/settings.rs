@@ -26,6 +26,8 @@ pub struct VisionSettings {
     /// channel; the behaviour controller otherwise takes the target from `Agent.detections`).
     pub avatar_gaze: bool,
     pub max_frame_pixels: u64,
+    /// Threads OpenCV may use inside one call (process-wide).
+    pub threads: u32,
     pub faces: FaceSettings,
     pub motion: MotionSettings,
     pub codes: CodeSettings,
@@ -92,6 +94,7 @@ impl Default for VisionSettings {
             source: "Agent.video".to_owned(),
             avatar_gaze: false,
             max_frame_pixels: DEFAULT_MAX_PIXELS,
+            threads: 1,
             faces: FaceSettings::default(),
             motion: MotionSettings::default(),
             codes: CodeSettings::default(),

@@ -284,7 +284,7 @@ fn gaze_looks_at_a_face_in_the_two_people_frame() {
     let mut pipeline = VisionPipeline::new(PipelineParams::default()).expect("pipeline");
     let mut last = None;
     let mut settle = 10;
-    for seq in 0..90 {
+    for seq in 0..150 {
         let detections = pipeline
             .process_jpeg(&jpeg, seq, seq * FRAME_US)
             .expect("process");
@@ -297,7 +297,7 @@ fn gaze_looks_at_a_face_in_the_two_people_frame() {
             }
         }
     }
-    let detections = last.expect("a full face scan within 90 frames");
+    let detections = last.expect("a full face scan within 150 frames");
     let faces = detections.faces.expect("faces enabled");
     assert!(faces.len() >= 2, "{faces:?}");
     assert_eq!(detections.gaze.source, GazeSource::Face);

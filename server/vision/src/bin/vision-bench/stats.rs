@@ -36,14 +36,6 @@ impl Samples {
     pub fn cpu_median(&self) -> f64 {
         percentile(&self.cpu_ms, 0.5)
     }
-
-    pub fn mean(&self) -> f64 {
-        if self.wall_ms.is_empty() {
-            f64::NAN
-        } else {
-            self.wall_ms.iter().sum::<f64>() / self.wall_ms.len() as f64
-        }
-    }
 }
 
 /// Nearest-rank percentile; NaN for no samples.
