@@ -10,11 +10,10 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, PATIENCE, command, fixture, run};
+use agent_tests::{Agent, DataDir, PATIENCE, Satellite, command, fixture, run};
 use anyhow::Context;
 use flow::ClientEvent;
 use serde_json::Value;
-use tokio::process::Child;
 
 /// Speech clips with their reference transcripts.
 const CLIPS: [&str; 5] = [
@@ -30,54 +29,14 @@ const TRANSCRIPT_PATIENCE: Duration = Duration::from_secs(120);
 /// After the last transcript, this long without another means the satellites are done with a clip.
 const QUIET: Duration = Duration::from_secs(4);
 
-/// A satellite process.
-struct Satellite {
-    name: String,
-    child: Child,
-}
-
 async fn start_satellite(agent: &Agent, name: &str) -> anyhow::Result<Satellite> {
-    let mut cmd = command("whisper-sat")?;
-    cmd.arg("run")
-        .arg("--addr")
-        .arg(agent.tcp().to_string())
-        .arg("--token")
-        .arg(agent.token())
-        .arg("--name")
-        .arg(name)
-        .env(
-            "RUST_LOG",
-            std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info,whisper_rs=warn".into()),
-        )
-        .stdin(std::process::Stdio::null());
-    let child = cmd.spawn().context("starting whisper-sat")?;
-    let sat = Satellite {
-        name: name.to_owned(),
-        child,
-    };
-    wait_channel(agent, &format!("Agent.asr.sat.{name}")).await?;
-    Ok(sat)
+    Satellite::start(agent, name).await
 }
 
-/// Waits until a channel exists (the satellite has loaded its model and joined).
-async fn wait_channel(agent: &Agent, name: &str) -> anyhow::Result<()> {
-    let client = agent.client("asr-test-watch").await?;
-    let mut events = client.events();
-    let deadline = tokio::time::Instant::now() + TRANSCRIPT_PATIENCE;
-    loop {
-        if client.channels().await?.iter().any(|c| c.name == name) {
-            return Ok(());
-        }
-        tokio::select! {
-            _ = events.recv() => {}
-            () = tokio::time::sleep_until(deadline) => anyhow::bail!("channel {name} did not appear"),
-        }
-    }
-}
-
-/// Everything published on `Agent.transcript`, collected in the background.
+/// Everything published on `Agent.transcript`, collected in the background: transcripts, and apart from them the
+/// voice-activity events (`{"vad":...}`) with the time they arrived.
 #[derive(Clone, Default)]
-struct Transcripts(Arc<Mutex<Vec<Value>>>);
+struct Transcripts(Arc<Mutex<Vec<Value>>>, Arc<Mutex<Vec<(Value, u64)>>>);
 
 impl Transcripts {
     async fn collect(agent: &Agent) -> anyhow::Result<Transcripts> {
@@ -89,7 +48,14 @@ impl Transcripts {
             let _keep = client;
             while let Some(d) = sub.recv().await {
                 if let Ok(v) = serde_json::from_slice::<Value>(&d.payload) {
-                    sink.lock().push(v);
+                    if v.get("vad").is_some() {
+                        sink.1
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .push((v, now_us()));
+                    } else {
+                        sink.lock().push(v);
+                    }
                 }
             }
         });
@@ -104,6 +70,14 @@ impl Transcripts {
 
     fn snapshot(&self) -> Vec<Value> {
         self.lock().clone()
+    }
+
+    /// The voice-activity events so far, with their arrival time (µs since the Unix epoch).
+    fn activity(&self) -> Vec<(Value, u64)> {
+        self.1
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
     }
 
     /// Waits for at least `min` more transcripts than `before`, then until the satellites have finished every
@@ -431,5 +405,75 @@ async fn silence_and_noise_give_no_transcript() -> anyhow::Result<()> {
     pub_wav(&agent, &fixture("audio/sb_example1.wav")?).await?;
     let got = transcripts.settle(&agent, 0, 1).await?;
     assert!(joined(&got).to_lowercase().contains("canoe"), "{got:?}");
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn voice_activity_frames_each_utterance_once_with_two_satellites() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let _a = start_satellite(&agent, "asr-vad-a").await?;
+    let _b = start_satellite(&agent, "asr-vad-b").await?;
+    // Two sentences with a pause longer than the hangover: two utterances, each framed by a start and an end.
+    let wav = temp_wav(&dir, "two.wav");
+    write_wav(
+        &wav,
+        &[
+            silence(500),
+            clip_samples("LJ001-0002")?,
+            silence(1200),
+            clip_samples("LJ001-0004")?,
+        ],
+    )?;
+    pub_wav(&agent, &wav).await?;
+    let got = transcripts.settle(&agent, 0, 2).await?;
+    assert_each_once(&got);
+    let activity = transcripts.activity();
+    println!("{activity:#?}");
+    let kinds: Vec<&str> = activity
+        .iter()
+        .filter_map(|(v, _)| v["vad"].as_str())
+        .collect();
+    // Starts and ends alternate: one of each per utterance, published by the relay alone, not once per satellite.
+    assert!(
+        kinds.len() >= 4 && kinds.chunks(2).all(|p| p == ["start", "end"]),
+        "voice activity: {activity:?}"
+    );
+    for transcript in &got {
+        let id = transcript["utterance"].as_str().context("utterance")?;
+        let ends: Vec<usize> = (0..activity.len())
+            .filter(|&i| activity[i].0["utterance"] == id)
+            .collect();
+        assert_eq!(ends.len(), 1, "end of {id} not once: {activity:?}");
+        let (end, end_arrived) = &activity[ends[0]];
+        let (start, _) = &activity[ends[0] - 1];
+        assert_eq!(end["vad"], "end");
+        let (t_start, t_end) = (
+            transcript["start_us"].as_u64().context("start_us")? / 1000,
+            transcript["end_us"].as_u64().context("end_us")? / 1000,
+        );
+        let (at_start, at_end) = (
+            start["at_ms"].as_u64().context("at_ms")?,
+            end["at_ms"].as_u64().context("at_ms")?,
+        );
+        // The start is the onset, after the pre-roll that begins the transcript's audio; the end is the end of
+        // speech the transcript reports.
+        assert!(
+            (t_start..t_end).contains(&at_start),
+            "{start} vs {transcript}"
+        );
+        assert_eq!(at_end, t_end, "{end} vs {transcript}");
+        assert!(
+            end["satellite"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("asr-vad-"))
+        );
+        // The end is announced after the speech ended (the hangover), on the same clock.
+        assert!(
+            *end_arrived / 1000 >= at_end,
+            "{end} arrived at {end_arrived}"
+        );
+    }
     Ok(())
 }

@@ -10,12 +10,14 @@ pub mod browser_media;
 pub mod fixtures;
 pub mod http;
 pub mod raw;
+pub mod satellite;
 pub mod wait;
 
 pub use agent::{Agent, AgentOptions, DataDir};
 pub use binaries::{binary, command, run};
 pub use fixtures::fixture;
 pub use raw::RawConn;
+pub use satellite::Satellite;
 pub use wait::{recv, until_subscribed, until_unsubscribed};
 
 /// A generous bound for anything a test waits on: the machine may be busy

@@ -173,6 +173,7 @@ mod tests {
             start_us: start,
             speech_end_us: end,
             audio: Vec::new(),
+            forced: false,
         }
     }
 

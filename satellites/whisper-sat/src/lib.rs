@@ -3,6 +3,7 @@
 //! The library holds the pieces; `src/main.rs` wires them into the `whisper-sat` command (convert, transcribe, run,
 //! bench).
 
+pub mod activity;
 pub mod claim;
 pub mod convert;
 pub mod ledger;

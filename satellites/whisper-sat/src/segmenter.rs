@@ -94,12 +94,18 @@ pub struct Utterance {
 /// What the segmenter reports while it consumes audio.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SegmentEvent {
-    /// Speech began at this sample (pre-roll included).
-    Started { start: u64 },
+    /// Speech began: the utterance's audio starts at `start` (pre-roll included), the voice at `onset`.
+    /// `continued` is true when this only continues speech cut at the maximum length (the voice never stopped).
+    Started {
+        start: u64,
+        onset: u64,
+        continued: bool,
+    },
     /// An utterance ended by silence (or the length cap).
     Ended(Utterance),
-    /// What started at `start` was too short to be speech and is dropped.
-    Dropped { start: u64 },
+    /// What started at `start` was too short (or too noisy) to be speech and is dropped; its last voiced frame
+    /// ended at `speech_end`.
+    Dropped { start: u64, speech_end: u64 },
 }
 
 enum State {
@@ -340,7 +346,11 @@ impl Segmenter {
                         tonal_frames,
                         silent_frames: 0,
                     };
-                    events.push(SegmentEvent::Started { start });
+                    events.push(SegmentEvent::Started {
+                        start,
+                        onset: onset_at,
+                        continued: false,
+                    });
                 }
             }
             State::Speech {
@@ -385,7 +395,7 @@ impl Segmenter {
         if voiced_frames < frames(self.cfg.min_voiced_ms)
             || tonal_frames < frames(self.cfg.min_tonal_ms)
         {
-            events.push(SegmentEvent::Dropped { start });
+            events.push(SegmentEvent::Dropped { start, speech_end });
             return;
         }
         let keep = (speech_end - start) as usize + samples(self.cfg.post_roll_ms);
@@ -406,7 +416,11 @@ impl Segmenter {
                 tonal_frames: 0,
                 silent_frames: 0,
             };
-            events.push(SegmentEvent::Started { start: end });
+            events.push(SegmentEvent::Started {
+                start: end,
+                onset: end,
+                continued: true,
+            });
             return;
         }
         audio.truncate(keep);

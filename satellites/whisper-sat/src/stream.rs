@@ -37,15 +37,26 @@ pub struct ClockedUtterance {
     pub speech_end_us: u64,
     /// 16 kHz audio to transcribe.
     pub audio: Vec<f32>,
+    /// Cut at the maximum length while the voice went on (the speech continues in the next utterance).
+    pub forced: bool,
 }
 
 /// What the pipeline reports.
 #[derive(Debug, Clone, PartialEq)]
 pub enum StreamEvent {
+    /// Speech began: its audio starts at `start_us` (pre-roll included), the voice at `onset_us`. `continued`
+    /// marks the start of the next piece of speech cut at the maximum length.
     Started {
         start_us: u64,
+        onset_us: u64,
+        continued: bool,
     },
     Utterance(ClockedUtterance),
+    /// Speech that started was too short or too noisy to transcribe; its voice ended at `speech_end_us`.
+    Dropped {
+        start_us: u64,
+        speech_end_us: u64,
+    },
     /// The stream restarted or jumped; anything open was closed first.
     Restarted,
 }
@@ -165,11 +176,20 @@ impl AudioStream {
     fn emit(&mut self, out: &mut Vec<StreamEvent>) {
         for ev in std::mem::take(&mut self.events) {
             match ev {
-                SegmentEvent::Started { start } => out.push(StreamEvent::Started {
+                SegmentEvent::Started {
+                    start,
+                    onset,
+                    continued,
+                } => out.push(StreamEvent::Started {
                     start_us: self.clock_of(start),
+                    onset_us: self.clock_of(onset),
+                    continued,
                 }),
                 SegmentEvent::Ended(u) => out.push(StreamEvent::Utterance(self.locate(u))),
-                SegmentEvent::Dropped { .. } => {}
+                SegmentEvent::Dropped { start, speech_end } => out.push(StreamEvent::Dropped {
+                    start_us: self.clock_of(start),
+                    speech_end_us: self.clock_of(speech_end),
+                }),
             }
         }
     }
@@ -181,15 +201,17 @@ impl AudioStream {
             start_us,
             speech_end_us: self.clock_of(u.speech_end),
             audio: u.audio,
+            forced: u.forced,
         }
     }
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn tone_pcm(ms: u32, loud: bool) -> Vec<u8> {
+    /// A vowel-like harmonic tone with a syllable envelope (speech enough for the WebRTC detector), or silence.
+    pub(crate) fn tone_pcm(ms: u32, loud: bool) -> Vec<u8> {
         let n = (HUB_RATE * ms / 1000) as usize;
         (0..n)
             .flat_map(|i| {
@@ -205,7 +227,12 @@ mod tests {
     }
 
     /// Publishes PCM as 20 ms messages stamped like a real-time publisher starting at `t0`.
-    fn feed(stream: &mut AudioStream, pcm: &[u8], seq0: u64, t0: u64) -> Vec<StreamEvent> {
+    pub(crate) fn feed(
+        stream: &mut AudioStream,
+        pcm: &[u8],
+        seq0: u64,
+        t0: u64,
+    ) -> Vec<StreamEvent> {
         let mut out = Vec::new();
         for (n, chunk) in pcm.chunks(882).enumerate() {
             let msg = AudioMessage {

@@ -1,6 +1,9 @@
-//! The `Agent.transcript` message: what a satellite publishes for each utterance.
+//! The `Agent.transcript` messages: the transcript a satellite publishes for each utterance, and the voice-activity
+//! events (`{"vad":"start"|"end",...}`) that frame it.
 
 use serde::{Deserialize, Serialize};
+
+use crate::activity::VoiceActivity;
 
 /// One transcript, serialised as JSON on `Agent.transcript`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -20,9 +23,70 @@ pub struct TranscriptMessage {
     pub is_final: bool,
 }
 
+/// Which way voice activity changed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VadKind {
+    Start,
+    End,
+}
+
+/// A voice-activity event, serialised as JSON on `Agent.transcript` beside the transcripts (it has no `text`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct VadMessage {
+    pub vad: VadKind,
+    /// When the voice began or ended on the hub clock (ms since the Unix epoch), the clock of `start_us`/`end_us`.
+    pub at_ms: u64,
+    /// On `end`: the utterance whose transcript follows; absent when the speech was dropped as too short or noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub utterance: Option<String>,
+    /// The satellite that published the event (the transcript relay).
+    pub satellite: String,
+}
+
+impl VadMessage {
+    /// The message for a voice-activity change seen by `satellite`.
+    pub fn new(activity: &VoiceActivity, satellite: &str) -> VadMessage {
+        let (vad, at_us, utterance) = match activity {
+            VoiceActivity::Start { at_us } => (VadKind::Start, *at_us, None),
+            VoiceActivity::End { at_us, utterance } => (VadKind::End, *at_us, utterance.clone()),
+        };
+        VadMessage {
+            vad,
+            at_ms: at_us / 1000,
+            utterance,
+            satellite: satellite.to_owned(),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn voice_activity_serialises_as_the_contract_says() -> Result<(), serde_json::Error> {
+        let start = VadMessage::new(&VoiceActivity::Start { at_us: 1_234_567 }, "sat");
+        assert_eq!(
+            serde_json::to_value(&start)?,
+            serde_json::json!({"vad":"start","at_ms":1234,"satellite":"sat"})
+        );
+        let end = VadMessage::new(
+            &VoiceActivity::End {
+                at_us: 2_000_999,
+                utterance: Some("u1".into()),
+            },
+            "sat",
+        );
+        let v = serde_json::to_value(&end)?;
+        assert_eq!(
+            v,
+            serde_json::json!({"vad":"end","at_ms":2000,"utterance":"u1","satellite":"sat"})
+        );
+        // Not a transcript: satellites reading Agent.transcript skip it.
+        assert!(serde_json::from_value::<TranscriptMessage>(v).is_err());
+        Ok(())
+    }
 
     #[test]
     fn serialises_with_the_contract_field_names() -> Result<(), serde_json::Error> {

@@ -3,6 +3,9 @@
 //! The segmenter holds the WebRTC detector, which is not `Send`, so it lives on a dedicated thread fed through a
 //! bounded queue. Overflow policy: when the thread falls behind by `QUEUE` messages (about 20 s of audio) new
 //! messages are dropped and counted; the pipeline notices the hole in the hub clock and restarts cleanly.
+//!
+//! Besides utterances the thread reports voice activity (start and end of speech) on a broadcast channel; only
+//! the transcript relay listens to it, so with several satellites each change is published once.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -11,7 +14,8 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use flow::Client;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{broadcast, mpsc, watch};
+use whisper_sat::activity::{self, VoiceActivity};
 use whisper_sat::segmenter::SegmenterConfig;
 use whisper_sat::stream::{AudioMessage, AudioStream, ClockedUtterance, StreamEvent};
 
@@ -19,6 +23,9 @@ use whisper_sat::stream::{AudioMessage, AudioStream, ClockedUtterance, StreamEve
 const QUEUE: usize = 1024;
 /// An open utterance is closed when the stream has been silent (no messages) this long.
 const STALL: Duration = Duration::from_millis(800);
+/// Voice-activity changes come a few per utterance; a relay that falls this far behind loses the oldest (and logs
+/// how many), which only costs listeners a stale start or end.
+const ACTIVITY_QUEUE: usize = 64;
 
 /// Work for the segmentation thread.
 #[derive(Debug)]
@@ -39,6 +46,8 @@ pub enum Feed {
 pub struct Listener {
     feed: std_mpsc::SyncSender<Feed>,
     pub dropped: Arc<AtomicU64>,
+    /// Voice activity as the segmenter finds it.
+    pub activity: broadcast::Sender<VoiceActivity>,
 }
 
 impl Listener {
@@ -51,9 +60,11 @@ impl Listener {
         let (feed, rx) = std_mpsc::sync_channel::<Feed>(QUEUE);
         // Utterances are a few per minute; 64 is ample, and the sender waits rather than lose one.
         let (utt_tx, utt_rx) = mpsc::channel(64);
+        let (activity, _) = broadcast::channel(ACTIVITY_QUEUE);
+        let activity_tx = activity.clone();
         std::thread::Builder::new().name("segmenter".into()).spawn(
             move || match AudioStream::new(cfg) {
-                Ok(mut stream) => segment(&mut stream, &rx, &utt_tx),
+                Ok(mut stream) => segment(&mut stream, &rx, &utt_tx, &activity_tx),
                 Err(e) => tracing::error!("audio pipeline: {e}"),
             },
         )?;
@@ -61,6 +72,7 @@ impl Listener {
             Listener {
                 feed,
                 dropped: Arc::new(AtomicU64::new(0)),
+                activity,
             },
             utt_rx,
         ))
@@ -78,6 +90,7 @@ fn segment(
     stream: &mut AudioStream,
     rx: &std_mpsc::Receiver<Feed>,
     out: &mpsc::Sender<ClockedUtterance>,
+    activity_out: &broadcast::Sender<VoiceActivity>,
 ) {
     let mut events = Vec::new();
     // While audio flows, a stall closes open speech; while none does, the thread sleeps until work arrives.
@@ -96,6 +109,8 @@ fn segment(
             }
         };
         flowing = matches!(item, Feed::Audio { .. });
+        // Switched off: open speech still ends for the listeners, but nothing is transcribed.
+        let discard = matches!(item, Feed::Discard);
         let result = match item {
             Feed::Audio { seq, ts_us, pcm } => stream.push(
                 AudioMessage {
@@ -106,24 +121,31 @@ fn segment(
                 &mut events,
             ),
             Feed::Flush => stream.finish(&mut events),
-            Feed::Discard => {
-                let r = stream.finish(&mut events);
-                events.clear();
-                r
-            }
+            Feed::Discard => stream.finish(&mut events),
         };
         if let Err(e) = result {
             tracing::error!("audio pipeline: {e}");
         }
         for ev in events.drain(..) {
+            if let Some(change) = activity::of_event(&ev) {
+                tracing::debug!(?change, "voice activity");
+                // No receiver (this satellite is not the relay) is the common case, not an error.
+                let _ = activity_out.send(change);
+            }
             match ev {
+                StreamEvent::Utterance(_) if discard => {}
                 StreamEvent::Utterance(u) => {
                     tracing::debug!(id = %u.id, seconds = u.audio.len() as f64 / 16_000.0, "utterance found");
                     if out.blocking_send(u).is_err() {
                         return;
                     }
                 }
-                StreamEvent::Started { start_us } => tracing::trace!(start_us, "speech started"),
+                StreamEvent::Started { start_us, .. } => {
+                    tracing::trace!(start_us, "speech started");
+                }
+                StreamEvent::Dropped { start_us, .. } => {
+                    tracing::debug!(start_us, "speech dropped as too short or noise");
+                }
                 StreamEvent::Restarted => tracing::debug!("audio stream restarted"),
             }
         }

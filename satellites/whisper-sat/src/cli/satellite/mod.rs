@@ -72,7 +72,11 @@ pub async fn run(
             listener.clone(),
             enabled_rx.clone(),
         )),
-        tokio::spawn(relay::relay(client.clone(), settings.name.clone())),
+        tokio::spawn(relay::relay(
+            client.clone(),
+            settings.name.clone(),
+            listener.activity.clone(),
+        )),
     ];
     let transcripts = client.subscribe(relay::TRANSCRIPT).await?;
     let mut events = client.events();

@@ -4,20 +4,30 @@
 //! creates `Agent.transcript` first) also serves `Agent.asr.submit` and publishes what the others submit. If it
 //! dies, the hub removes both channels and tells everyone; the survivors race to take the role over. The relay
 //! publishes each utterance once, whatever is submitted twice.
+//!
+//! The relay also publishes voice activity (`{"vad":"start"|"end",...}`) from its own satellite's segmenter. Every
+//! satellite segments the same stream into the same utterances, so the relay's view is everyone's, and the events go
+//! out once however many satellites run; they need no round trip through the submit service.
 
 use std::collections::VecDeque;
 
-use flow::{Client, ClientEvent, ErrorCode};
+use flow::{Client, ClientEvent, ErrorCode, Publisher};
+use tokio::sync::broadcast;
+use whisper_sat::activity::VoiceActivity;
 use whisper_sat::claim::overlaps;
 use whisper_sat::ledger::SAME_SPEECH_US;
-use whisper_sat::transcript::TranscriptMessage;
+use whisper_sat::transcript::{TranscriptMessage, VadMessage};
 
 /// The service that accepts transcripts for publication.
 pub const SUBMIT: &str = "Agent.asr.submit";
 pub const TRANSCRIPT: &str = "Agent.transcript";
 
 /// Takes the relay role whenever it is free, until the client shuts down.
-pub async fn relay(client: Client, satellite: String) -> anyhow::Result<()> {
+pub async fn relay(
+    client: Client,
+    satellite: String,
+    activity: broadcast::Sender<VoiceActivity>,
+) -> anyhow::Result<()> {
     let mut events = client.events();
     loop {
         match client
@@ -37,8 +47,27 @@ pub async fn relay(client: Client, satellite: String) -> anyhow::Result<()> {
                     }
                 };
                 tracing::info!(%satellite, "relaying transcripts on {TRANSCRIPT}");
+                // Only changes from now on: the previous holder published what came before.
+                let mut changes = activity.subscribe();
                 let mut published: VecDeque<(String, u64, u64)> = VecDeque::new();
-                while let Some(call) = service.next().await {
+                loop {
+                    let call = tokio::select! {
+                        call = service.next() => match call {
+                            Some(call) => call,
+                            None => break,
+                        },
+                        change = changes.recv() => {
+                            match change {
+                                Ok(change) => publish_activity(&publisher, &change, &satellite).await,
+                                Err(broadcast::error::RecvError::Lagged(n)) => {
+                                    tracing::warn!("{n} voice-activity changes not published (relay behind)");
+                                }
+                                // Cannot happen: this function holds a sender itself.
+                                Err(broadcast::error::RecvError::Closed) => {}
+                            }
+                            continue;
+                        }
+                    };
                     let reply = match serde_json::from_slice::<TranscriptMessage>(&call.payload) {
                         Ok(t) => {
                             let dup = published.iter().any(|(id, s, e)| {
@@ -73,6 +102,19 @@ pub async fn relay(client: Client, satellite: String) -> anyhow::Result<()> {
             }
             Err(e) => return Err(e.into()),
         }
+    }
+}
+
+/// Publishes one voice-activity change on `Agent.transcript`.
+async fn publish_activity(publisher: &Publisher, change: &VoiceActivity, satellite: &str) {
+    let message = VadMessage::new(change, satellite);
+    match serde_json::to_vec(&message) {
+        Ok(payload) => {
+            if let Err(e) = publisher.publish(bytes::Bytes::from(payload)).await {
+                tracing::warn!("publishing voice activity: {e}");
+            }
+        }
+        Err(e) => tracing::warn!("serialising voice activity: {e}"),
     }
 }
 

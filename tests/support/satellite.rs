@@ -1,0 +1,61 @@
+//! A real `whisper-sat` satellite for integration tests: started against a test server with the tiny.en model
+//! (`make model`), killed on drop, ready once its presence channel exists (the model is loaded).
+
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::process::Child;
+
+use crate::{Agent, command};
+
+/// Loading the model and joining may take long on a machine busy building.
+pub const SATELLITE_PATIENCE: Duration = Duration::from_secs(120);
+
+/// A satellite process, killed (SIGKILL) on drop.
+#[derive(Debug)]
+pub struct Satellite {
+    pub name: String,
+    pub child: Child,
+}
+
+impl Satellite {
+    /// Starts `whisper-sat run --name NAME` against `agent` and waits until it has joined.
+    pub async fn start(agent: &Agent, name: &str) -> anyhow::Result<Satellite> {
+        let mut cmd = command("whisper-sat")?;
+        cmd.arg("run")
+            .arg("--addr")
+            .arg(agent.tcp().to_string())
+            .arg("--token")
+            .arg(agent.token())
+            .arg("--name")
+            .arg(name)
+            .env(
+                "RUST_LOG",
+                std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info,whisper_rs=warn".into()),
+            )
+            .stdin(std::process::Stdio::null());
+        let child = cmd.spawn().context("starting whisper-sat")?;
+        let sat = Satellite {
+            name: name.to_owned(),
+            child,
+        };
+        wait_channel(agent, &format!("Agent.asr.sat.{name}")).await?;
+        Ok(sat)
+    }
+}
+
+/// Waits until a channel exists.
+pub async fn wait_channel(agent: &Agent, name: &str) -> anyhow::Result<()> {
+    let client = agent.client("test-channel-watch").await?;
+    let mut events = client.events();
+    let deadline = tokio::time::Instant::now() + SATELLITE_PATIENCE;
+    loop {
+        if client.channels().await?.iter().any(|c| c.name == name) {
+            return Ok(());
+        }
+        tokio::select! {
+            _ = events.recv() => {}
+            () = tokio::time::sleep_until(deadline) => anyhow::bail!("channel {name} did not appear"),
+        }
+    }
+}
