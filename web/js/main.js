@@ -228,7 +228,12 @@ function handleAvatar(cmd) {
       const items = Array.isArray(cmd.items) ? cmd.items : [];
       const anchor = speech.anchorOf(utterance);
       if (anchor !== undefined && (utterance !== 0 || speech.speaking)) avatar.scheduleVisemes(utterance, anchor, items);
-      else pendingVisemes.set(utterance, items);
+      else {
+        // One utterance's cues come in several batches before its audio starts: keep them all, in order.
+        const pending = pendingVisemes.get(utterance);
+        if (pending) pending.push(...items);
+        else pendingVisemes.set(utterance, items.slice());
+      }
       break;
     }
     case "speech_stop":

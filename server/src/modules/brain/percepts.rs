@@ -62,7 +62,9 @@ pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
         (Some(other), _) => Err(format!(
             "unknown voice activity {other:?} (expected \"start\" or \"end\")"
         )),
-        (None, None) => Err("transcript JSON has neither `text` nor `vad`".into()),
+        // Nothing the brain acts on (a status or other satellite's note without text): ignored quietly, since
+        // a warning per message would flood the log on a busy channel.
+        (None, None) => Ok(Hearing::Nothing),
         (None, Some(_)) if message.is_final == Some(false) || message.partial => {
             Ok(Hearing::Speaking)
         }
@@ -203,7 +205,20 @@ mod tests {
         assert_eq!(hearing(b"hello there"), said("hello there"));
         assert_eq!(hearing(b"   "), Ok(Hearing::Nothing));
         assert_eq!(hearing(br#"{"text":"  "}"#), Ok(Hearing::Nothing));
-        assert!(hearing(br#"{"txt":"x"}"#).is_err());
+        assert_eq!(hearing(br#"{"txt":"x"}"#), Ok(Hearing::Nothing));
+        assert_eq!(
+            hearing(br#"{"vad":"start","at_ms":5,"satellite":"whisper-1"}"#),
+            Ok(Hearing::Speaking)
+        );
+        assert_eq!(
+            hearing(br#"{"vad":"end","at_ms":9,"utterance":"u5","satellite":"whisper-1"}"#),
+            Ok(Hearing::Paused)
+        );
+        assert_eq!(
+            hearing(br#"{"utterance":"u5","final":true}"#),
+            Ok(Hearing::Nothing)
+        );
+        assert!(hearing(br#"{"text":5}"#).is_err());
         assert!(hearing(br#"{"vad":"maybe"}"#).is_err());
         assert!(hearing(&[0xff, 0xfe]).is_err());
     }
