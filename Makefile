@@ -17,9 +17,10 @@ test: deps model build-debug
 
 ## Benchmarks against their baselines, side by side (not part of the tests).
 bench: deps model-release build
+	$(CARGO) run --release -p agent-bench --bin hub-bench -- --rate-ms 10000
 	$(CARGO) run --release -p agent-voice --bin voice-bench
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
-	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-vision --bin vision-bench
+	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-vision --bin vision-bench -- --iterations 15 --rounds 3 --write-doc docs/bench-vision.md
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
 	$(TARGET_DIR)/release/whisper-sat bench --write docs/bench-asr.md

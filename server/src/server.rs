@@ -133,7 +133,8 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
     let listener = listener.tap_io(|tcp| {
         let _ = tcp.set_nodelay(true);
     });
-    let browser = crate::browser::BrowserLink::from_config(&shared.config, shared.shutdown.subscribe())?;
+    let browser =
+        crate::browser::BrowserLink::from_config(&shared.config, shared.shutdown.subscribe())?;
     let app = crate::http::app(shared.clone())
         .merge(browser.router())
         .into_make_service_with_connect_info::<SocketAddr>();
@@ -146,8 +147,14 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
             tracing::error!("http server failed: {e}");
         }
     }));
-    let browser_modules = browser.modules().into_iter().filter(|m| shared.config.module_enabled(m.name()));
-    for module in crate::modules::builtin(&shared.config).into_iter().chain(browser_modules) {
+    let browser_modules = browser
+        .modules()
+        .into_iter()
+        .filter(|m| shared.config.module_enabled(m.name()));
+    for module in crate::modules::builtin(&shared.config)
+        .into_iter()
+        .chain(browser_modules)
+    {
         tasks.push(crate::module::spawn(shared.clone(), module).await?);
     }
     info!(%http, ?flow_tcp, ?flow_unix, "robot-agent is up");

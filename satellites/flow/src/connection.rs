@@ -4,7 +4,7 @@
 
 use std::io;
 
-use bytes::BytesMut;
+use bytes::{Bytes, BytesMut};
 use thiserror::Error;
 
 use crate::protocol::frame::{self, Check, RawFrame};
@@ -21,6 +21,10 @@ pub enum ConnError {
     #[error("peer closed the connection in the middle of a frame")]
     TruncatedFrame,
 }
+
+/// Room made for reading when a frame needs more than the buffer has: enough
+/// for several small frames, or a large part of a video frame, per read.
+const READ_RESERVE: usize = 64 * 1024;
 
 /// Reads whole frames from a transport.
 #[derive(Debug)]
@@ -60,19 +64,37 @@ impl<R: TransportRead> FrameReader<R> {
         match frame::check(&self.buf, self.max_frame)? {
             Check::Complete(total) => Ok(Some(frame::parse(&mut self.buf, total))),
             Check::Incomplete(total) => {
-                // The length was checked against the maximum, so this reservation is bounded.
-                self.buf.reserve(total.saturating_sub(self.buf.len()));
+                // Grow only when the rest of the frame does not fit: every
+                // growth moves the partial frame, and a large one would be
+                // copied once per read. The length was checked against the
+                // maximum, so this reservation is bounded.
+                let need = total.saturating_sub(self.buf.len());
+                if self.buf.capacity() - self.buf.len() < need {
+                    self.buf.reserve(need.max(READ_RESERVE));
+                }
                 Ok(None)
             }
         }
     }
 }
 
-/// Encodes frames into a buffer and writes them out in batches.
+/// Payloads at least this large are sent from their own shared buffer
+/// (vectored write) instead of being copied next to their header; smaller
+/// ones are cheaper to copy than to track as a separate piece.
+pub const ZERO_COPY_MIN: usize = 4 * 1024;
+
+/// Encodes frames and writes them out in batches.
+///
+/// Small frames and the headers of large ones are encoded into one growing
+/// buffer; large payloads join the batch as shared [`Bytes`] chunks, so the
+/// hub fans a video frame out to N connections without N copies of it.
 #[derive(Debug)]
 pub struct FrameWriter<W> {
     io: W,
     buf: BytesMut,
+    /// Finished pieces of the batch, in order; `buf` follows them.
+    chunks: Vec<Bytes>,
+    chunk_bytes: usize,
 }
 
 impl<W: TransportWrite> FrameWriter<W> {
@@ -80,6 +102,8 @@ impl<W: TransportWrite> FrameWriter<W> {
         FrameWriter {
             io,
             buf: BytesMut::with_capacity(64 * 1024),
+            chunks: Vec::new(),
+            chunk_bytes: 0,
         }
     }
 
@@ -89,25 +113,66 @@ impl<W: TransportWrite> FrameWriter<W> {
     }
 
     pub fn queue_event(&mut self, event: &crate::protocol::Event) {
-        codec::encode_event(event, &mut self.buf);
+        match event {
+            crate::protocol::Event::Data {
+                chan,
+                seq,
+                ts_us,
+                payload,
+            } if payload.len() >= ZERO_COPY_MIN => {
+                codec::encode_data_head(*chan, *seq, *ts_us, payload.len(), &mut self.buf);
+                self.push_chunk(payload.clone());
+            }
+            other => codec::encode_event(other, &mut self.buf),
+        }
     }
 
     pub fn queue_command(&mut self, env: &crate::protocol::Envelope) {
         codec::encode_command(env, &mut self.buf);
     }
 
+    /// Queues already encoded frames, sharing rather than copying large ones.
+    pub fn queue_encoded(&mut self, frames: Bytes) {
+        if frames.len() >= ZERO_COPY_MIN {
+            self.push_chunk(frames);
+        } else {
+            self.buf.extend_from_slice(&frames);
+        }
+    }
+
+    /// Appends `chunk` after everything queued so far.
+    fn push_chunk(&mut self, chunk: Bytes) {
+        if !self.buf.is_empty() {
+            let head = self.buf.split().freeze();
+            self.chunk_bytes += head.len();
+            self.chunks.push(head);
+        }
+        self.chunk_bytes += chunk.len();
+        self.chunks.push(chunk);
+    }
+
     /// Bytes waiting to be written.
     pub fn pending(&self) -> usize {
-        self.buf.len()
+        self.chunk_bytes + self.buf.len()
     }
 
     /// Writes everything queued.
     pub async fn flush(&mut self) -> io::Result<()> {
-        if !self.buf.is_empty() {
-            self.io.write_all(&self.buf).await?;
-            self.buf.clear();
+        if self.chunks.is_empty() {
+            if !self.buf.is_empty() {
+                self.io.write_all(&self.buf).await?;
+                self.buf.clear();
+            }
+            return Ok(());
         }
-        Ok(())
+        if !self.buf.is_empty() {
+            self.chunks.push(self.buf.split().freeze());
+        }
+        let result = self.io.write_all_chunks(&mut self.chunks).await;
+        // Dropping the written pieces lets `buf` reuse its allocation.
+        self.chunks.clear();
+        self.chunk_bytes = 0;
+        result
     }
 
     pub async fn shutdown(&mut self) -> io::Result<()> {
@@ -133,5 +198,54 @@ impl<T: Transport> Connection<T> {
             reader: FrameReader::new(r, max_frame),
             writer: FrameWriter::new(w),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::Event;
+    use crate::transport::Transport;
+    use crate::transport::memory;
+    use tokio::io::AsyncReadExt;
+
+    /// Small and large payloads, mixed with other events, arrive byte-identical
+    /// to the plain encoding whether they were copied or sent as shared chunks.
+    #[tokio::test]
+    async fn shared_payload_chunks_match_the_plain_encoding() {
+        let (a, b) = memory::pair("writer-test");
+        let (_, w) = a.split();
+        let (mut r, _) = b.split();
+        let mut writer = FrameWriter::new(w);
+        let events: Vec<Event> = [10usize, ZERO_COPY_MIN, 3, 100_000, 0]
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &len)| {
+                let payload = Bytes::from((0..len).map(|b| (b * 7 + i) as u8).collect::<Vec<_>>());
+                [
+                    Event::Data {
+                        chan: i as i16,
+                        seq: i as u64 + 1,
+                        ts_us: 1000 + i as u64,
+                        payload,
+                    },
+                    Event::StartPublishing { id: i as i16 },
+                ]
+            })
+            .collect();
+        let mut plain = BytesMut::new();
+        for e in &events {
+            writer.queue_event(e);
+            codec::encode_event(e, &mut plain);
+        }
+        assert_eq!(writer.pending(), plain.len());
+        writer.flush().await.expect("flush");
+        assert_eq!(writer.pending(), 0);
+        let mut sent = vec![0u8; plain.len()];
+        r.0.read_exact(&mut sent).await.expect("read");
+        assert!(
+            sent == plain[..],
+            "bytes on the wire differ from encode_event"
+        );
     }
 }

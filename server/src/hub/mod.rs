@@ -180,7 +180,12 @@ impl Hub {
             remove_channel_locked(&mut st, chan);
         }
         // Calls this connection was waiting on: nobody will read the answers.
-        let abandoned: Vec<CallId> = st.calls.iter().filter(|(_, p)| p.caller == conn).map(|(k, _)| *k).collect();
+        let abandoned: Vec<CallId> = st
+            .calls
+            .iter()
+            .filter(|(_, p)| p.caller == conn)
+            .map(|(k, _)| *k)
+            .collect();
         for call in abandoned {
             finish_call(&mut st, call);
         }

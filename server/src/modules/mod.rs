@@ -12,7 +12,9 @@ pub mod vision;
 /// any other publisher of avatar commands: it owns `Agent.avatar` (the
 /// behaviour controllers publish through it).
 pub fn builtin(config: &Config) -> Vec<Box<dyn Module>> {
-    let all: Vec<Box<dyn Module>> = vec![Box::new(tts::TtsModule), Box::new(brain::BrainModule),
+    let all: Vec<Box<dyn Module>> = vec![
+        Box::new(tts::TtsModule),
+        Box::new(brain::BrainModule),
         Box::new(vision::VisionModule),
     ];
     all.into_iter()

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use flow::connection::{Connection, FrameWriter};
+use flow::connection::{ConnError, Connection, FrameWriter};
 use flow::protocol::decode_command;
 use flow::transport::{Transport, TransportWrite};
 use tracing::{debug, info, warn};
@@ -15,8 +15,11 @@ use crate::session::{Outcome, Session};
 
 /// Payload bytes taken from the outbox per write.
 const WRITE_BATCH: usize = 512 * 1024;
-/// Commands handled in a row before the reader yields to other tasks.
-const BURST: u32 = 16;
+/// Commands handled in a row before the reader lets other tasks run: half a
+/// subscriber lane's default 64 messages, so the writers that a flood of
+/// publishes wakes get to drain their lanes before they overflow. Each yield
+/// costs a trip through the scheduler, so not after every command.
+const FAIR_SHARE: usize = 32;
 /// How long a closing connection may take to flush what is queued.
 const FLUSH_GRACE: Duration = Duration::from_secs(2);
 
@@ -32,31 +35,41 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
     debug!(%peer, conn, "connection opened");
     let mut writer_task = tokio::spawn(write_loop(writer, outbox.clone()));
     let mut session = Session::new(conn, peer.clone(), outbox.clone(), shared.clone(), internal);
-    let mut handled = 0u32;
-    let reason: Option<String> = loop {
-        tokio::select! {
-            frame = reader.read_frame() => match frame {
-                Ok(Some(raw)) => match decode_command(raw) {
-                    Ok(env) => match session.handle(env).await {
-                        Outcome::Continue => {
-                            // A burst already buffered would otherwise be handled without
-                            // a pause, filling subscribers' lanes faster than their writers
-                            // can run; let them drain now and then.
-                            handled = handled.wrapping_add(1);
-                            if handled % BURST == 0 {
-                                tokio::task::yield_now().await;
-                            }
-                        }
-                        Outcome::Close(reason) => break Some(reason),
-                    },
-                    Err(e) => break Some(format!("undecodable command: {e}")),
-                },
-                Ok(None) => break None,
-                Err(e) => break Some(e.to_string()),
-            },
+    let mut since_yield = 0usize;
+    let reason: Option<String> = 'serve: loop {
+        let read = tokio::select! {
+            frame = reader.read_frame() => frame,
             _ = outbox.wait_closed() => break outbox.closed(),
             _ = shutdown.changed() => break None,
             _ = &mut writer_task => break Some("write failed".into()),
+        };
+        let mut next = match read {
+            Ok(Some(raw)) => Some(raw),
+            Ok(None) => break None,
+            Err(e) => break Some(e.to_string()),
+        };
+        // Frames that came with the same read are handled here, without
+        // setting up the select above again for each one.
+        while let Some(raw) = next {
+            let env = match decode_command(raw) {
+                Ok(env) => env,
+                Err(e) => break 'serve Some(format!("undecodable command: {e}")),
+            };
+            if let Outcome::Close(reason) = session.handle(env).await {
+                break 'serve Some(reason);
+            }
+            since_yield += 1;
+            if since_yield == FAIR_SHARE {
+                // A publisher that never pauses would otherwise keep this
+                // worker until its budget ran out, while the writers it woke
+                // wait and their lanes overflow.
+                since_yield = 0;
+                tokio::task::yield_now().await;
+            }
+            next = match reader.parse_buffered() {
+                Ok(frame) => frame,
+                Err(e) => break 'serve Some(ConnError::Frame(e).to_string()),
+            };
         }
     };
     if let Some(reason) = &reason {

@@ -20,6 +20,8 @@ pub enum FrameError {
     },
     #[error("the JPEG decoder produced no image")]
     Undecodable,
+    #[error("the JPEG decoder failed: {0}")]
+    Decode(String),
     #[error("OpenCV failed while decoding: {0}")]
     OpenCv(#[from] opencv::Error),
 }

@@ -189,10 +189,10 @@ async fn run(
     };
     let write_loop = async {
         while let Some(first) = out_rx.recv().await {
-            writer.buffer().extend_from_slice(&first);
+            writer.queue_encoded(first);
             while writer.pending() < WRITE_BATCH {
                 match out_rx.try_recv() {
-                    Ok(more) => writer.buffer().extend_from_slice(&more),
+                    Ok(more) => writer.queue_encoded(more),
                     Err(_) => break,
                 }
             }

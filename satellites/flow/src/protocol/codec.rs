@@ -164,6 +164,23 @@ pub fn encode_event(event: &Event, out: &mut BytesMut) {
     body.finish(op, req);
 }
 
+/// Appends everything of a `DATA` frame except its payload: the frame header
+/// and the fixed fields. Followed by the payload's bytes, it equals what
+/// [`encode_event`] writes for [`Event::Data`]; writers use it to send large
+/// payloads straight from their shared buffer instead of copying them.
+pub fn encode_data_head(
+    chan: ChanId,
+    seq: u64,
+    ts_us: u64,
+    payload_len: usize,
+    out: &mut BytesMut,
+) {
+    frame::put_header(out, op::DATA, 0, 2 + 8 + 8 + payload_len);
+    out.put_i16_le(chan);
+    out.put_u64_le(seq);
+    out.put_u64_le(ts_us);
+}
+
 /// Writes a body after a placeholder header, then patches the header in.
 ///
 /// Encoding in place avoids a second buffer and a copy of every payload.

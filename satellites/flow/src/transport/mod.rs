@@ -9,7 +9,7 @@
 use std::future::Future;
 use std::io;
 
-use bytes::BytesMut;
+use bytes::{Bytes, BytesMut};
 
 pub mod addr;
 pub mod memory;
@@ -40,6 +40,24 @@ pub trait TransportRead: Send + 'static {
 pub trait TransportWrite: Send + 'static {
     /// Sends all of `data` (one or more whole frames).
     fn write_all(&mut self, data: &[u8]) -> impl Future<Output = io::Result<()>> + Send;
+    /// Sends `chunks` in order as if they were one buffer (together one or
+    /// more whole frames). This default joins them and makes one
+    /// [`TransportWrite::write_all`], so a message-based transport still sends
+    /// one message per flush; byte streams override it with vectored writes,
+    /// so that large payloads go out from their shared buffers uncopied.
+    /// The chunks may be left partly consumed.
+    fn write_all_chunks(
+        &mut self,
+        chunks: &mut [Bytes],
+    ) -> impl Future<Output = io::Result<()>> + Send {
+        async move {
+            match chunks {
+                [] => Ok(()),
+                [one] => self.write_all(one).await,
+                many => self.write_all(&many.concat()).await,
+            }
+        }
+    }
     /// Closes the sending direction after flushing.
     fn shutdown(&mut self) -> impl Future<Output = io::Result<()>> + Send;
 }
@@ -135,6 +153,15 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Unix(w) => w.write_all(data).await,
             LinkWriter::Ws(w) => w.write_all(data).await,
             LinkWriter::Memory(w) => w.write_all(data).await,
+        }
+    }
+
+    async fn write_all_chunks(&mut self, chunks: &mut [Bytes]) -> io::Result<()> {
+        match self {
+            LinkWriter::Tcp(w) => w.write_all_chunks(chunks).await,
+            LinkWriter::Unix(w) => w.write_all_chunks(chunks).await,
+            LinkWriter::Ws(w) => w.write_all_chunks(chunks).await,
+            LinkWriter::Memory(w) => w.write_all_chunks(chunks).await,
         }
     }
 

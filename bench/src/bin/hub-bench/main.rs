@@ -1,0 +1,266 @@
+//! hub-bench: fan-out of one publisher to 1, 4 and 16 subscribers over
+//! loopback TCP through our hub (`robot-agent`), side by side in the same run
+//! with Redis pub/sub and with raw TCP writes (the ceiling). See
+//! docs/bench-hub.md for what is measured and why it is a fair comparison.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Parser;
+
+mod modes;
+mod payloads;
+mod report;
+mod rig;
+mod servers;
+mod stamp;
+mod tally;
+
+use modes::Timing;
+use payloads::Payload;
+use report::{Measured, Outcome};
+use rig::{Endpoints, Rig, System};
+
+/// Hub fan-out benchmark against Redis pub/sub and raw TCP.
+#[derive(Debug, Parser)]
+struct Args {
+    /// robot-agent binary [default: next to this binary]
+    #[arg(long)]
+    agent: Option<PathBuf>,
+    /// Keep robot-agent's built-in modules (page link, vision, TTS, brain) on,
+    /// as `make run` has them; by default they are off, so that the figures,
+    /// peak RSS above all, are the hub's own.
+    #[arg(long)]
+    with_modules: bool,
+    /// redis-server binary (Debian package redis-server).
+    #[arg(long, default_value = "redis-server")]
+    redis_server: PathBuf,
+    /// Fixtures directory [default: $AGENT_FIXTURES or ../shared/fixtures beside the repo]
+    #[arg(long)]
+    fixtures: Option<PathBuf>,
+    /// Subscriber counts to measure.
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16")]
+    subs: Vec<usize>,
+    /// Payloads to measure (audio, jpeg).
+    #[arg(long, value_delimiter = ',', default_value = "audio,jpeg")]
+    payloads: Vec<String>,
+    /// Systems to measure (hub, redis, raw); the SUMMARY lines need all three.
+    #[arg(long, value_delimiter = ',', default_value = "hub,redis,raw")]
+    systems: Vec<String>,
+    /// Modes to run (window: lossless flat out, open: open-loop flat out,
+    /// rate: fixed-rate latency); skipped ones print as zero.
+    #[arg(long, value_delimiter = ',', default_value = "window,open,rate")]
+    modes: Vec<String>,
+    /// Sending before each flat-out measurement window (ms).
+    #[arg(long, default_value_t = 300)]
+    warmup_ms: u64,
+    /// Flat-out measurement window (ms).
+    #[arg(long, default_value_t = 1500)]
+    window_ms: u64,
+    /// Duration of each fixed-rate latency run (ms).
+    #[arg(long, default_value_t = 3000)]
+    rate_ms: u64,
+    /// Messages allowed in flight to the slowest subscriber in the lossless flat-out mode.
+    #[arg(long, default_value_t = 32)]
+    window_msgs: u64,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    // Two workers, as many as the target machine has cores: the servers under
+    // test get the same CPU budget whichever system is measured.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    runtime.block_on(run(args))
+}
+
+async fn run(args: Args) -> anyhow::Result<()> {
+    let fixtures = args
+        .fixtures
+        .clone()
+        .unwrap_or_else(payloads::default_fixtures);
+    let payloads: Vec<Payload> = [payloads::audio(&fixtures)?, payloads::jpeg(&fixtures)?]
+        .into_iter()
+        .filter(|p| args.payloads.iter().any(|n| n == p.name))
+        .collect();
+    let timing = Timing {
+        warmup: Duration::from_millis(args.warmup_ms),
+        window: Duration::from_millis(args.window_ms),
+        rate_run: Duration::from_millis(args.rate_ms),
+        window_msgs: args.window_msgs.max(1),
+        stall: Duration::from_secs(3),
+    };
+    let work = std::env::temp_dir().join(format!("hub-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&work)?;
+    let result = run_in(&args, &work, &payloads, timing).await;
+    if result.is_ok() {
+        let _ = std::fs::remove_dir_all(&work);
+    } else {
+        eprintln!("hub-bench: server logs kept in {}", work.display());
+    }
+    result
+}
+
+async fn run_in(
+    args: &Args,
+    work: &Path,
+    payloads: &[Payload],
+    timing: Timing,
+) -> anyhow::Result<()> {
+    let agent_bin = args
+        .agent
+        .clone()
+        .unwrap_or_else(servers::default_agent_bin);
+    let mut agent = servers::start_agent(&agent_bin, work, !args.with_modules)
+        .await
+        .with_context(|| {
+            format!(
+                "build it first: cargo build --release -p robot-agent (looked for {})",
+                agent_bin.display()
+            )
+        })?;
+    let mut redis = servers::start_redis(&args.redis_server, work).await?;
+    let ends = Endpoints {
+        hub: format!("tcp://{}", agent.flow_tcp)
+            .parse()
+            .map_err(|e| anyhow::anyhow!("robot-agent's flow address: {e}"))?,
+        hub_token: agent.token.clone(),
+        redis_url: redis.url.clone(),
+    };
+    println!("hub-bench: load average before: {}", load_average());
+    let idle = |s: &servers::Server| {
+        s.rss()
+            .map_or("?".into(), |b| format!("{:.1} MB", b as f64 / 1e6))
+    };
+    println!(
+        "hub-bench: idle RSS robot-agent {}, redis-server {}",
+        idle(&agent.server),
+        idle(&redis.server)
+    );
+    println!(
+        "hub-bench: robot-agent pid {} at {}, redis-server pid {}; window {} msgs, \
+         warm-up {:?}, flat-out window {:?}, fixed-rate runs {:?}",
+        agent.server.pid,
+        agent.flow_tcp,
+        redis.server.pid,
+        timing.window_msgs,
+        timing.warmup,
+        timing.window,
+        timing.rate_run
+    );
+    let mut outcomes = Vec::new();
+    for payload in payloads {
+        for &subs in &args.subs {
+            let mut rows = Vec::new();
+            let systems = [System::Hub, System::Redis, System::RawTcp]
+                .into_iter()
+                .filter(|s| {
+                    args.systems
+                        .iter()
+                        .any(|n| s.label().starts_with(n.as_str()))
+                });
+            for system in systems {
+                let server = match system {
+                    System::Hub => Some(&agent.server),
+                    System::Redis => Some(&redis.server),
+                    System::RawTcp => None,
+                };
+                if let Some(s) = server {
+                    s.reset_peak();
+                }
+                let measured = measure(
+                    system,
+                    &ends,
+                    server.map(|s| s.pid),
+                    payload,
+                    subs,
+                    timing,
+                    &args.modes,
+                )
+                .await
+                .with_context(|| {
+                    format!("{} {} x {subs} subscribers", system.label(), payload.name)
+                })?;
+                let peak_rss = server.and_then(servers::Server::peak_rss);
+                rows.push(Measured {
+                    peak_rss,
+                    ..measured
+                });
+            }
+            if !agent.server.alive() || !redis.server.alive() {
+                anyhow::bail!("a server under test died (logs in {})", work.display());
+            }
+            let outcome = Outcome {
+                payload: payload.clone(),
+                subs,
+                rows,
+            };
+            report::print_table(&outcome);
+            outcomes.push(outcome);
+        }
+    }
+    println!();
+    println!("hub-bench: load average after: {}", load_average());
+    report::print_summary(&outcomes);
+    agent.server.stop().await;
+    redis.server.stop().await;
+    Ok(())
+}
+
+/// Runs the three modes against one system, each on freshly connected clients.
+async fn measure(
+    system: System,
+    ends: &Endpoints,
+    server_pid: Option<u32>,
+    payload: &Payload,
+    subs: usize,
+    timing: Timing,
+    wanted: &[String],
+) -> anyhow::Result<Measured> {
+    let wants = |mode: &str| wanted.iter().any(|m| m == mode);
+    // A fresh channel name per rig: the previous owner's channel may still be
+    // in the middle of being removed.
+    let channel = |mode: &str| format!("Bench.{}.{subs}.{mode}", payload.name);
+    let mut measured = Measured {
+        system,
+        flat: Default::default(),
+        open: Default::default(),
+        rate: Default::default(),
+        peak_rss: None,
+    };
+    if wants("window") {
+        let mut rig = Rig::connect(system, ends, &channel("window"), subs).await?;
+        rig.watch_server(server_pid);
+        let flat = modes::windowed(&mut rig, &payload.bytes, timing).await;
+        rig.close().await;
+        measured.flat = flat?;
+    }
+    if wants("open") {
+        let mut rig = Rig::connect(system, ends, &channel("open"), subs).await?;
+        rig.watch_server(server_pid);
+        let open = modes::open_loop(&mut rig, &payload.bytes, timing).await;
+        rig.close().await;
+        measured.open = open?;
+        // The server may still be flushing the flood to the closed subscribers.
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    if wants("rate") {
+        let mut rig = Rig::connect(system, ends, &channel("rate"), subs).await?;
+        let rate = modes::fixed_rate(&mut rig, &payload.bytes, payload.hz, timing).await;
+        rig.close().await;
+        measured.rate = rate?;
+    }
+    // Let the server finish tearing the connections down before the next system.
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    Ok(measured)
+}
+
+/// The 1, 5 and 15 minute load averages: figures taken on a busy machine say so.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unknown".into())
+}
