@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use agent_tests::{Agent, AgentOptions, DataDir, PATIENCE};
+use agent_tests::{Agent, DataDir, PATIENCE};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
@@ -43,18 +43,7 @@ impl Rig {
              [modules.vision]\nenabled = false\n",
             program_path.display().to_string()
         );
-        let agent = Agent::start_with(
-            &dir,
-            AgentOptions {
-                config: Some(config),
-                ..AgentOptions::default()
-            },
-        )
-        .await?;
-        agent
-            .output
-            .wait_for("brain: program loaded", 1, PATIENCE)
-            .await?;
+        let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
         let satellite = agent.client("brain-test").await?;
         let avatar = satellite.subscribe("Agent.avatar").await?;
         let speech = satellite.subscribe("Agent.speech").await?;

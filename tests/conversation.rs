@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use agent_tests::{Agent, AgentOptions, DataDir, Satellite, fixture, run};
+use agent_tests::{Agent, DataDir, Satellite, fixture, run};
 use anyhow::Context;
 use flow::Subscription;
 use serde_json::Value;
@@ -91,18 +91,7 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
         "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
         program.display().to_string()
     );
-    let agent = Agent::start_with(
-        &dir,
-        AgentOptions {
-            config: Some(config),
-            ..AgentOptions::default()
-        },
-    )
-    .await?;
-    agent
-        .output
-        .wait_for("brain: program loaded", 1, PATIENCE)
-        .await?;
+    let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
     let watcher = agent.client("conversation-test").await?;
     let transcript = watcher.subscribe("Agent.transcript").await?;
     let rules = watcher.subscribe("Agent.rules").await?;

@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use agent_tests::{Agent, AgentOptions, DataDir, PATIENCE};
+use agent_tests::{Agent, DataDir, PATIENCE};
 use anyhow::{Context, bail};
 use flow::{Client, Subscription};
 use serde_json::{Value, json};
@@ -33,18 +33,7 @@ impl Rig {
         let dir = DataDir::new()?;
         let config =
             "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n".to_owned();
-        let agent = Agent::start_with(
-            &dir,
-            AgentOptions {
-                config: Some(config),
-                ..AgentOptions::default()
-            },
-        )
-        .await?;
-        agent
-            .output
-            .wait_for("tts: speaking on", 1, PATIENCE)
-            .await?;
+        let agent = Agent::start_configured(&dir, &config, "tts: speaking on").await?;
         let satellite = agent.client("voice-test").await?;
         let speech = satellite.subscribe("Agent.speech").await?;
         let avatar = satellite.subscribe("Agent.avatar").await?;

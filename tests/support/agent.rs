@@ -157,6 +157,25 @@ impl Agent {
         Self::start_with(dir, opts).await
     }
 
+    /// Starts an agent with `config` layered over the defaults and waits until its log shows `ready` (the line a
+    /// module prints once it is running), so the test begins with the modules it needs in place.
+    pub async fn start_configured(
+        dir: &DataDir,
+        config: &str,
+        ready: &str,
+    ) -> anyhow::Result<Agent> {
+        let agent = Agent::start_with(
+            dir,
+            AgentOptions {
+                config: Some(config.to_owned()),
+                ..AgentOptions::default()
+            },
+        )
+        .await?;
+        agent.output.wait_for(ready, 1, crate::PATIENCE).await?;
+        Ok(agent)
+    }
+
     pub async fn start_with(dir: &DataDir, opts: AgentOptions) -> anyhow::Result<Agent> {
         let any = "127.0.0.1:0".to_string();
         let mut cmd = Command::new(binary("robot-agent")?);

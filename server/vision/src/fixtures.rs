@@ -169,6 +169,66 @@ pub struct FaceScore {
     pub false_positives: usize,
 }
 
+/// Face scores summed over the annotated images, with the acceptance bar of the face tests: recall of at least
+/// 85% at IoU 0.3, and no more than one false positive per image on average.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct FaceTotals {
+    pub images: usize,
+    pub annotated: usize,
+    pub found: usize,
+    pub false_positives: usize,
+}
+
+impl FaceTotals {
+    pub const MIN_RECALL: f64 = 0.85;
+    pub const MAX_FALSE_POSITIVES_PER_IMAGE: f64 = 1.0;
+
+    pub fn add(&mut self, score: &FaceScore) {
+        self.images += 1;
+        self.annotated += score.annotated;
+        self.found += score.found;
+        self.false_positives += score.false_positives;
+    }
+
+    pub fn recall(&self) -> f64 {
+        self.found as f64 / self.annotated.max(1) as f64
+    }
+
+    pub fn false_positives_per_image(&self) -> f64 {
+        self.false_positives as f64 / self.images.max(1) as f64
+    }
+
+    /// The totals line of the per-image table.
+    pub fn summary(&self) -> String {
+        format!(
+            "recall {}/{} = {:.2}, false positives per image {:.2}",
+            self.found,
+            self.annotated,
+            self.recall(),
+            self.false_positives_per_image()
+        )
+    }
+
+    /// Whether the bar is met; the error says which part is not.
+    pub fn check(&self) -> Result<(), String> {
+        if self.recall() < Self::MIN_RECALL {
+            return Err(format!(
+                "recall {:.2} below {}",
+                self.recall(),
+                Self::MIN_RECALL
+            ));
+        }
+        if self.false_positives_per_image() > Self::MAX_FALSE_POSITIVES_PER_IMAGE {
+            return Err(format!(
+                "{:.2} false positives per image, more than {}",
+                self.false_positives_per_image(),
+                Self::MAX_FALSE_POSITIVES_PER_IMAGE
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Matches detections to annotated boxes greedily by IoU (each used once) and counts hits at `min_iou` and extra
 /// detections. For an image with only a face count, detections up to the count are hits and the rest are false
 /// positives (the count-only images are portraits, where that is a fair reading).
