@@ -160,16 +160,24 @@ impl Transcriber {
     }
 
     /// Runs greedy decoding without filtering. With a fitted encoder window, an output that runs into the token
-    /// cap or loops on one phrase is decoded again with the full window: a cut window occasionally makes the
-    /// decoder repeat itself, and the full window is what the model was trained on.
+    /// cap or loops on one phrase is decoded again with the full window: a cut window makes the decoder repeat
+    /// itself, and the full window is what the model was trained on. The commonest failure, on short utterances, is
+    /// the whole utterance transcribed and then said again and again; that output is kept, once, since the second
+    /// decode costs the full 30 s encoder (over a second on two cores, most of the voice-to-voice latency).
     pub fn decode(&mut self, audio: &[f32]) -> Result<Decoded, TranscribeError> {
         let started = Instant::now();
         let mut decoded = self.decode_with(audio, self.cfg.audio_context)?;
         if self.cfg.audio_context == AudioContext::Fit
             && (decoded.tokens >= token_cap(audio.len()) || is_repetition_loop(&decoded.text))
         {
-            tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
-            decoded = self.decode_with(audio, AudioContext::Full)?;
+            let seconds = audio.len() as f32 / RATE as f32;
+            if let Some(once) = repeated_utterance(&decoded.text, seconds) {
+                tracing::debug!(text = %decoded.text, "fitted window repeated the utterance; kept once");
+                decoded.text = once;
+            } else {
+                tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
+                decoded = self.decode_with(audio, AudioContext::Full)?;
+            }
         }
         decoded.processing = started.elapsed();
         Ok(decoded)
@@ -245,6 +253,31 @@ impl Transcriber {
             processing: started.elapsed(),
         })
     }
+}
+
+/// Fewest words a second the repeated phrase must hold to stand for the whole utterance: read speech runs at two
+/// to three, so a phrase below this covers only part of the audio and the output is not trusted.
+const MIN_WORDS_PER_SECOND: f32 = 1.2;
+
+/// When `text` is one phrase from its start said at least twice over (the last time possibly cut by the token
+/// cap), and that phrase is long enough for `seconds` of speech, the phrase once; else `None`.
+pub fn repeated_utterance(text: &str, seconds: f32) -> Option<String> {
+    let words: Vec<(&str, String)> = text
+        .split_whitespace()
+        .map(|w| (w, crate::wer::normalise(w).concat()))
+        .filter(|(_, n)| !n.is_empty())
+        .collect();
+    let n = words.len();
+    let period = (1..=n / 2).find(|&p| (p..n).all(|i| words[i].1 == words[i % p].1))?;
+    if (period as f32) < MIN_WORDS_PER_SECOND * seconds {
+        return None;
+    }
+    let once = words[..period]
+        .iter()
+        .map(|(w, _)| *w)
+        .collect::<Vec<_>>()
+        .join(" ");
+    Some(once.trim_end_matches([',', ';', ':']).to_owned())
 }
 
 /// Most text tokens an utterance of `samples` may yield: eight a second plus a sentence's worth.
@@ -384,6 +417,31 @@ mod tests {
             judge(&loud(), decoded("so so so so so so so so", 0.1, -0.2)),
             Outcome::Rejected(Rejection::Repetition, _)
         ));
+    }
+
+    #[test]
+    fn an_utterance_said_over_and_over_is_kept_once() {
+        let looped = "produced the block books, produced the block books, Produced the block books, produced the";
+        assert_eq!(
+            repeated_utterance(looped, 1.5).as_deref(),
+            Some("produced the block books")
+        );
+        assert_eq!(
+            repeated_utterance(
+                "in being comparatively modern. In being comparatively modern.",
+                1.8
+            )
+            .as_deref(),
+            Some("in being comparatively modern.")
+        );
+        // A phrase too short for the audio is a loop on part of it: not trusted.
+        assert_eq!(repeated_utterance("the the the the the the", 3.0), None);
+        // Not a repetition from the start.
+        assert_eq!(
+            repeated_utterance("so it goes on and on and on and on", 2.0),
+            None
+        );
+        assert_eq!(repeated_utterance("", 1.0), None);
     }
 
     #[test]
