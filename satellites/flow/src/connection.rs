@@ -62,7 +62,19 @@ impl<R: TransportRead> FrameReader<R> {
     /// A frame already in the buffer, if any; never waits.
     pub fn parse_buffered(&mut self) -> Result<Option<RawFrame>, FrameError> {
         match frame::check(&self.buf, self.max_frame)? {
-            Check::Complete(total) => Ok(Some(frame::parse(&mut self.buf, total))),
+            Check::Complete(total) => {
+                let mut frame = frame::parse(&mut self.buf, total);
+                // A frame is a view into the read buffer. A small one would keep
+                // that whole buffer (64 kB or more) alive for as long as it waits
+                // in subscribers' lanes, so 64 queued 882-byte audio chunks could
+                // pin megabytes; it gets its own copy, which costs next to nothing
+                // at that size. Large payloads stay views: they are most of
+                // their buffer anyway, and fan-out shares them uncopied.
+                if frame.body.len() < ZERO_COPY_MIN {
+                    frame.body = Bytes::copy_from_slice(&frame.body);
+                }
+                Ok(Some(frame))
+            }
             Check::Incomplete(total) => {
                 // Grow only when the rest of the frame does not fit: every
                 // growth moves the partial frame, and a large one would be
@@ -208,6 +220,33 @@ mod tests {
     use crate::transport::Transport;
     use crate::transport::memory;
     use tokio::io::AsyncReadExt;
+
+    /// A small frame owns its bytes, so it does not keep the read buffer alive;
+    /// a large one is a view into that buffer.
+    #[tokio::test]
+    async fn small_frames_do_not_pin_the_read_buffer() {
+        let (a, b) = memory::pair("reader-test");
+        let (_, w) = a.split();
+        let (r, _) = b.split();
+        let mut writer = FrameWriter::new(w);
+        for len in [882usize, 100_000] {
+            writer.queue_event(&Event::Data {
+                chan: 1,
+                seq: 1,
+                ts_us: 0,
+                payload: Bytes::from(vec![7u8; len]),
+            });
+        }
+        writer.flush().await.expect("flush");
+        let mut reader = FrameReader::new(r, 1 << 20);
+        let small = reader.read_frame().await.expect("read").expect("frame");
+        let large = reader.read_frame().await.expect("read").expect("frame");
+        assert!(
+            small.body.is_unique(),
+            "a small frame shares the read buffer"
+        );
+        assert!(!large.body.is_unique(), "a large frame was copied");
+    }
 
     /// Small and large payloads, mixed with other events, arrive byte-identical
     /// to the plain encoding whether they were copied or sent as shared chunks.
