@@ -1,0 +1,203 @@
+//! Voice-to-voice latency of the whole agent (`make bench`): from the end of the user's speech in the
+//! `Agent.audio` stream to the first reply PCM on `Agent.speech`, with a real release `robot-agent` (brain and TTS
+//! modules) and one real `whisper-sat` (tiny.en, 2 threads) on this machine.
+//!
+//! A microphone stand-in publishes real recorded utterances in real time, each followed by silence, and stamps
+//! the wall time at which the chunk holding the last voiced sample went out. A watcher on the same hub stamps the
+//! arrival of the `vad` end event and the final transcript (`Agent.transcript`), the rule trace the transcript
+//! caused (`Agent.rules`) and the reply's first PCM frame (`Agent.speech`). The differences give the breakdown:
+//! VAD hangover, ASR, rules, first TTS chunk; the hub hop is measured on its own. See docs/bench-voice-latency.md.
+//!
+//! Options: `--runs N` (default 20), `--threads N` (satellite inference threads, default 2), `--hangover-ms N`
+//! (default: the satellite's), `--write PATH` (a Markdown report).
+
+mod report;
+mod rig;
+mod speech_clip;
+mod watch;
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use flow::{Client, ConnectOptions, FlowAddr};
+use tokio::sync::{mpsc, oneshot};
+
+use crate::report::Figures;
+use crate::rig::Rig;
+use crate::speech_clip::{Clip, Say};
+use crate::watch::Watcher;
+
+/// Short real utterances from the shared fixtures (22050 Hz mono), said in turn: a whole sentence, and the first
+/// phrases of two longer ones, cut inside the pause after them (the satellite's own segmentation splits those
+/// sentences there, so the cut keeps one utterance per run).
+const CLIPS: [(&str, Option<f64>); 3] = [
+    ("audio/LJ001-0002.wav", None),
+    ("audio/LJ001-0004.wav", Some(1.65)),
+    ("audio/LJ001-0001.wav", Some(4.2)),
+];
+/// How long one run may take from the end of speech to the reply before it counts as lost.
+const RUN_PATIENCE: Duration = Duration::from_secs(60);
+
+struct Options {
+    runs: usize,
+    threads: u32,
+    hangover_ms: Option<u32>,
+    write: Option<PathBuf>,
+}
+
+fn options() -> anyhow::Result<Options> {
+    let mut o = Options {
+        runs: 20,
+        threads: 2,
+        hangover_ms: None,
+        write: None,
+    };
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = |name: &str| args.next().with_context(|| format!("{name} needs a value"));
+        match a.as_str() {
+            "--runs" => o.runs = value("--runs")?.parse().context("--runs N")?,
+            "--threads" => o.threads = value("--threads")?.parse().context("--threads N")?,
+            "--hangover-ms" => {
+                o.hangover_ms = Some(value("--hangover-ms")?.parse().context("--hangover-ms N")?);
+            }
+            "--write" => o.write = Some(PathBuf::from(value("--write")?)),
+            other => bail!(
+                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --write PATH)"
+            ),
+        }
+    }
+    if o.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+    Ok(o)
+}
+
+/// `$AGENT_FIXTURES`, else `shared/fixtures` beside the repository.
+fn fixtures() -> PathBuf {
+    std::env::var_os("AGENT_FIXTURES").map_or_else(
+        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures"),
+        PathBuf::from,
+    )
+}
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() -> anyhow::Result<()> {
+    let opts = options()?;
+    let clips: Vec<Clip> = CLIPS
+        .iter()
+        .map(|(path, cut)| Clip::load(&fixtures().join(path), *cut))
+        .collect::<anyhow::Result<_>>()
+        .context(
+            "loading the fixture clips (set AGENT_FIXTURES to the shared fixtures directory)",
+        )?;
+    let bins = rig::bin_dir()?;
+    println!(
+        "voice-to-voice latency: {} runs, whisper-sat tiny.en with {} threads, binaries from {}",
+        opts.runs,
+        opts.threads,
+        bins.display()
+    );
+    for c in &clips {
+        println!(
+            "  clip {}: {:.2} s, speech ends at {:.2} s",
+            c.name,
+            c.seconds(),
+            c.voiced_end as f64 / f64::from(speech_clip::RATE)
+        );
+    }
+
+    let mut rig = Rig::start(&bins).await?;
+    let addr: FlowAddr = rig
+        .flow_tcp
+        .parse()
+        .map_err(anyhow::Error::msg)
+        .context("the server's TCP address")?;
+    let connect = |name: &str| {
+        let mut o = ConnectOptions::new(name, rig.token.clone());
+        o.reconnect = false;
+        // Reply speech arrives paced but in bursts of 300 ms; nothing here may be dropped.
+        o.queue = 4096;
+        o
+    };
+    let watcher_client = Client::connect(&addr, connect("bench-watch")).await?;
+    let mic_client = Client::connect(&addr, connect("bench-mic")).await?;
+    let hop = watch::hub_hop(&mic_client, &watcher_client, 250).await?;
+    let mut watcher = Watcher::start(&watcher_client).await?;
+
+    rig.start_satellite(&bins, opts.threads, opts.hangover_ms)
+        .await?;
+    watch::wait_channel(
+        &watcher_client,
+        "Agent.asr.sat.bench-asr",
+        Duration::from_secs(120),
+    )
+    .await
+    .context("the satellite did not join (is the model there? `make model`)")?;
+    let publisher = mic_client
+        .publisher(
+            "Agent.audio",
+            r#"{"mime":"audio/pcm","rate":22050,"channels":1,"format":"s16le"}"#,
+        )
+        .await?;
+    let (say_tx, say_rx) = mpsc::channel(1);
+    let mic = tokio::spawn(speech_clip::microphone(publisher, say_rx));
+    // Silence first, so the satellite's stream is running before the first utterance.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+
+    let mut figures = Figures::default();
+    let load_before = report::load_average();
+    for run in 0..opts.runs {
+        let clip = &clips[run % clips.len()];
+        let (spoken_tx, spoken_rx) = oneshot::channel();
+        say_tx
+            .send(Say {
+                clip: clip.clone(),
+                spoken: spoken_tx,
+            })
+            .await
+            .context("the microphone stopped")?;
+        let end_of_speech = spoken_rx.await.context("the microphone stopped")?;
+        match watcher
+            .follow(end_of_speech, end_of_speech + RUN_PATIENCE)
+            .await
+        {
+            Ok(run_figures) => {
+                println!(
+                    "  run {:>2} {:<12} {}",
+                    run + 1,
+                    clip.name,
+                    run_figures.line()
+                );
+                figures.runs.push(run_figures);
+            }
+            Err(e) => {
+                println!("  run {:>2} {:<12} lost: {e:#}", run + 1, clip.name);
+                figures.lost += 1;
+            }
+        }
+        // Let the reply play out, so the next utterance does not barge in on it.
+        watcher.until_quiet(Duration::from_millis(800)).await?;
+    }
+    drop(say_tx);
+    mic.await.context("the microphone task")??;
+    figures.hop = hop;
+    figures.load = (load_before, report::load_average());
+    figures.print(&opts_summary(&opts));
+    if let Some(path) = &opts.write {
+        report::write_figures(path, &figures.markdown(&opts_summary(&opts)))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn opts_summary(o: &Options) -> String {
+    format!(
+        "{} runs, tiny.en, {} inference threads, hangover {}",
+        o.runs,
+        o.threads,
+        o.hangover_ms
+            .map_or_else(|| "default".to_owned(), |ms| format!("{ms} ms"))
+    )
+}

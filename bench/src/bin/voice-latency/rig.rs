@@ -1,0 +1,177 @@
+//! The processes under test: a release `robot-agent` on free ports in a temporary data directory, and one
+//! `whisper-sat` satellite with the tiny.en model; both killed when the rig is dropped.
+
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use tokio::io::{AsyncBufReadExt, BufReader};
+use tokio::process::{Child, Command};
+use tokio::sync::mpsc;
+
+/// How long the server may take to print its addresses, and the satellite to load its model.
+const START_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Where the release binaries are: `$AGENT_BIN_DIR`, else beside this benchmark's own executable.
+pub fn bin_dir() -> anyhow::Result<PathBuf> {
+    if let Some(dir) = std::env::var_os("AGENT_BIN_DIR") {
+        return Ok(PathBuf::from(dir));
+    }
+    let exe = std::env::current_exe().context("locating the benchmark executable")?;
+    exe.parent()
+        .map(Path::to_path_buf)
+        .context("the benchmark executable has no directory")
+}
+
+fn binary(dir: &Path, name: &str) -> anyhow::Result<PathBuf> {
+    let path = dir.join(name);
+    if !path.is_file() {
+        bail!(
+            "{} does not exist: build it first (`cargo build --release -p robot-agent -p whisper-sat`) \
+             or point AGENT_BIN_DIR at the directory holding it",
+            path.display()
+        );
+    }
+    Ok(path)
+}
+
+/// A running server and satellite.
+pub struct Rig {
+    _agent: Child,
+    satellite: Option<Child>,
+    data_dir: PathBuf,
+    /// `tcp://HOST:PORT` of the hub.
+    pub flow_tcp: String,
+    pub token: String,
+}
+
+impl Rig {
+    /// Starts the server; the satellite follows with [`Rig::start_satellite`].
+    pub async fn start(bins: &Path) -> anyhow::Result<Rig> {
+        let data_dir = std::env::temp_dir().join(format!("voice-latency-{}", std::process::id()));
+        std::fs::create_dir_all(&data_dir)
+            .with_context(|| format!("creating {}", data_dir.display()))?;
+        // The shipped brain program (found from the source tree, whatever the working directory); no camera in
+        // this benchmark, so the vision module would only idle.
+        let program = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
+        let config = data_dir.join("bench.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
+                program.display().to_string()
+            ),
+        )?;
+        let mut agent = Command::new(binary(bins, "robot-agent")?)
+            .args(["--http", "127.0.0.1:0", "--flow-tcp", "127.0.0.1:0"])
+            .arg("--flow-unix")
+            .arg("flow.sock")
+            .arg("--data-dir")
+            .arg(&data_dir)
+            .arg("--config")
+            .arg(&config)
+            .env("RUST_LOG", "warn")
+            .env("NO_COLOR", "1")
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .kill_on_drop(true)
+            .spawn()
+            .context("starting robot-agent")?;
+        let mut lines = output_lines(&mut agent);
+        let flow_tcp = tokio::time::timeout(START_TIMEOUT, async {
+            while let Some(line) = lines.recv().await {
+                if let Some(rest) = line.strip_prefix("flow hub: tcp://") {
+                    return rest.split_whitespace().next().map(|a| format!("tcp://{a}"));
+                }
+            }
+            None
+        })
+        .await
+        .context("robot-agent did not print its TCP address in time")?
+        .context("robot-agent exited at start")?;
+        // Keep draining its output so a chatty server never blocks on a full pipe.
+        tokio::spawn(async move { while lines.recv().await.is_some() {} });
+        let token = std::fs::read_to_string(data_dir.join("token"))
+            .context("reading the server's token")?
+            .trim()
+            .to_owned();
+        Ok(Rig {
+            _agent: agent,
+            satellite: None,
+            data_dir,
+            flow_tcp,
+            token,
+        })
+    }
+
+    /// Starts `whisper-sat run` with `threads` inference threads and the given hangover.
+    pub async fn start_satellite(
+        &mut self,
+        bins: &Path,
+        threads: u32,
+        hangover_ms: Option<u32>,
+    ) -> anyhow::Result<()> {
+        let mut cmd = Command::new(binary(bins, "whisper-sat")?);
+        cmd.arg("run")
+            .arg("--addr")
+            .arg(&self.flow_tcp)
+            .arg("--token")
+            .arg(&self.token)
+            .arg("--name")
+            .arg("bench-asr")
+            .arg("--threads")
+            .arg(threads.to_string());
+        if let Some(ms) = hangover_ms {
+            cmd.arg("--hangover-ms").arg(ms.to_string());
+        }
+        let child = cmd
+            .env("RUST_LOG", "warn")
+            .env("NO_COLOR", "1")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .kill_on_drop(true)
+            .spawn()
+            .context("starting whisper-sat")?;
+        self.satellite = Some(child);
+        Ok(())
+    }
+}
+
+impl Drop for Rig {
+    fn drop(&mut self) {
+        // The processes die with their handles (kill_on_drop); the data directory goes too.
+        drop(self.satellite.take());
+        let _ = std::fs::remove_dir_all(&self.data_dir);
+    }
+}
+
+/// Every line the child prints on stdout or stderr, through one bounded queue (a slow reader only delays the
+/// child's logging, never the benchmark's measurements, which do not read it after start).
+fn output_lines(child: &mut Child) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel(256);
+    if let Some(out) = child.stdout.take() {
+        let tx = tx.clone();
+        tokio::spawn(async move {
+            let mut lines = BufReader::new(out).lines();
+            while let Ok(Some(l)) = lines.next_line().await {
+                if tx.send(l).await.is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    if let Some(err) = child.stderr.take() {
+        tokio::spawn(async move {
+            let mut lines = BufReader::new(err).lines();
+            while let Ok(Some(l)) = lines.next_line().await {
+                if tx.send(l).await.is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    rx
+}

@@ -1,0 +1,159 @@
+//! The user's side: real recorded utterances, where their speech ends, and a microphone stand-in that publishes
+//! `Agent.audio` in real time (20 ms s16le chunks at 22050 Hz, silence between utterances).
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use bytes::Bytes;
+use flow::Publisher;
+use tokio::sync::{mpsc, oneshot};
+
+pub const RATE: u32 = 22_050;
+/// Samples per 20 ms chunk, what a browser microphone sends.
+const CHUNK: usize = 441;
+const CHUNK_TIME: Duration = Duration::from_millis(20);
+/// The end of speech is the end of the last 10 ms window whose level is within this many dB of the clip's loudest
+/// window: quiet enough to keep soft word endings, loud enough to ignore the recording's room noise.
+const VOICED_BELOW_PEAK_DB: f64 = 35.0;
+const WINDOW: usize = RATE as usize / 100;
+
+/// One recorded utterance.
+#[derive(Debug, Clone)]
+pub struct Clip {
+    pub name: String,
+    pub samples: Vec<i16>,
+    /// Index just past the last voiced sample.
+    pub voiced_end: usize,
+}
+
+impl Clip {
+    /// Loads a 22050 Hz mono s16le WAV fixture, cut after `cut_s` seconds if given, and locates its end of speech.
+    pub fn load(path: &Path, cut_s: Option<f64>) -> anyhow::Result<Clip> {
+        let mut reader =
+            hound::WavReader::open(path).with_context(|| format!("opening {}", path.display()))?;
+        let spec = reader.spec();
+        if spec.sample_rate != RATE || spec.channels != 1 || spec.bits_per_sample != 16 {
+            bail!(
+                "{}: expected 22050 Hz mono 16-bit, got {} Hz, {} channel(s), {} bits",
+                path.display(),
+                spec.sample_rate,
+                spec.channels,
+                spec.bits_per_sample
+            );
+        }
+        let mut samples: Vec<i16> = reader
+            .samples::<i16>()
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("reading {}", path.display()))?;
+        if let Some(cut) = cut_s {
+            samples.truncate((cut * f64::from(RATE)) as usize);
+        }
+        let voiced_end =
+            voiced_end(&samples).with_context(|| format!("{}: no speech", path.display()))?;
+        let name = path
+            .file_stem()
+            .map_or_else(|| "clip".into(), |s| s.to_string_lossy().into_owned());
+        Ok(Clip {
+            name,
+            samples,
+            voiced_end,
+        })
+    }
+
+    pub fn seconds(&self) -> f64 {
+        self.samples.len() as f64 / f64::from(RATE)
+    }
+}
+
+/// Index just past the last voiced 10 ms window (see [`VOICED_BELOW_PEAK_DB`]).
+fn voiced_end(samples: &[i16]) -> Option<usize> {
+    let power: Vec<f64> = samples
+        .chunks(WINDOW)
+        .map(|w| w.iter().map(|&s| f64::from(s).powi(2)).sum::<f64>() / w.len() as f64)
+        .collect();
+    let peak = power.iter().copied().fold(0.0, f64::max);
+    if peak <= 0.0 {
+        return None;
+    }
+    let floor = peak * 10f64.powf(-VOICED_BELOW_PEAK_DB / 10.0);
+    let last = power.iter().rposition(|&p| p >= floor)?;
+    Some(((last + 1) * WINDOW).min(samples.len()))
+}
+
+/// A request to say a clip; answered with the wall time at which the chunk holding its last voiced sample was
+/// published (the earliest moment the server could know the speech was over).
+pub struct Say {
+    pub clip: Clip,
+    pub spoken: oneshot::Sender<Instant>,
+}
+
+/// Publishes 20 ms chunks on a fixed real-time schedule: silence, or the clips it is asked to say. A chunk is
+/// published when its last sample has been "captured", as a microphone would, so chunk `k` leaves at
+/// `start + (k + 1) x 20 ms`. Runs until the request queue closes.
+pub async fn microphone(
+    publisher: Publisher,
+    mut requests: mpsc::Receiver<Say>,
+) -> anyhow::Result<()> {
+    let start = tokio::time::Instant::now();
+    let mut chunk_no: u32 = 0;
+    let silence = vec![0i16; CHUNK];
+    // The clip being said, the position in it, and who waits for its end of speech.
+    let mut current: Option<(Clip, usize, Option<oneshot::Sender<Instant>>)> = None;
+    loop {
+        if current.is_none() {
+            match requests.try_recv() {
+                Ok(say) => current = Some((say.clip, 0, Some(say.spoken))),
+                Err(mpsc::error::TryRecvError::Empty) => {}
+                Err(mpsc::error::TryRecvError::Disconnected) => return Ok(()),
+            }
+        }
+        let mut ends_speech = None;
+        let samples = match &mut current {
+            Some((clip, pos, spoken)) => {
+                let end = (*pos + CHUNK).min(clip.samples.len());
+                let mut chunk = clip.samples[*pos..end].to_vec();
+                chunk.resize(CHUNK, 0);
+                if (*pos..end).contains(&(clip.voiced_end - 1)) {
+                    ends_speech = spoken.take();
+                }
+                *pos = end;
+                let finished = end == clip.samples.len();
+                if finished {
+                    current = None;
+                }
+                chunk
+            }
+            None => silence.clone(),
+        };
+        chunk_no += 1;
+        tokio::time::sleep_until(start + CHUNK_TIME * chunk_no).await;
+        let pcm: Vec<u8> = samples.iter().flat_map(|s| s.to_le_bytes()).collect();
+        publisher.publish(Bytes::from(pcm)).await?;
+        if let Some(spoken) = ends_speech {
+            // The waiter may have given up; the stream goes on regardless.
+            let _ = spoken.send(Instant::now());
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn end_of_speech_is_the_last_loud_window() {
+        let mut s = vec![0i16; RATE as usize];
+        for (i, v) in s.iter_mut().enumerate().take(11_025).skip(2205) {
+            *v = if i % 2 == 0 { 8000 } else { -8000 };
+        }
+        // A faint tail far below the peak is not speech.
+        for v in s.iter_mut().skip(15_000).take(100) {
+            *v = 20;
+        }
+        // The end of the 10 ms window holding the last loud sample.
+        let end = voiced_end(&s).expect("speech");
+        assert!((11_025..11_025 + WINDOW).contains(&end), "{end}");
+        assert_eq!(voiced_end(&[0; 1000]), None);
+    }
+}
