@@ -24,6 +24,7 @@ bench: deps model-release build
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
 	$(TARGET_DIR)/release/whisper-sat bench --write docs/bench-asr.md
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin voice-latency -- --write docs/bench-voice-latency.md
 
 ## Coverage-guided fuzzing of the protocol decoder (not in CI).
 fuzz:

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
+use flow::token::{TokenKind, resolve_token};
 use flow::{ConnectOptions, FlowAddr};
 
 /// Where the hub is and how to log in.
@@ -25,21 +25,7 @@ impl HubArgs {
     /// Satellites reconnect by themselves, so the examples keep that on.
     pub fn connect_options(&self, name: &str) -> anyhow::Result<(FlowAddr, ConnectOptions)> {
         let addr: FlowAddr = self.addr.parse().map_err(anyhow::Error::msg)?;
-        let token = match &self.token {
-            Some(t) => t.clone(),
-            None => {
-                let file = self.data_dir.join("token");
-                std::fs::read_to_string(&file)
-                    .with_context(|| {
-                        format!(
-                            "no token: pass --token or point --data-dir at the server's data ({})",
-                            file.display()
-                        )
-                    })?
-                    .trim()
-                    .to_string()
-            }
-        };
+        let token = resolve_token(self.token.as_deref(), &self.data_dir, TokenKind::User)?;
         Ok((addr, ConnectOptions::new(name, token)))
     }
 }

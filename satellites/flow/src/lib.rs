@@ -15,6 +15,7 @@ pub mod protocol;
 pub mod queue;
 pub mod sketch;
 pub mod tick;
+pub mod token;
 pub mod transport;
 
 pub use client::{

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use clap::{Parser, Subcommand};
+use flow::token::{TokenKind, resolve_token};
 use flow::{Client, ConnectOptions, FlowAddr};
 
 mod commands;
@@ -146,23 +147,12 @@ async fn main() {
 
 async fn run(args: Args) -> anyhow::Result<()> {
     let addr: FlowAddr = args.addr.parse().map_err(anyhow::Error::msg)?;
-    let token = match args.token.clone() {
-        Some(t) => t,
-        None => {
-            let file = args
-                .data_dir
-                .join(if args.admin { "admin.token" } else { "token" });
-            std::fs::read_to_string(&file)
-                .with_context(|| {
-                    format!(
-                        "no token: pass --token or point --data-dir at the server's data ({})",
-                        file.display()
-                    )
-                })?
-                .trim()
-                .to_string()
-        }
+    let kind = if args.admin {
+        TokenKind::Admin
+    } else {
+        TokenKind::User
     };
+    let token = resolve_token(args.token.as_deref(), &args.data_dir, kind)?;
     let mut opts = ConnectOptions::new(args.login_name.clone(), token);
     opts.reconnect = false;
     opts.asynchronous = matches!(

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
+use flow::token::{TokenKind, resolve_token};
 use flow::{Client, ConnectOptions, FlowAddr};
 use whisper_sat::transcriber::Transcriber;
 
@@ -30,21 +31,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let addr: FlowAddr = args.addr.parse().map_err(anyhow::Error::msg)?;
-    let token = match &args.token {
-        Some(t) => t.clone(),
-        None => {
-            let file = args.data_dir.join("token");
-            std::fs::read_to_string(&file)
-                .with_context(|| {
-                    format!(
-                        "no token: pass --token or point --data-dir at the server's data ({})",
-                        file.display()
-                    )
-                })?
-                .trim()
-                .to_owned()
-        }
-    };
+    let token = resolve_token(args.token.as_deref(), &args.data_dir, TokenKind::User)?;
     let name = args
         .name
         .clone()
