@@ -353,7 +353,8 @@ async fn the_program_file_is_reloaded_and_a_broken_edit_keeps_the_old_one() -> a
 #[tokio::test]
 async fn malformed_transcripts_are_logged_and_skipped() -> anyhow::Result<()> {
     let rig = Rig::start(&default_program()?).await?;
-    rig.transcript.publish(b"{\"txt\": 1}".to_vec()).await?;
+    // A transcript whose text is not a string (a message without `text` or `vad` is a status note, ignored).
+    rig.transcript.publish(b"{\"text\": 1}".to_vec()).await?;
     rig.agent
         .output
         .wait_for("bad message on Agent.transcript", 1, PATIENCE)
