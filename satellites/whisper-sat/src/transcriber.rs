@@ -285,11 +285,16 @@ pub fn token_cap(samples: usize) -> usize {
     samples * 8 / RATE + 16
 }
 
-/// Encoder positions (20 ms each) covering `samples` plus a one-second margin, rounded up to a multiple of 64 so
-/// the encoder sees a few stable sizes; never more than the model's window.
+/// The fitted encoder window grows in steps of this many positions (2.56 s). Measured on the fixture clips with
+/// tiny.en: steps of 64 left some sizes (192, 320) where the decoder looped or ran slowly (LJ001-0004 at 320:
+/// 2.0 s, at 384: 0.35 s, the same text); steps of 128 were as fast or faster on every clip, 256 no better.
+const FIT_CTX_STEP: usize = 128;
+
+/// Encoder positions (20 ms each) covering `samples` plus a one-second margin, rounded up to a multiple of
+/// [`FIT_CTX_STEP`]; never more than the model's window.
 pub fn fit_audio_ctx(samples: usize, model_ctx: i32) -> i32 {
     let positions = samples.div_ceil(320) + 50;
-    (positions.div_ceil(64) * 64).min(model_ctx.max(1) as usize) as i32
+    (positions.div_ceil(FIT_CTX_STEP) * FIT_CTX_STEP).min(model_ctx.max(1) as usize) as i32
 }
 
 /// Level of the whole clip in dBFS.
@@ -468,5 +473,6 @@ mod tests {
         assert_eq!(fit_audio_ctx(16_000, 1500), 128);
         assert_eq!(fit_audio_ctx(16_000 * 60, 1500), 1500);
         assert!(fit_audio_ctx(16_000 * 5, 1500) as usize >= 250);
+        assert_eq!(fit_audio_ctx(16_000 * 5, 1500) % 128, 0);
     }
 }
