@@ -3,6 +3,7 @@
 //! (SIGKILL) on drop. The data directory outlives the process, so a test can
 //! kill the server and start it again on the same data and ports.
 
+use flow::token::{TokenKind, resolve_token};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -42,20 +43,13 @@ impl DataDir {
 
     /// The user token the server wrote at first start.
     pub fn token(&self) -> anyhow::Result<String> {
-        read_token(&self.path().join("token"))
+        Ok(resolve_token(None, self.path(), TokenKind::User)?)
     }
 
     /// The admin token.
     pub fn admin_token(&self) -> anyhow::Result<String> {
-        read_token(&self.path().join("admin.token"))
+        Ok(resolve_token(None, self.path(), TokenKind::Admin)?)
     }
-}
-
-fn read_token(path: &Path) -> anyhow::Result<String> {
-    Ok(std::fs::read_to_string(path)
-        .with_context(|| format!("reading {}", path.display()))?
-        .trim()
-        .to_string())
 }
 
 /// How to start a server.

@@ -2,6 +2,7 @@
 //! loopback ports: `robot-agent` (our hub) and Debian's `redis-server`. Both
 //! are killed when their handle is dropped.
 
+use flow::token::{TokenKind, resolve_token};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -134,10 +135,7 @@ pub async fn start_agent(bin: &Path, work: &Path, hub_only: bool) -> anyhow::Res
         .context("robot-agent did not print its flow address within 30 s")??;
     // Keep reading stdout so the server can never block on a full pipe.
     tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
-    let token = std::fs::read_to_string(data.join("token"))
-        .context("reading the token robot-agent wrote")?
-        .trim()
-        .to_string();
+    let token = resolve_token(None, &data, TokenKind::User)?;
     Ok(Agent {
         server: Server { child, pid },
         flow_tcp,

@@ -1,6 +1,7 @@
 //! The processes under test: a release `robot-agent` on free ports in a temporary data directory, and one
 //! `whisper-sat` satellite with the tiny.en model; both killed when the rig is dropped.
 
+use flow::token::{TokenKind, resolve_token};
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::Duration;
@@ -93,10 +94,7 @@ impl Rig {
         .context("robot-agent exited at start")?;
         // Keep draining its output so a chatty server never blocks on a full pipe.
         tokio::spawn(async move { while lines.recv().await.is_some() {} });
-        let token = std::fs::read_to_string(data_dir.join("token"))
-            .context("reading the server's token")?
-            .trim()
-            .to_owned();
+        let token = resolve_token(None, &data_dir, TokenKind::User)?;
         Ok(Rig {
             _agent: agent,
             satellite: None,
