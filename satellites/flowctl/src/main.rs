@@ -160,9 +160,18 @@ async fn run(args: Args) -> anyhow::Result<()> {
         Cmd::Echo { .. } | Cmd::Pub { .. } | Cmd::PubWav { .. }
     );
     opts.queue = 1024;
+    let asynchronous = opts.asynchronous;
     let client = Client::connect(&addr, opts).await?;
     let result = dispatch(&client, args.command).await;
-    client.close();
+    if asynchronous {
+        // Publishes return once queued: let the last ones reach the hub before the process exits.
+        client
+            .close_and_wait(std::time::Duration::from_secs(5))
+            .await;
+    } else {
+        // Every request was answered; nothing is left to send.
+        client.close();
+    }
     result
 }
 

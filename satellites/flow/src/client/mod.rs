@@ -212,9 +212,19 @@ impl Client {
     }
 
     /// Closes the connection for good; pending requests fail with `Closed`.
+    /// Frames already queued are still sent; see [`Client::close_and_wait`].
     pub fn close(&self) {
         self.inner.closed.store(true, Ordering::SeqCst);
         self.inner.closing.send_replace(true);
+    }
+
+    /// Closes the connection and waits, at most `grace`, until the queued
+    /// frames are written and the link is down: what a short-lived tool does
+    /// before it exits.
+    pub async fn close_and_wait(&self, grace: std::time::Duration) {
+        let mut connected = self.connection_state();
+        self.close();
+        let _ = tokio::time::timeout(grace, connected.wait_for(|up| !*up)).await;
     }
 
     // ------------------------------------------------------------ channels

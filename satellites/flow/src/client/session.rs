@@ -206,6 +206,13 @@ async fn run(
         reason = read_loop => reason,
         reason = write_loop => reason,
         _ = closing.changed() => {
+            // Frames already handed over (asynchronous publishes return once
+            // queued) still go out before the connection closes, so a tool that
+            // publishes and then closes does not lose its last messages.
+            while let Ok(more) = out_rx.try_recv() {
+                writer.queue_encoded(more);
+            }
+            let _ = writer.flush().await;
             let _ = writer.shutdown().await;
             "client closed".to_string()
         }
