@@ -49,6 +49,7 @@ pub struct HubSection {
     pub subscriber_queue_bytes: usize,
     pub control_queue: usize,
     pub service_inflight: usize,
+    pub io_threads: usize,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -107,6 +108,12 @@ impl Config {
             return Err((
                 "hub.max_frame",
                 format!("{} is outside 1024..=1073741824", h.max_frame),
+            ));
+        }
+        if h.io_threads == 0 || h.io_threads > 64 {
+            return Err((
+                "hub.io_threads",
+                format!("{} is outside 1..=64", h.io_threads),
             ));
         }
         for (key, v) in [

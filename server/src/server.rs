@@ -15,6 +15,7 @@ use tracing::info;
 
 use crate::config::Config;
 use crate::hub::{Hub, HubLimits, OutboxLimits};
+use crate::net::IoRuntime;
 use crate::pairdb::PairDb;
 use crate::pulse::PulseHub;
 use crate::tokens::Tokens;
@@ -57,6 +58,7 @@ pub struct RunningServer {
     pub flow_unix: Option<PathBuf>,
     pub shared: Arc<Shared>,
     tasks: Vec<JoinHandle<()>>,
+    io: IoRuntime,
 }
 
 /// Opens the data directory, binds every listener and starts the modules.
@@ -97,15 +99,23 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         pulses.run(shared.hub.clone(), shared.shutdown.subscribe()),
     ));
 
+    // Socket connections are served on the hub's own I/O runtime; listeners are created inside its context so
+    // that they, and every connection they accept, belong to its reactor.
+    let io = IoRuntime::start(shared.config.hub.io_threads).context("starting the hub I/O runtime")?;
     let flow_tcp = if shared.config.server.flow_tcp.is_empty() {
         None
     } else {
         let addr = &shared.config.server.flow_tcp;
-        let listener = TcpListener::bind(addr)
-            .await
+        let std_listener = std::net::TcpListener::bind(addr)
+            .and_then(|l| l.set_nonblocking(true).map(|()| l))
             .with_context(|| format!("binding flow TCP {addr}"))?;
+        let listener = {
+            let _io = io.handle().enter();
+            TcpListener::from_std(std_listener)
+                .with_context(|| format!("binding flow TCP {addr}"))?
+        };
         let bound = listener.local_addr()?;
-        tasks.push(tokio::spawn(crate::net::tcp::accept_loop(
+        tasks.push(io.handle().spawn(crate::net::tcp::accept_loop(
             listener,
             shared.clone(),
         )));
@@ -114,9 +124,12 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
     let flow_unix = match shared.config.unix_socket() {
         None => None,
         Some(path) => {
-            let listener = crate::net::unix::bind(&path)
-                .with_context(|| format!("binding unix socket {}", path.display()))?;
-            tasks.push(tokio::spawn(crate::net::unix::accept_loop(
+            let listener = {
+                let _io = io.handle().enter();
+                crate::net::unix::bind(&path)
+                    .with_context(|| format!("binding unix socket {}", path.display()))?
+            };
+            tasks.push(io.handle().spawn(crate::net::unix::accept_loop(
                 listener,
                 path.clone(),
                 shared.clone(),
@@ -164,6 +177,7 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         flow_unix,
         shared,
         tasks,
+        io,
     })
 }
 
@@ -181,6 +195,8 @@ impl RunningServer {
                 tracing::warn!("a task did not stop within 5 s");
             }
         }
+        // The listeners have waited for their connections; what is left on the I/O runtime ends here.
+        self.io.stop().await;
         // redb commits every acknowledged write durably; nothing is left to flush.
         info!("stopped");
     }

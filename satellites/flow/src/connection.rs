@@ -26,11 +26,31 @@ pub enum ConnError {
 /// for several small frames, or a large part of a video frame, per read.
 const READ_RESERVE: usize = 64 * 1024;
 
+/// Read buffers kept for reuse once the frames cut from them are gone.
+const SPARE_BUFFERS: usize = 4;
+/// The largest read buffer made for a stream of large frames: room for
+/// several video frames, so that moving a partial frame into a new buffer
+/// happens once per several frames rather than for every one.
+const MAX_GROWN_BUFFER: usize = 1024 * 1024;
+
 /// Reads whole frames from a transport.
+///
+/// Large frames are views into the read buffer (no copy on the way in), so a
+/// buffer stays pinned while its frames wait in queues. Instead of allocating
+/// a fresh buffer each time the current one is pinned and full, the reader
+/// keeps the pinned ones aside and takes one back once every frame cut from
+/// it has been dropped. With the system allocator, a fresh 64 kB+ block per
+/// video frame meant the heap was trimmed and grown again for every frame,
+/// and each page of it faulted in anew: that cost the hub about a third of
+/// its throughput on 52 kB camera frames (docs/bench-hub.md).
 #[derive(Debug)]
 pub struct FrameReader<R> {
     io: R,
     buf: BytesMut,
+    /// Earlier read buffers, empty, possibly still shared with frames in use.
+    spare: Vec<BytesMut>,
+    /// Read buffers allocated since the start (a figure for tests and tuning).
+    allocated: u64,
     max_frame: usize,
 }
 
@@ -38,9 +58,16 @@ impl<R: TransportRead> FrameReader<R> {
     pub fn new(io: R, max_frame: usize) -> Self {
         FrameReader {
             io,
-            buf: BytesMut::with_capacity(64 * 1024),
+            buf: BytesMut::with_capacity(READ_RESERVE),
+            spare: Vec::new(),
+            allocated: 1,
             max_frame,
         }
+    }
+
+    /// How many read buffers this reader has allocated, the first included.
+    pub fn buffers_allocated(&self) -> u64 {
+        self.allocated
     }
 
     /// The next frame, or `None` when the peer closed cleanly between frames.
@@ -76,18 +103,62 @@ impl<R: TransportRead> FrameReader<R> {
                 Ok(Some(frame))
             }
             Check::Incomplete(total) => {
-                // Grow only when the rest of the frame does not fit: every
-                // growth moves the partial frame, and a large one would be
-                // copied once per read. The length was checked against the
-                // maximum, so this reservation is bounded.
+                // Make room only when the rest of the frame does not fit:
+                // every move copies the partial frame, and a large one would
+                // be copied once per read. The length was checked against the
+                // maximum, so the room made is bounded.
                 let need = total.saturating_sub(self.buf.len());
                 if self.buf.capacity() - self.buf.len() < need {
-                    self.buf.reserve(need.max(READ_RESERVE));
+                    self.make_room(need, total);
                 }
                 Ok(None)
             }
         }
     }
+
+    /// Gives `buf` room for `need` more bytes of a frame of `total` bytes,
+    /// reusing a buffer whose frames are all gone where there is one.
+    fn make_room(&mut self, need: usize, total: usize) {
+        let held = self.buf.len();
+        // Nothing cut from the current buffer is alive any more: it can take
+        // the rest of the frame where it is (moving the partial frame to its
+        // front at most).
+        if self.buf.try_reclaim(need) {
+            return;
+        }
+        let wanted = held + need;
+        // A failed `try_reclaim` leaves a buffer as it was; a successful one
+        // makes the whole allocation available again.
+        let reused = self.spare.iter_mut().position(|b| b.try_reclaim(wanted));
+        let mut next = match reused {
+            Some(i) => self.spare.remove(i),
+            None => {
+                self.allocated += 1;
+                BytesMut::with_capacity(grown_capacity(wanted, total))
+            }
+        };
+        next.extend_from_slice(&self.buf);
+        let mut old = std::mem::replace(&mut self.buf, next);
+        old.clear();
+        if self.spare.len() == SPARE_BUFFERS {
+            // The oldest is the most likely to be free already, but a buffer
+            // that frames still pin after this many others is held by a slow
+            // consumer; let those frames own it.
+            self.spare.remove(0);
+        }
+        self.spare.push(old);
+    }
+}
+
+/// Capacity of a new read buffer that must hold `wanted` bytes now, while
+/// frames of `total` bytes arrive: room for about four such frames, at least
+/// the usual read size and at most [`MAX_GROWN_BUFFER`] unless one frame
+/// needs more.
+fn grown_capacity(wanted: usize, total: usize) -> usize {
+    total
+        .saturating_mul(4)
+        .clamp(READ_RESERVE, MAX_GROWN_BUFFER)
+        .max(wanted)
 }
 
 /// Payloads at least this large are sent from their own shared buffer
@@ -246,6 +317,44 @@ mod tests {
             "a small frame shares the read buffer"
         );
         assert!(!large.body.is_unique(), "a large frame was copied");
+    }
+
+    /// Video-sized frames read one after another reuse the read buffers their
+    /// predecessors were cut from once those are dropped; frames that are
+    /// kept pin their buffers, and the reader allocates new ones instead.
+    #[tokio::test]
+    async fn read_buffers_are_reused_once_their_frames_are_gone() {
+        async fn read_all(keep: bool) -> u64 {
+            let (a, b) = memory::pair("reuse-test");
+            let (_, w) = a.split();
+            let (r, _) = b.split();
+            let mut writer = FrameWriter::new(w);
+            let mut reader = FrameReader::new(r, 1 << 20);
+            let mut kept = Vec::new();
+            for seq in 0..60u64 {
+                writer.queue_event(&Event::Data {
+                    chan: 1,
+                    seq,
+                    ts_us: 0,
+                    payload: Bytes::from(vec![seq as u8; 52_000]),
+                });
+                writer.flush().await.expect("flush");
+                let frame = reader.read_frame().await.expect("read").expect("frame");
+                let event = crate::protocol::decode_event(frame).expect("decode");
+                let Event::Data { payload, .. } = event else {
+                    panic!("not data: {event:?}");
+                };
+                assert!(payload.iter().all(|b| *b == seq as u8), "frame {seq} damaged");
+                if keep {
+                    kept.push(payload);
+                }
+            }
+            reader.buffers_allocated()
+        }
+        let reused = read_all(false).await;
+        let pinned = read_all(true).await;
+        assert!(reused <= 3, "{reused} buffers for frames dropped at once");
+        assert!(pinned >= 10, "only {pinned} buffers for 60 kept 52 kB frames");
     }
 
     /// Small and large payloads, mixed with other events, arrive byte-identical

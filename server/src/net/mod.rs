@@ -2,8 +2,10 @@
 //! listener module per transport.
 
 pub mod conn;
+pub mod io_runtime;
 pub mod tcp;
 pub mod unix;
 pub mod ws;
 
 pub use conn::serve_connection;
+pub use io_runtime::IoRuntime;

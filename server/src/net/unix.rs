@@ -5,6 +5,7 @@ use std::sync::Arc;
 
 use flow::transport::unix::UnixTransport;
 use tokio::net::UnixListener;
+use tokio::task::JoinSet;
 use tracing::warn;
 
 use super::serve_connection;
@@ -25,9 +26,10 @@ pub fn bind(path: &Path) -> std::io::Result<UnixListener> {
     UnixListener::bind(path)
 }
 
-/// Accepts connections until shutdown, then removes the socket file.
+/// Accepts connections until shutdown, removes the socket file, then waits for the connections to close.
 pub async fn accept_loop(listener: UnixListener, path: std::path::PathBuf, shared: Arc<Shared>) {
     let mut shutdown = shared.shutdown.subscribe();
+    let mut connections = JoinSet::new();
     let mut next = 0u64;
     loop {
         tokio::select! {
@@ -35,15 +37,17 @@ pub async fn accept_loop(listener: UnixListener, path: std::path::PathBuf, share
                 Ok((stream, _)) => {
                     next += 1;
                     let peer = format!("unix:{next}");
-                    tokio::spawn(serve_connection(UnixTransport::from_stream(stream, peer), shared.clone(), false));
+                    connections.spawn(serve_connection(UnixTransport::from_stream(stream, peer), shared.clone(), false));
                 }
                 Err(e) => {
                     warn!("unix accept failed: {e}");
                     tokio::time::sleep(std::time::Duration::from_millis(100)).await;
                 }
             },
+            Some(_) = connections.join_next() => {}
             _ = shutdown.changed() => break,
         }
     }
     let _ = std::fs::remove_file(path);
+    while connections.join_next().await.is_some() {}
 }
