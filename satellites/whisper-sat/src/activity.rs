@@ -38,7 +38,13 @@ pub fn of_event(event: &StreamEvent) -> Option<VoiceActivity> {
             at_us: *speech_end_us,
             utterance: None,
         }),
-        StreamEvent::Started { .. } | StreamEvent::Utterance(_) | StreamEvent::Restarted => None,
+        // A pause is no end: the voice may come back before the hangover is over, and listeners hear of the end
+        // only when it is certain.
+        StreamEvent::Started { .. }
+        | StreamEvent::Utterance(_)
+        | StreamEvent::Paused(_)
+        | StreamEvent::Resumed { .. }
+        | StreamEvent::Restarted => None,
     }
 }
 
@@ -55,6 +61,16 @@ mod tests {
         let mut events = feed(&mut stream, pcm, 1, t0);
         stream.finish(&mut events).expect("finish");
         events.iter().filter_map(of_event).collect()
+    }
+
+    /// One start then one end, the end naming an utterance when `transcribed`.
+    fn assert_one_start_and_end(got: &[VoiceActivity], transcribed: bool) {
+        assert_eq!(got.len(), 2, "{got:?}");
+        assert!(matches!(got[0], VoiceActivity::Start { .. }), "{got:?}");
+        assert!(
+            matches!(&got[1], VoiceActivity::End { utterance, .. } if utterance.is_some() == transcribed),
+            "{got:?}"
+        );
     }
 
     #[test]
@@ -86,15 +102,7 @@ mod tests {
         };
         let audio = [pcm(500, false), pcm(3000, true), pcm(800, false)].concat();
         let got = activity(cfg, &audio, 0);
-        assert_eq!(got.len(), 2, "{got:?}");
-        assert!(matches!(got[0], VoiceActivity::Start { .. }));
-        assert!(matches!(
-            got[1],
-            VoiceActivity::End {
-                utterance: Some(_),
-                ..
-            }
-        ));
+        assert_one_start_and_end(&got, true);
     }
 
     #[test]
@@ -102,15 +110,22 @@ mod tests {
         // 120 ms of voice opens an utterance (80 of 100 ms voiced) but is under the 200 ms minimum.
         let audio = [pcm(500, false), pcm(120, true), pcm(800, false)].concat();
         let got = activity(SegmenterConfig::default(), &audio, 0);
-        assert_eq!(got.len(), 2, "{got:?}");
-        assert!(matches!(got[0], VoiceActivity::Start { .. }));
-        assert!(matches!(
-            got[1],
-            VoiceActivity::End {
-                utterance: None,
-                ..
-            }
-        ));
+        assert_one_start_and_end(&got, false);
+    }
+
+    #[test]
+    fn a_pause_inside_an_utterance_is_no_activity() {
+        // 240 ms of silence: long enough to pause (150 ms post-roll), shorter than the 300 ms hangover.
+        let audio = [
+            pcm(500, false),
+            pcm(800, true),
+            pcm(240, false),
+            pcm(800, true),
+            pcm(800, false),
+        ]
+        .concat();
+        let got = activity(SegmenterConfig::default(), &audio, 0);
+        assert_one_start_and_end(&got, true);
     }
 
     #[test]

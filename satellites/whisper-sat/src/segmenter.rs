@@ -6,6 +6,12 @@
 //! little of that silence, which Whisper transcribes better than an abrupt cut. Frames quieter than an energy floor
 //! count as unvoiced whatever the detector says, which keeps faint hiss from opening utterances.
 //!
+//! Closing waits for the whole hangover, but the audio a closed utterance hands on is fixed much earlier: once the
+//! trailing silence holds the post-roll, nothing but resumed voice can change it. At that moment the segmenter
+//! reports the utterance as paused, with exactly the audio it will carry when it ends, so the satellite can
+//! transcribe during the rest of the hangover. Voice that comes back before the hangover is over withdraws the pause
+//! (`Resumed`); the utterance goes on and pauses or ends later.
+//!
 //! Broadband noise can fool the detector (it is tuned for telephony), so an utterance must also contain some tonal
 //! frames: voiced speech has harmonics, so its spectrum is far from flat, while hiss, fans and static have a flat
 //! spectrum. Utterances with too few frames below a spectral-flatness limit are dropped as noise.
@@ -101,6 +107,13 @@ pub enum SegmentEvent {
         onset: u64,
         continued: bool,
     },
+    /// The open utterance has been silent for its post-roll: if no voice comes back before the hangover is over,
+    /// it ends with exactly this utterance (the same start, end of speech and audio). Only utterances that would be
+    /// kept are reported (enough voiced and tonal frames), so speech that will be dropped never pauses.
+    Paused(Utterance),
+    /// Voice came back after `Paused`: the utterance that started at `start` goes on, and the paused one will not
+    /// be its end.
+    Resumed { start: u64 },
     /// An utterance ended by silence (or the length cap).
     Ended(Utterance),
     /// What started at `start` was too short (or too noisy) to be speech and is dropped; its last voiced frame
@@ -117,6 +130,8 @@ enum State {
         voiced_frames: u32,
         tonal_frames: u32,
         silent_frames: u32,
+        /// A `Paused` was reported for the current silence (so voice coming back must withdraw it).
+        paused: bool,
     },
 }
 
@@ -345,6 +360,7 @@ impl Segmenter {
                         voiced_frames: voiced_in_window,
                         tonal_frames,
                         silent_frames: 0,
+                        paused: false,
                     };
                     events.push(SegmentEvent::Started {
                         start,
@@ -354,15 +370,19 @@ impl Segmenter {
                 }
             }
             State::Speech {
+                start,
                 audio,
                 speech_end,
                 voiced_frames,
                 tonal_frames,
                 silent_frames,
-                ..
+                paused,
             } => {
                 audio.extend_from_slice(frame);
                 if voiced {
+                    if std::mem::take(paused) {
+                        events.push(SegmentEvent::Resumed { start: *start });
+                    }
                     *speech_end = frame_end;
                     *voiced_frames += 1;
                     *tonal_frames += u32::from(tonal);
@@ -375,6 +395,20 @@ impl Segmenter {
                     self.close(false, events);
                 } else if too_long {
                     self.close(true, events);
+                } else if !voiced && !*paused {
+                    // The first frame whose silence covers the post-roll: the audio a close would keep is complete.
+                    let keep = (*speech_end - *start) as usize + samples(self.cfg.post_roll_ms);
+                    let kept = *voiced_frames >= frames(self.cfg.min_voiced_ms)
+                        && *tonal_frames >= frames(self.cfg.min_tonal_ms);
+                    if kept && audio.len() >= keep {
+                        *paused = true;
+                        events.push(SegmentEvent::Paused(Utterance {
+                            start: *start,
+                            speech_end: *speech_end,
+                            audio: audio[..keep].to_vec(),
+                            forced: false,
+                        }));
+                    }
                 }
             }
         }
@@ -415,6 +449,7 @@ impl Segmenter {
                 voiced_frames: 0,
                 tonal_frames: 0,
                 silent_frames: 0,
+                paused: false,
             };
             events.push(SegmentEvent::Started {
                 start: end,
@@ -449,6 +484,19 @@ mod tests {
                     .map(|h| (2.0 * std::f32::consts::PI * f0 * h as f32 * t).sin() / h as f32)
                     .sum();
                 0.15 * env * s
+            })
+            .collect()
+    }
+
+    /// Deterministic loud white noise (xorshift), which the WebRTC detector takes for voice.
+    fn white_noise(ms: u32) -> Vec<f32> {
+        let mut x = 0x9e37_79b9_u32;
+        (0..samples(ms))
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                (x as f32 / u32::MAX as f32 - 0.5) * 0.35
             })
             .collect()
     }
@@ -546,6 +594,162 @@ mod tests {
         assert_eq!(utts[1].start, utts[0].start + utts[0].audio.len() as u64);
     }
 
+    /// Feeds 20 ms chunks and records each event with the position it was reported at.
+    fn run_timed(cfg: SegmenterConfig, audio: &[f32]) -> Vec<(u64, SegmentEvent)> {
+        let mut seg = Segmenter::new(cfg).expect("valid config");
+        let mut out = Vec::new();
+        let mut ev = Vec::new();
+        for chunk in audio.chunks(FRAME) {
+            seg.push(chunk, &mut ev);
+            out.extend(ev.drain(..).map(|e| (seg.position(), e)));
+        }
+        seg.finish(&mut ev);
+        out.extend(ev.drain(..).map(|e| (seg.position(), e)));
+        out
+    }
+
+    /// The events by kind and position, short enough to print (utterance audio is not).
+    fn kinds(ev: &[(u64, SegmentEvent)]) -> Vec<String> {
+        ev.iter()
+            .map(|(at, e)| match e {
+                SegmentEvent::Started { .. } => "started".to_owned(),
+                SegmentEvent::Paused(_) => "paused".to_owned(),
+                SegmentEvent::Resumed { .. } => "resumed".to_owned(),
+                SegmentEvent::Ended(u) if u.forced => format!("cut at {at}"),
+                SegmentEvent::Ended(_) => "ended".to_owned(),
+                SegmentEvent::Dropped { .. } => "dropped".to_owned(),
+            })
+            .collect()
+    }
+
+    fn paused(ev: &[(u64, SegmentEvent)]) -> Vec<(u64, &Utterance)> {
+        ev.iter()
+            .filter_map(|(at, e)| match e {
+                SegmentEvent::Paused(u) => Some((*at, u)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_pause_reports_exactly_the_utterance_that_ends_later() {
+        let cfg = SegmenterConfig::default();
+        let audio = [silence(1000), voice(1500), silence(1000)].concat();
+        let ev = run_timed(cfg.clone(), &audio);
+        let pauses = paused(&ev);
+        assert_eq!(pauses.len(), 1, "{:?}", kinds(&ev));
+        let (paused_at, p) = pauses[0];
+        let (ended_at, e) = ev
+            .iter()
+            .find_map(|(at, e)| match e {
+                SegmentEvent::Ended(u) => Some((*at, u)),
+                _ => None,
+            })
+            .expect("the utterance ends");
+        assert_eq!(p, e, "the paused utterance differs from the ended one");
+        // Reported as soon as the silence covers the post-roll (rounded up to whole frames), well before the end.
+        let post_roll_frames = u64::from(frames(cfg.post_roll_ms));
+        assert_eq!(paused_at - p.speech_end, post_roll_frames * FRAME as u64);
+        assert_eq!(
+            ended_at - e.speech_end,
+            u64::from(frames(cfg.hangover_ms)) * FRAME as u64
+        );
+        assert!(
+            !ev.iter()
+                .any(|(_, e)| matches!(e, SegmentEvent::Resumed { .. }))
+        );
+    }
+
+    #[test]
+    fn voice_after_a_pause_withdraws_it_and_the_last_pause_is_the_end() {
+        let audio = [
+            silence(500),
+            voice(800),
+            silence(240),
+            voice(800),
+            silence(800),
+        ]
+        .concat();
+        let ev = run_timed(SegmenterConfig::default(), &audio);
+        assert_eq!(
+            kinds(&ev),
+            ["started", "paused", "resumed", "paused", "ended"]
+        );
+        let pauses = paused(&ev);
+        let utts = ended(&ev.iter().map(|(_, e)| e.clone()).collect::<Vec<_>>())
+            .into_iter()
+            .cloned()
+            .collect::<Vec<_>>();
+        let SegmentEvent::Resumed { start } = ev[2].1 else {
+            panic!("{:?}", kinds(&ev))
+        };
+        assert_eq!(start, utts[0].start);
+        // The first pause was provisional: the utterance went on past it.
+        assert_eq!(pauses[0].1.start, utts[0].start);
+        assert!(pauses[0].1.speech_end < utts[0].speech_end);
+        assert!(pauses[0].1.audio.len() < utts[0].audio.len());
+        assert_eq!(pauses[1].1, &utts[0]);
+    }
+
+    #[test]
+    fn speech_that_is_dropped_never_pauses() {
+        // A click (never opens), a burst that opens but is under the minimum voiced time, and loud white noise.
+        let noise = white_noise(2000);
+        for audio in [
+            [silence(500), voice(60), silence(1000)].concat(),
+            [silence(500), voice(120), silence(1000)].concat(),
+            [silence(500), noise, silence(1000)].concat(),
+        ] {
+            let ev = run_timed(SegmenterConfig::default(), &audio);
+            assert!(paused(&ev).is_empty(), "{:?}", kinds(&ev));
+            assert!(
+                !ev.iter().any(|(_, e)| matches!(e, SegmentEvent::Ended(_))),
+                "{:?}",
+                kinds(&ev)
+            );
+        }
+    }
+
+    #[test]
+    fn the_length_cut_still_works_and_supersedes_a_pause() {
+        let capped = SegmenterConfig {
+            max_utterance_ms: 1000,
+            ..SegmenterConfig::default()
+        };
+        // Continuous voice: cut at the maximum length, never paused.
+        let ev = run_timed(capped.clone(), &[voice(2500), silence(600)].concat());
+        let utts: Vec<&Utterance> = ev
+            .iter()
+            .filter_map(|(_, e)| match e {
+                SegmentEvent::Ended(u) => Some(u),
+                _ => None,
+            })
+            .collect();
+        assert!(utts.len() >= 2 && utts[0].forced, "{:?}", kinds(&ev));
+        assert_eq!(utts[0].audio.len(), samples(1000));
+        assert_eq!(utts[1].start, utts[0].start + utts[0].audio.len() as u64);
+        let pauses = paused(&ev);
+        assert_eq!(
+            pauses.len(),
+            1,
+            "only the last piece pauses: {:?}",
+            kinds(&ev)
+        );
+        assert_eq!(pauses[0].1, *utts.last().expect("utterances"));
+        // A cut that falls in the hangover after a pause: the forced end is not the paused utterance.
+        let ev = run_timed(capped, &[voice(760), silence(600)].concat());
+        let p = paused(&ev);
+        let forced = ev.iter().find_map(|(_, e)| match e {
+            SegmentEvent::Ended(u) if u.forced => Some(u),
+            _ => None,
+        });
+        let (Some((_, p)), Some(forced)) = (p.first(), forced) else {
+            panic!("expected a pause and then a cut: {:?}", kinds(&ev))
+        };
+        assert_eq!(p.start, forced.start);
+        assert_ne!(*p, forced, "{:?}", kinds(&ev));
+    }
+
     #[test]
     fn quiet_hiss_stays_below_the_energy_floor() {
         // Deterministic pseudo-random noise at about -60 dBFS.
@@ -561,15 +765,7 @@ mod tests {
 
     #[test]
     fn loud_white_noise_is_dropped_even_when_the_detector_fires() {
-        let mut x = 0x9e37_79b9_u32;
-        let noise: Vec<f32> = (0..samples(3000))
-            .map(|_| {
-                x ^= x << 13;
-                x ^= x >> 17;
-                x ^= x << 5;
-                (x as f32 / u32::MAX as f32 - 0.5) * 0.35
-            })
-            .collect();
+        let noise = white_noise(3000);
         let audio = [silence(500), noise, silence(1000)].concat();
         assert!(ended(&run(SegmenterConfig::default(), &audio)).is_empty());
         // The same noise with a voice over it is speech.

@@ -51,6 +51,14 @@ pub enum StreamEvent {
         onset_us: u64,
         continued: bool,
     },
+    /// The open utterance paused for its post-roll: if the voice does not resume before the hangover is over, the
+    /// `Utterance` that follows is exactly this one (see `SegmentEvent::Paused`).
+    Paused(ClockedUtterance),
+    /// The voice of the paused utterance `id` came back: the pause will not be its end.
+    Resumed {
+        id: String,
+        start_us: u64,
+    },
     Utterance(ClockedUtterance),
     /// Speech that started was too short or too noisy to transcribe; its voice ended at `speech_end_us`.
     Dropped {
@@ -185,6 +193,14 @@ impl AudioStream {
                     onset_us: self.clock_of(onset),
                     continued,
                 }),
+                SegmentEvent::Paused(u) => out.push(StreamEvent::Paused(self.locate(u))),
+                SegmentEvent::Resumed { start } => {
+                    let start_us = self.clock_of(start);
+                    out.push(StreamEvent::Resumed {
+                        id: utterance_id(start_us),
+                        start_us,
+                    });
+                }
                 SegmentEvent::Ended(u) => out.push(StreamEvent::Utterance(self.locate(u))),
                 SegmentEvent::Dropped { start, speech_end } => out.push(StreamEvent::Dropped {
                     start_us: self.clock_of(start),
@@ -197,13 +213,18 @@ impl AudioStream {
     fn locate(&self, u: Utterance) -> ClockedUtterance {
         let start_us = self.clock_of(u.start);
         ClockedUtterance {
-            id: format!("u{}", start_us / 1000),
+            id: utterance_id(start_us),
             start_us,
             speech_end_us: self.clock_of(u.speech_end),
             audio: u.audio,
             forced: u.forced,
         }
     }
+}
+
+/// The id every satellite gives the utterance whose audio starts at `start_us` on the hub clock.
+fn utterance_id(start_us: u64) -> String {
+    format!("u{}", start_us / 1000)
 }
 
 #[cfg(test)]
@@ -314,5 +335,37 @@ pub(crate) mod tests {
         let u = utterances(&ev);
         assert_eq!(u.len(), 1, "{ev:?}");
         assert!(u[0].start_us < 2_000_000);
+    }
+
+    #[test]
+    fn a_paused_utterance_is_located_like_the_one_that_ends() {
+        let pcm = [
+            tone_pcm(600, false),
+            tone_pcm(1000, true),
+            tone_pcm(240, false),
+            tone_pcm(700, true),
+            tone_pcm(900, false),
+        ]
+        .concat();
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let ev = feed(&mut s, &pcm, 1, 1_700_000_000_000_000);
+        let u = utterances(&ev);
+        assert_eq!(u.len(), 1, "{ev:?}");
+        let paused: Vec<&ClockedUtterance> = ev
+            .iter()
+            .filter_map(|e| match e {
+                StreamEvent::Paused(p) => Some(p),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(paused.len(), 2, "{ev:?}");
+        // The mid-utterance pause was withdrawn under the same id; the last pause is the utterance itself.
+        assert!(ev.contains(&StreamEvent::Resumed {
+            id: u[0].id.clone(),
+            start_us: u[0].start_us
+        }));
+        assert_eq!(paused[0].id, u[0].id);
+        assert!(paused[0].speech_end_us < u[0].speech_end_us);
+        assert_eq!(paused[1], u[0]);
     }
 }
