@@ -20,10 +20,16 @@ pub fn claimed_utterance(channel: &str) -> Option<&str> {
 }
 
 /// The JSON header of a claim channel: the interval, so satellites whose segmentation differs slightly can still
-/// see that an overlapping utterance is taken.
-pub fn claim_header(start_us: u64, end_us: u64, satellite: &str) -> String {
-    serde_json::json!({ "start_us": start_us, "end_us": end_us, "satellite": satellite })
-        .to_string()
+/// see that an overlapping utterance is taken. `speculative` marks a claim made when the utterance paused, before
+/// it ended (its interval is then the speech so far); it is for people and tests reading the hub, the claim rules
+/// do not depend on it.
+pub fn claim_header(start_us: u64, end_us: u64, satellite: &str, speculative: bool) -> String {
+    let mut header =
+        serde_json::json!({ "start_us": start_us, "end_us": end_us, "satellite": satellite });
+    if speculative {
+        header["speculative"] = serde_json::Value::Bool(true);
+    }
+    header.to_string()
 }
 
 /// The interval in a claim header, if it has one.
@@ -48,7 +54,14 @@ mod tests {
         let name = claim_channel("u1700000000123");
         assert_eq!(claimed_utterance(&name), Some("u1700000000123"));
         assert_eq!(claimed_utterance("Agent.audio"), None);
-        assert_eq!(claim_interval(&claim_header(5, 9, "s1")), Some((5, 9)));
+        assert_eq!(
+            claim_interval(&claim_header(5, 9, "s1", false)),
+            Some((5, 9))
+        );
+        let speculative = claim_header(5, 9, "s1", true);
+        assert_eq!(claim_interval(&speculative), Some((5, 9)));
+        assert!(speculative.contains("\"speculative\":true"));
+        assert!(!claim_header(5, 9, "s1", false).contains("speculative"));
         assert_eq!(claim_interval("{}"), None);
     }
 

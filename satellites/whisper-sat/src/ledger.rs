@@ -1,5 +1,10 @@
 //! A satellite's book of utterances: found by its own segmenter, waiting for a claim, taken by another satellite,
 //! or finished by anyone. Pure bookkeeping, so the claim rules can be tested without a hub.
+//!
+//! With speculation an utterance enters the book when it pauses, before it has ended: the entry then holds the
+//! provisional utterance, which the next pause or the end replaces under the same id (the id is the start, which a
+//! pause does not change). When the voice resumes, the provisional audio is out of date and the entry is not
+//! claimed until the segmenter reports the utterance again; a claim already made on it stays valid.
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -20,9 +25,20 @@ pub enum Standing {
     Taken,
 }
 
+/// An utterance as the book hands it out for a claim.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pending {
+    pub utterance: ClockedUtterance,
+    /// False while the utterance is only paused: it may still grow.
+    pub ended: bool,
+}
+
 #[derive(Debug)]
 struct Entry {
     utterance: ClockedUtterance,
+    ended: bool,
+    /// The voice resumed after the pause this entry holds: its audio is not what will be transcribed.
+    stale: bool,
     standing: Standing,
     eligible_at: Instant,
     found_at: Instant,
@@ -47,19 +63,49 @@ impl Ledger {
         }
     }
 
-    /// Records a new utterance, claimable from `eligible_at`. Ignored if it is already finished or known.
-    pub fn found(&mut self, utterance: ClockedUtterance, now: Instant, eligible_at: Instant) {
-        if self.is_finished(&utterance.id, interval(&utterance))
-            || self.entries.iter().any(|e| e.utterance.id == utterance.id)
+    /// Records an utterance that paused (`ended` false) or ended, claimable from `eligible_at`. An utterance already
+    /// in the book is brought up to date under its id (keeping its standing and eligibility); one already finished
+    /// is ignored.
+    pub fn found(
+        &mut self,
+        utterance: ClockedUtterance,
+        ended: bool,
+        now: Instant,
+        eligible_at: Instant,
+    ) {
+        if self.is_finished(&utterance.id, interval(&utterance)) {
+            return;
+        }
+        if let Some(e) = self
+            .entries
+            .iter_mut()
+            .find(|e| e.utterance.id == utterance.id)
         {
+            e.utterance = utterance;
+            e.ended = ended;
+            e.stale = false;
             return;
         }
         self.entries.push_back(Entry {
             utterance,
+            ended,
+            stale: false,
             standing: Standing::Waiting,
             eligible_at,
             found_at: now,
         });
+    }
+
+    /// The voice of a paused utterance came back: it is not claimed again until it pauses again or ends.
+    pub fn resumed(&mut self, id: &str) {
+        if let Some(e) = self.entries.iter_mut().find(|e| e.utterance.id == id) {
+            e.stale = true;
+        }
+    }
+
+    /// Forgets an utterance that will never be transcribed (recognition was switched off while it was open).
+    pub fn forget(&mut self, id: &str) {
+        self.entries.retain(|e| e.utterance.id != id);
     }
 
     /// Marks an utterance finished by anyone (a transcript seen, or a claim marked done), dropping every entry that
@@ -109,21 +155,26 @@ impl Ledger {
     }
 
     /// Removes and returns the oldest utterance that may be claimed now, dropping expired ones on the way.
-    pub fn next_claimable(&mut self, now: Instant) -> Option<ClockedUtterance> {
+    pub fn next_claimable(&mut self, now: Instant) -> Option<Pending> {
         let max_age = self.max_age;
         self.entries
             .retain(|e| now.duration_since(e.found_at) < max_age);
         let i = self
             .entries
             .iter()
-            .position(|e| e.standing == Standing::Waiting && e.eligible_at <= now)?;
-        self.entries.remove(i).map(|e| e.utterance)
+            .position(|e| e.claimable() && e.eligible_at <= now)?;
+        self.entries.remove(i).map(|e| Pending {
+            utterance: e.utterance,
+            ended: e.ended,
+        })
     }
 
     /// Puts back an utterance taken out by `next_claimable` (its claim failed because another holds it).
-    pub fn put_back(&mut self, utterance: ClockedUtterance, standing: Standing, now: Instant) {
+    pub fn put_back(&mut self, pending: Pending, standing: Standing, now: Instant) {
         let entry = Entry {
-            utterance,
+            utterance: pending.utterance,
+            ended: pending.ended,
+            stale: false,
             standing,
             eligible_at: now,
             found_at: now,
@@ -135,7 +186,7 @@ impl Ledger {
     pub fn next_deadline(&self) -> Option<Instant> {
         self.entries
             .iter()
-            .filter(|e| e.standing == Standing::Waiting)
+            .filter(|e| e.claimable())
             .map(|e| e.eligible_at)
             .min()
     }
@@ -156,6 +207,12 @@ impl Ledger {
     /// True when nothing waits.
     pub fn is_empty(&self) -> bool {
         self.entries.is_empty()
+    }
+}
+
+impl Entry {
+    fn claimable(&self) -> bool {
+        self.standing == Standing::Waiting && !self.stale
     }
 }
 
@@ -182,21 +239,27 @@ mod tests {
         let t0 = Instant::now();
         let later = t0 + Duration::from_millis(300);
         let mut l = Ledger::new(Duration::from_secs(60));
-        l.found(utt("a", 0, 1_000_000), t0, later);
-        l.found(utt("b", 2_000_000, 3_000_000), t0, t0);
-        assert_eq!(l.next_claimable(t0).map(|u| u.id), Some("b".into()));
+        l.found(utt("a", 0, 1_000_000), true, t0, later);
+        l.found(utt("b", 2_000_000, 3_000_000), true, t0, t0);
+        assert_eq!(
+            l.next_claimable(t0).map(|p| p.utterance.id),
+            Some("b".into())
+        );
         assert_eq!(l.next_claimable(t0), None);
         assert_eq!(l.next_deadline(), Some(later));
-        assert_eq!(l.next_claimable(later).map(|u| u.id), Some("a".into()));
+        assert_eq!(
+            l.next_claimable(later).map(|p| p.utterance.id),
+            Some("a".into())
+        );
     }
 
     #[test]
     fn taken_utterances_wait_for_release_or_finish() {
         let t0 = Instant::now();
         let mut l = Ledger::new(Duration::from_secs(60));
-        l.found(utt("a", 0, 1_000_000), t0, t0);
-        let u = l.next_claimable(t0).expect("claimable");
-        l.put_back(u, Standing::Taken, t0);
+        l.found(utt("a", 0, 1_000_000), true, t0, t0);
+        let p = l.next_claimable(t0).expect("claimable");
+        l.put_back(p, Standing::Taken, t0);
         assert_eq!(l.next_claimable(t0), None);
         l.released("a", t0);
         assert_eq!(l.standing("a"), Some(Standing::Waiting));
@@ -205,7 +268,42 @@ mod tests {
         l.finished("a2", 50_000, 1_020_000);
         assert!(l.is_empty());
         // Seen again later (a late segmenter): still finished.
-        l.found(utt("a", 0, 1_000_000), t0, t0);
+        l.found(utt("a", 0, 1_000_000), true, t0, t0);
+        assert!(l.is_empty());
+    }
+
+    #[test]
+    fn a_paused_utterance_is_brought_up_to_date_and_waits_while_the_voice_goes_on() {
+        let t0 = Instant::now();
+        let mut l = Ledger::new(Duration::from_secs(60));
+        l.found(utt("a", 0, 400_000), false, t0, t0);
+        // Another satellite claimed it at the pause; then the voice resumed and the utterance ended longer.
+        l.taken("a");
+        l.resumed("a");
+        l.found(utt("a", 0, 1_500_000), true, t0, t0);
+        assert_eq!(l.standing("a"), Some(Standing::Taken));
+        assert_eq!(l.len(), 1);
+        // The holder died: what is claimed again is the whole utterance, not the pause.
+        l.released("a", t0);
+        let p = l.next_claimable(t0).expect("claimable");
+        assert_eq!(
+            p,
+            Pending {
+                utterance: utt("a", 0, 1_500_000),
+                ended: true
+            }
+        );
+        // Nobody claimed a pause before the voice resumed: it waits for the next pause or the end.
+        l.found(utt("b", 2_000_000, 2_400_000), false, t0, t0);
+        l.resumed("b");
+        assert_eq!(l.next_claimable(t0), None);
+        assert_eq!(l.next_deadline(), None);
+        l.found(utt("b", 2_000_000, 2_900_000), false, t0, t0);
+        let p = l.next_claimable(t0).expect("claimable again");
+        assert_eq!((p.utterance.speech_end_us, p.ended), (2_900_000, false));
+        // Recognition switched off while it was open: forgotten.
+        l.put_back(p, Standing::Taken, t0);
+        l.forget("b");
         assert!(l.is_empty());
     }
 
@@ -213,7 +311,7 @@ mod tests {
     fn stale_utterances_expire() {
         let t0 = Instant::now();
         let mut l = Ledger::new(Duration::from_secs(1));
-        l.found(utt("a", 0, 1), t0, t0);
+        l.found(utt("a", 0, 1), true, t0, t0);
         assert_eq!(l.next_claimable(t0 + Duration::from_secs(2)), None);
         assert!(l.is_empty());
     }

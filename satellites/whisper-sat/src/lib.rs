@@ -3,6 +3,7 @@
 //! The library holds the pieces; `src/main.rs` wires them into the `whisper-sat` command (convert, transcribe, run,
 //! bench).
 
+pub mod abort;
 pub mod activity;
 pub mod claim;
 pub mod convert;
@@ -11,6 +12,7 @@ pub mod model_path;
 pub mod offline;
 pub mod resample;
 pub mod segmenter;
+pub mod speculation;
 pub mod stream;
 pub mod transcriber;
 pub mod transcript;

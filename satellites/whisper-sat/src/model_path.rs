@@ -21,6 +21,16 @@ pub fn default_model() -> PathBuf {
     }
 }
 
+/// The speech clips in the fixture directory's `audio/` (`NAME.wav` with its reference `NAME.txt`), which the
+/// model tests and the benchmark run on.
+pub const FIXTURE_CLIPS: [&str; 5] = [
+    "jfk",
+    "LJ001-0001",
+    "LJ001-0002",
+    "LJ001-0004",
+    "sb_example1",
+];
+
 /// The shared fixture directory: `AGENT_FIXTURES`, else `shared/fixtures` beside the repository.
 pub fn fixtures_dir() -> PathBuf {
     match std::env::var_os("AGENT_FIXTURES") {

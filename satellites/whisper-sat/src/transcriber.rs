@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use crate::abort::AbortFlag;
 use whisper_rs::{
     FullParams, SamplingStrategy, WhisperContext, WhisperContextParameters, WhisperState,
 };
@@ -28,6 +29,9 @@ pub enum TranscribeError {
     },
     #[error("whisper inference failed: {0}")]
     Inference(#[from] whisper_rs::WhisperError),
+    /// The caller set the abort flag: the result was no longer wanted.
+    #[error("whisper inference aborted")]
+    Aborted,
 }
 
 /// How much of Whisper's 30 s encoder window to run.
@@ -155,7 +159,16 @@ impl Transcriber {
 
     /// Runs greedy decoding on 16 kHz mono audio and applies the hallucination filter.
     pub fn transcribe(&mut self, audio: &[f32]) -> Result<Outcome, TranscribeError> {
-        let decoded = self.decode(audio)?;
+        self.transcribe_abortable(audio, &AbortFlag::new())
+    }
+
+    /// `transcribe`, stopped early with [`TranscribeError::Aborted`] once `abort` is set.
+    pub fn transcribe_abortable(
+        &mut self,
+        audio: &[f32],
+        abort: &AbortFlag,
+    ) -> Result<Outcome, TranscribeError> {
+        let decoded = self.decode_abortable(audio, abort)?;
         Ok(judge(&self.cfg, audio, decoded))
     }
 
@@ -165,8 +178,17 @@ impl Transcriber {
     /// the whole utterance transcribed and then said again and again; that output is kept, once, since the second
     /// decode costs the full 30 s encoder (over a second on two cores, most of the voice-to-voice latency).
     pub fn decode(&mut self, audio: &[f32]) -> Result<Decoded, TranscribeError> {
+        self.decode_abortable(audio, &AbortFlag::new())
+    }
+
+    /// `decode`, stopped early with [`TranscribeError::Aborted`] once `abort` is set.
+    pub fn decode_abortable(
+        &mut self,
+        audio: &[f32],
+        abort: &AbortFlag,
+    ) -> Result<Decoded, TranscribeError> {
         let started = Instant::now();
-        let mut decoded = self.decode_with(audio, self.cfg.audio_context)?;
+        let mut decoded = self.decode_with(audio, self.cfg.audio_context, abort)?;
         if self.cfg.audio_context == AudioContext::Fit
             && (decoded.tokens >= token_cap(audio.len()) || is_repetition_loop(&decoded.text))
         {
@@ -176,7 +198,7 @@ impl Transcriber {
                 decoded.text = once;
             } else {
                 tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
-                decoded = self.decode_with(audio, AudioContext::Full)?;
+                decoded = self.decode_with(audio, AudioContext::Full, abort)?;
             }
         }
         decoded.processing = started.elapsed();
@@ -187,6 +209,7 @@ impl Transcriber {
         &mut self,
         audio: &[f32],
         context: AudioContext,
+        abort: &AbortFlag,
     ) -> Result<Decoded, TranscribeError> {
         let started = Instant::now();
         // whisper.cpp refuses input shorter than one second; pad short utterances with silence.
@@ -219,7 +242,13 @@ impl Transcriber {
         if context == AudioContext::Fit {
             params.set_audio_ctx(fit_audio_ctx(input.len(), self.ctx.n_audio_ctx()));
         }
-        self.state.full(params, input)?;
+        abort.attach(&mut params);
+        let result = self.state.full(params, input);
+        // An aborted run fails inside whisper.cpp, or may finish with whatever it had; either way it is unwanted.
+        if abort.is_aborted() {
+            return Err(TranscribeError::Aborted);
+        }
+        result?;
         let eot = self.ctx.token_eot();
         let mut text = String::new();
         let mut logprob_sum = 0.0f32;

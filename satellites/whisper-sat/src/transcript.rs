@@ -21,6 +21,10 @@ pub struct TranscriptMessage {
     /// Always true for now: no partial results are published.
     #[serde(rename = "final")]
     pub is_final: bool,
+    /// The text was decoded during the end-of-speech hangover, from the audio the utterance had when it paused
+    /// (the very audio it ended with). Only present when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub speculative: bool,
 }
 
 /// Which way voice activity changed.
@@ -99,11 +103,20 @@ mod tests {
             model: "tiny.en".into(),
             processing_ms: 3,
             is_final: true,
+            speculative: false,
         };
         let v: serde_json::Value = serde_json::to_value(&t)?;
         assert_eq!(v["final"], true);
         assert_eq!(v["utterance"], "u1");
+        assert!(v.get("speculative").is_none());
         assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, t);
+        let speculative = TranscriptMessage {
+            speculative: true,
+            ..t
+        };
+        let v = serde_json::to_value(&speculative)?;
+        assert_eq!(v["speculative"], true);
+        assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, speculative);
         Ok(())
     }
 }

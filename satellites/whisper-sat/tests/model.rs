@@ -5,10 +5,13 @@
 
 use std::path::PathBuf;
 
-use whisper_sat::model_path::{default_model, fixtures_dir};
+use whisper_sat::abort::AbortFlag;
+use whisper_sat::model_path::{FIXTURE_CLIPS, default_model, fixtures_dir};
 use whisper_sat::offline::{joined_text, transcribe_clip};
-use whisper_sat::segmenter::SegmenterConfig;
-use whisper_sat::transcriber::{AudioContext, Outcome, Transcriber, TranscriberConfig};
+use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
+use whisper_sat::transcriber::{
+    AudioContext, Outcome, TranscribeError, Transcriber, TranscriberConfig,
+};
 use whisper_sat::wer::wer;
 
 fn model() -> PathBuf {
@@ -59,13 +62,7 @@ fn segmented_pipeline_transcribes_every_fixture_clip() {
     let mut t = Transcriber::load(&model(), TranscriberConfig::default()).expect("model loads");
     let mut errors = 0.0;
     let mut words = 0.0;
-    for name in [
-        "jfk",
-        "LJ001-0001",
-        "LJ001-0002",
-        "LJ001-0004",
-        "sb_example1",
-    ] {
+    for name in FIXTURE_CLIPS {
         let (clip, reference) = fixture(name);
         let results = transcribe_clip(&clip.samples, clip.rate, SegmenterConfig::default(), &mut t)
             .expect("run");
@@ -107,4 +104,70 @@ fn silence_and_noise_give_no_transcript() {
         .filter(|r| matches!(r.outcome, Outcome::Speech(_)))
         .collect();
     assert!(accepted.is_empty(), "noise produced {accepted:?}");
+}
+
+#[test]
+fn every_fixture_utterance_pauses_with_exactly_the_audio_it_ends_with() {
+    // Real speech has pauses inside utterances too; whatever happened in between, the last pause before an end
+    // must be that end (else a speculative transcript would be of other audio).
+    let mut pauses = 0;
+    let mut resumed = 0;
+    for name in FIXTURE_CLIPS {
+        let (clip, _) = fixture(name);
+        let audio =
+            whisper_sat::resample::resample_clip(&clip.samples, clip.rate, RATE).expect("resample");
+        let mut seg = Segmenter::new(SegmenterConfig::default()).expect("segmenter");
+        let mut events = Vec::new();
+        for chunk in [audio, vec![0.0; RATE as usize]].concat().chunks(320) {
+            seg.push(chunk, &mut events);
+        }
+        let mut last_pause = None;
+        let mut ends = 0;
+        for e in events {
+            match e {
+                SegmentEvent::Paused(u) => {
+                    pauses += 1;
+                    last_pause = Some(u);
+                }
+                SegmentEvent::Resumed { .. } => {
+                    resumed += 1;
+                    last_pause = None;
+                }
+                SegmentEvent::Ended(u) => {
+                    ends += 1;
+                    assert_eq!(
+                        last_pause.take().as_ref(),
+                        Some(&u),
+                        "{name}: an end without its pause"
+                    );
+                }
+                _ => {}
+            }
+        }
+        assert!(ends >= 1, "{name}: no utterance");
+    }
+    // The fixtures do pause inside utterances (sb_example1, LJ001-0001): resumption is exercised on real speech.
+    assert!(
+        resumed >= 1 && pauses > resumed,
+        "{pauses} pauses, {resumed} resumed"
+    );
+}
+
+#[test]
+fn an_aborted_inference_stops_and_the_transcriber_stays_usable() {
+    let (clip, reference) = fixture("sb_example1");
+    let audio =
+        whisper_sat::resample::resample_clip(&clip.samples, clip.rate, RATE).expect("resample");
+    let mut t = Transcriber::load(&model(), TranscriberConfig::default()).expect("model loads");
+    // whisper.cpp asks the flag at its first graph step and gives up.
+    let abort = AbortFlag::new();
+    abort.abort();
+    assert!(matches!(
+        t.transcribe_abortable(&audio, &abort),
+        Err(TranscribeError::Aborted)
+    ));
+    // The same state decodes normally afterwards: an abort leaves nothing behind.
+    let decoded = t.decode(&audio).expect("inference after an abort");
+    let rate = wer(&reference, &decoded.text);
+    assert!(rate <= 0.25, "WER {rate:.3} for {:?}", decoded.text);
 }

@@ -6,18 +6,10 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use whisper_sat::model_path::{default_model, fixtures_dir, repo_root};
+use whisper_sat::model_path::{FIXTURE_CLIPS, default_model, fixtures_dir, repo_root};
 use whisper_sat::resample::resample_clip;
 use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
 use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
-
-const CLIPS: [&str; 5] = [
-    "jfk",
-    "LJ001-0001",
-    "LJ001-0002",
-    "LJ001-0004",
-    "sb_example1",
-];
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -77,7 +69,7 @@ fn peak_rss_mb() -> f64 {
 }
 
 fn load_clips() -> anyhow::Result<Vec<ClipAudio>> {
-    CLIPS
+    FIXTURE_CLIPS
         .iter()
         .map(|name| {
             let path = fixtures_dir().join(format!("audio/{name}.wav"));

@@ -25,6 +25,10 @@ pub struct Args {
     /// Satellite name (login name and presence channel); unique per hub. Default: whisper-<pid>.
     #[arg(long)]
     name: Option<String>,
+    /// Do not transcribe speculatively during the end-of-speech hangover: claim and decode an utterance only once
+    /// it has ended (slower by up to the hangover less the post-roll; no decode is ever thrown away).
+    #[arg(long)]
+    no_speculate: bool,
     #[command(flatten)]
     recognition: RecognitionArgs,
 }
@@ -43,6 +47,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         name: name.clone(),
         segmenter: args.recognition.segmenter(),
         claim_retention: Duration::from_secs(30),
+        speculate: !args.no_speculate,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

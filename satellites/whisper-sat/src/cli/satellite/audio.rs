@@ -4,6 +4,9 @@
 //! bounded queue. Overflow policy: when the thread falls behind by `QUEUE` messages (about 20 s of audio) new
 //! messages are dropped and counted; the pipeline notices the hole in the hub clock and restarts cleanly.
 //!
+//! With speculation on, the thread also reports pauses (an utterance whose audio is complete unless the voice
+//! resumes), resumptions, and utterances abandoned because recognition was switched off while they were open.
+//!
 //! Besides utterances the thread reports voice activity (start and end of speech) on a broadcast channel; only
 //! the transcript relay listens to it, so with several satellites each change is published once.
 
@@ -41,6 +44,19 @@ pub enum Feed {
     Discard,
 }
 
+/// What the segmentation thread found, for the claiming side.
+#[derive(Debug)]
+pub enum Heard {
+    /// The utterance paused for its post-roll: this is what it will be if it ends now (speculation only).
+    Paused(ClockedUtterance),
+    /// The voice of the paused utterance `id` came back (speculation only).
+    Resumed { id: String },
+    /// An utterance ended: transcribe it.
+    Ended(ClockedUtterance),
+    /// Recognition was switched off while the paused utterance `id` was open: it will never end (speculation only).
+    Abandoned { id: String },
+}
+
 /// Handle on the segmentation thread.
 #[derive(Debug, Clone)]
 pub struct Listener {
@@ -51,20 +67,22 @@ pub struct Listener {
 }
 
 impl Listener {
-    /// Starts the segmentation thread; utterances come out of the returned receiver.
+    /// Starts the segmentation thread; utterances come out of the returned receiver, and with `speculate` their
+    /// pauses too.
     pub fn start(
         cfg: SegmenterConfig,
-    ) -> anyhow::Result<(Listener, mpsc::Receiver<ClockedUtterance>)> {
+        speculate: bool,
+    ) -> anyhow::Result<(Listener, mpsc::Receiver<Heard>)> {
         // Built here to report a bad configuration to the caller, and again on the thread that owns it.
         drop(AudioStream::new(cfg.clone())?);
         let (feed, rx) = std_mpsc::sync_channel::<Feed>(QUEUE);
-        // Utterances are a few per minute; 64 is ample, and the sender waits rather than lose one.
+        // Utterances (and their pauses) are a few per minute; 64 is ample, and the sender waits rather than lose one.
         let (utt_tx, utt_rx) = mpsc::channel(64);
         let (activity, _) = broadcast::channel(ACTIVITY_QUEUE);
         let activity_tx = activity.clone();
         std::thread::Builder::new().name("segmenter".into()).spawn(
             move || match AudioStream::new(cfg) {
-                Ok(mut stream) => segment(&mut stream, &rx, &utt_tx, &activity_tx),
+                Ok(mut stream) => segment(&mut stream, &rx, &utt_tx, &activity_tx, speculate),
                 Err(e) => tracing::error!("audio pipeline: {e}"),
             },
         )?;
@@ -89,8 +107,9 @@ impl Listener {
 fn segment(
     stream: &mut AudioStream,
     rx: &std_mpsc::Receiver<Feed>,
-    out: &mpsc::Sender<ClockedUtterance>,
+    out: &mpsc::Sender<Heard>,
     activity_out: &broadcast::Sender<VoiceActivity>,
+    speculate: bool,
 ) {
     let mut events = Vec::new();
     // While audio flows, a stall closes open speech; while none does, the thread sleeps until work arrives.
@@ -132,21 +151,40 @@ fn segment(
                 // No receiver (this satellite is not the relay) is the common case, not an error.
                 let _ = activity_out.send(change);
             }
-            match ev {
-                StreamEvent::Utterance(_) if discard => {}
+            let heard = match ev {
+                // A holder of its pause must let the claim go: the end will never come.
+                StreamEvent::Utterance(u) if discard => {
+                    speculate.then_some(Heard::Abandoned { id: u.id })
+                }
                 StreamEvent::Utterance(u) => {
                     tracing::debug!(id = %u.id, seconds = u.audio.len() as f64 / 16_000.0, "utterance found");
-                    if out.blocking_send(u).is_err() {
-                        return;
-                    }
+                    Some(Heard::Ended(u))
+                }
+                StreamEvent::Paused(u) => {
+                    tracing::debug!(id = %u.id, seconds = u.audio.len() as f64 / 16_000.0, "utterance paused");
+                    speculate.then_some(Heard::Paused(u))
+                }
+                StreamEvent::Resumed { id, .. } => {
+                    tracing::debug!(%id, "utterance resumed");
+                    speculate.then_some(Heard::Resumed { id })
                 }
                 StreamEvent::Started { start_us, .. } => {
                     tracing::trace!(start_us, "speech started");
+                    None
                 }
                 StreamEvent::Dropped { start_us, .. } => {
                     tracing::debug!(start_us, "speech dropped as too short or noise");
+                    None
                 }
-                StreamEvent::Restarted => tracing::debug!("audio stream restarted"),
+                StreamEvent::Restarted => {
+                    tracing::debug!("audio stream restarted");
+                    None
+                }
+            };
+            if let Some(heard) = heard
+                && out.blocking_send(heard).is_err()
+            {
+                return;
             }
         }
     }
