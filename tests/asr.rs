@@ -80,6 +80,16 @@ impl Transcripts {
             .clone()
     }
 
+    /// Asserts that the voice activity so far is one `start` and one `end`: one utterance for the listeners.
+    fn assert_one_start_and_end(&self) {
+        let activity = self.activity();
+        let kinds: Vec<&str> = activity
+            .iter()
+            .filter_map(|(v, _)| v["vad"].as_str())
+            .collect();
+        assert_eq!(kinds, ["start", "end"], "voice activity: {activity:?}");
+    }
+
     /// Waits for at least `min` more transcripts than `before`, then until the satellites have finished every
     /// utterance they claimed (each claim channel's header says `"done":true`) and claimed nothing new for
     /// `QUIET`. Satellites claim as soon as they are idle, so a quiet, all-done hub means no work is left.
@@ -569,17 +579,7 @@ async fn a_pause_shorter_than_the_hangover_gives_one_transcript_with_the_whole_t
     println!("WER {:.1}% : {}", 100.0 * e / n, joined(&got));
     assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&got));
     // One utterance for the listeners too: the pause is no end.
-    let kinds: Vec<String> = transcripts
-        .activity()
-        .iter()
-        .filter_map(|(v, _)| v["vad"].as_str().map(str::to_owned))
-        .collect();
-    assert_eq!(
-        kinds,
-        ["start", "end"],
-        "voice activity: {:?}",
-        transcripts.activity()
-    );
+    transcripts.assert_one_start_and_end();
     Ok(())
 }
 
@@ -604,5 +604,60 @@ async fn a_satellite_killed_holding_a_speculative_claim_is_replaced_once() -> an
     let reference = format!("{} {}", reference("LJ001-0002")?, reference("sb_example1")?);
     let (e, n) = word_errors(&reference, &joined(&got)).await?;
     assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&got));
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn switching_recognition_off_mid_utterance_abandons_it_and_on_again_hears_speech()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let control = agent.client("asr-test-ctrl").await?;
+    let ctrl = control
+        .publisher("Agent.ctrl", r#"{"format":"json"}"#)
+        .await?;
+    let _sat = start_satellite(&agent, "asr-ctrl").await?;
+    // LJ001-0001's first utterance runs about 4 s and pauses after its first word ("Printing,") for longer than the
+    // post-roll: by the time recognition is switched off the satellite may hold a speculative claim on it, or know
+    // it only as paused. Either way it must be given up: no transcript, and no claim left unfinished.
+    let publishing = {
+        let mut cmd = agent.flowctl()?;
+        cmd.arg("pub-wav")
+            .arg("Agent.audio")
+            .arg(fixture("audio/LJ001-0001.wav")?)
+            .arg("--realtime")
+            .arg("--tail-ms")
+            .arg("1000");
+        tokio::spawn(run(cmd, b"", TRANSCRIPT_PATIENCE))
+    };
+    tokio::time::timeout(TRANSCRIPT_PATIENCE, async {
+        while transcripts.activity().is_empty() {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await
+    .context("the satellite never heard the speech start")?;
+    // Well inside the utterance: past the pause, some 2 s before its end.
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    ctrl.publish(serde_json::json!({ "asr": false }).to_string().into_bytes())
+        .await?;
+    publishing.await??.ok()?;
+    transcripts.settle(&agent, 0, 0).await?;
+    assert!(
+        transcripts.snapshot().is_empty(),
+        "transcribed while switched off: {:?}",
+        transcripts.snapshot()
+    );
+    // The open speech still ended for the listeners, once.
+    transcripts.assert_one_start_and_end();
+    ctrl.publish(serde_json::json!({ "asr": true }).to_string().into_bytes())
+        .await?;
+    // A second of silence first, for the satellite to subscribe to the audio again.
+    let wav = temp_wav(&dir, "after.wav");
+    write_wav(&wav, &[silence(1000), clip_samples("sb_example1")?])?;
+    pub_wav(&agent, &wav).await?;
+    let got = transcripts.settle(&agent, 0, 1).await?;
+    assert!(joined(&got).to_lowercase().contains("canoe"), "{got:?}");
     Ok(())
 }
