@@ -159,7 +159,7 @@ fn an_aborted_inference_stops_and_the_transcriber_stays_usable() {
     let audio =
         whisper_sat::resample::resample_clip(&clip.samples, clip.rate, RATE).expect("resample");
     let mut t = Transcriber::load(&model(), TranscriberConfig::default()).expect("model loads");
-    // whisper.cpp asks the flag at its first graph step and gives up.
+    // whisper.cpp asks the flag once the encoder has run, and gives up before decoding.
     let abort = AbortFlag::new();
     abort.abort();
     assert!(matches!(

@@ -4,7 +4,9 @@
 //! The latency follows the satellite's pipeline: an utterance that paused with the audio it ended with is decoded
 //! from the pause on (speculation), so its transcript is ready at the later of the end (the hangover) and the pause
 //! plus the inference; one without such a pause (cut at the maximum length) is decoded from the end. The figure
-//! without speculation (`--no-speculate`: end plus inference) is printed beside it.
+//! without speculation (`--no-speculate`: end plus inference) is printed beside it. It assumes the transcriber is
+//! free at the pause; in the satellite an aborted speculative decode of an earlier pause in the same utterance may
+//! still be finishing its encoder then (whisper.cpp cannot stop the encoder), which this figure does not count.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
