@@ -2,6 +2,7 @@
 //! frames out. Framing rules live in [`crate::protocol::frame`]; this is only
 //! the loop that feeds bytes to them.
 
+use std::collections::VecDeque;
 use std::io;
 
 use bytes::{Bytes, BytesMut};
@@ -26,12 +27,14 @@ pub enum ConnError {
 /// for several small frames, or a large part of a video frame, per read.
 const READ_RESERVE: usize = 64 * 1024;
 
-/// Read buffers kept for reuse once the frames cut from them are gone.
-const SPARE_BUFFERS: usize = 4;
-/// The largest read buffer made for a stream of large frames: room for
-/// several video frames, so that moving a partial frame into a new buffer
-/// happens once per several frames rather than for every one.
-const MAX_GROWN_BUFFER: usize = 1024 * 1024;
+/// Bytes of earlier read buffers kept for reuse once the frames cut from them
+/// are gone: about 30 camera frames, as many as are typically on their way to
+/// subscribers at once when a publisher streams video flat out.
+const SPARE_BYTES: usize = 2 * 1024 * 1024;
+/// Room beyond the frame being completed when a new read buffer is made, for
+/// the frames that follow it in the same read; the start of a frame that does
+/// not fit is copied to the next buffer.
+const READ_SLACK: usize = 16 * 1024;
 
 /// Reads whole frames from a transport.
 ///
@@ -47,8 +50,13 @@ const MAX_GROWN_BUFFER: usize = 1024 * 1024;
 pub struct FrameReader<R> {
     io: R,
     buf: BytesMut,
-    /// Earlier read buffers, empty, possibly still shared with frames in use.
-    spare: Vec<BytesMut>,
+    /// Size of `buf`'s allocation (its capacity shrinks as frames are cut off).
+    buf_size: usize,
+    /// Earlier read buffers with their allocation sizes, oldest first: empty,
+    /// possibly still shared with frames in use.
+    spare: VecDeque<(BytesMut, usize)>,
+    /// Sum of the sizes in `spare`, at most [`SPARE_BYTES`].
+    spare_bytes: usize,
     /// Read buffers allocated since the start (a figure for tests and tuning).
     allocated: u64,
     max_frame: usize,
@@ -59,7 +67,9 @@ impl<R: TransportRead> FrameReader<R> {
         FrameReader {
             io,
             buf: BytesMut::with_capacity(READ_RESERVE),
-            spare: Vec::new(),
+            buf_size: READ_RESERVE,
+            spare: VecDeque::new(),
+            spare_bytes: 0,
             allocated: 1,
             max_frame,
         }
@@ -109,16 +119,16 @@ impl<R: TransportRead> FrameReader<R> {
                 // maximum, so the room made is bounded.
                 let need = total.saturating_sub(self.buf.len());
                 if self.buf.capacity() - self.buf.len() < need {
-                    self.make_room(need, total);
+                    self.make_room(need);
                 }
                 Ok(None)
             }
         }
     }
 
-    /// Gives `buf` room for `need` more bytes of a frame of `total` bytes,
-    /// reusing a buffer whose frames are all gone where there is one.
-    fn make_room(&mut self, need: usize, total: usize) {
+    /// Gives `buf` room for `need` more bytes, reusing a buffer whose frames
+    /// are all gone where there is one.
+    fn make_room(&mut self, need: usize) {
         let held = self.buf.len();
         // Nothing cut from the current buffer is alive any more: it can take
         // the rest of the frame where it is (moving the partial frame to its
@@ -129,36 +139,49 @@ impl<R: TransportRead> FrameReader<R> {
         let wanted = held + need;
         // A failed `try_reclaim` leaves a buffer as it was; a successful one
         // makes the whole allocation available again.
-        let reused = self.spare.iter_mut().position(|b| b.try_reclaim(wanted));
-        let mut next = match reused {
-            Some(i) => self.spare.remove(i),
+        let reused = self
+            .spare
+            .iter_mut()
+            .position(|(b, _)| b.try_reclaim(wanted));
+        let (mut next, next_size) = match reused.and_then(|i| self.spare.remove(i)) {
+            Some((b, size)) => {
+                self.spare_bytes -= size;
+                (b, size)
+            }
             None => {
                 self.allocated += 1;
-                BytesMut::with_capacity(grown_capacity(wanted, total))
+                let size = grown_capacity(wanted);
+                (BytesMut::with_capacity(size), size)
             }
         };
         next.extend_from_slice(&self.buf);
         let mut old = std::mem::replace(&mut self.buf, next);
+        let old_size = std::mem::replace(&mut self.buf_size, next_size);
         old.clear();
-        if self.spare.len() == SPARE_BUFFERS {
-            // The oldest is the most likely to be free already, but a buffer
-            // that frames still pin after this many others is held by a slow
-            // consumer; let those frames own it.
-            self.spare.remove(0);
+        // The oldest spares are the most likely to be free already; one that
+        // frames still pin after this many others is held by a slow consumer,
+        // so those frames may own it alone.
+        while self.spare_bytes + old_size > SPARE_BYTES {
+            let Some((_, size)) = self.spare.pop_front() else {
+                break;
+            };
+            self.spare_bytes -= size;
         }
-        self.spare.push(old);
+        if old_size <= SPARE_BYTES {
+            self.spare_bytes += old_size;
+            self.spare.push_back((old, old_size));
+        }
     }
 }
 
-/// Capacity of a new read buffer that must hold `wanted` bytes now, while
-/// frames of `total` bytes arrive: room for about four such frames, at least
-/// the usual read size and at most [`MAX_GROWN_BUFFER`] unless one frame
-/// needs more.
-fn grown_capacity(wanted: usize, total: usize) -> usize {
-    total
-        .saturating_mul(4)
-        .clamp(READ_RESERVE, MAX_GROWN_BUFFER)
-        .max(wanted)
+/// Capacity of a new read buffer that must hold `wanted` bytes now: that
+/// and a little more, so the next frame's first bytes fit behind it, and at
+/// least the usual read size. Not more: a buffer lives as long as any frame
+/// cut from it, so one that held several video frames would stay pinned by
+/// whichever of them a subscriber still queues, multiplying the memory that
+/// queued frames really need.
+fn grown_capacity(wanted: usize) -> usize {
+    wanted.saturating_add(READ_SLACK).max(READ_RESERVE)
 }
 
 /// Payloads at least this large are sent from their own shared buffer

@@ -109,6 +109,41 @@ fn every_event_round_trips_with_random_values() {
     }
 }
 
+/// The split encodings the writers use for large payloads (a header, then the
+/// payload from its own buffer) are byte for byte the plain encodings.
+#[test]
+fn split_heads_with_their_payloads_match_the_plain_encoding() {
+    let base = base_seed("split heads");
+    let mut rng = StdRng::seed_from_u64(base);
+    for _ in 0..200 {
+        let len = rng.random_range(0..70_000usize);
+        let payload = Bytes::from((0..len).map(|_| rng.random::<u8>()).collect::<Vec<_>>());
+        let chan: i16 = rng.random_range(0..i16::MAX);
+        let mut split = BytesMut::new();
+        flow::protocol::codec::encode_publish_head(chan, payload.len(), &mut split);
+        split.extend_from_slice(&payload);
+        let plain = encoded_command(&Envelope {
+            req: 0,
+            command: Command::Publish {
+                chan,
+                payload: payload.clone(),
+            },
+        });
+        assert!(split == plain, "publish head for {len} bytes differs");
+        let (seq, ts_us) = (rng.random::<u64>(), rng.random::<u64>());
+        let mut split = BytesMut::new();
+        flow::protocol::codec::encode_data_head(chan, seq, ts_us, payload.len(), &mut split);
+        split.extend_from_slice(&payload);
+        let plain = encoded_event(&Event::Data {
+            chan,
+            seq,
+            ts_us,
+            payload,
+        });
+        assert!(split == plain, "data head for {len} bytes differs");
+    }
+}
+
 #[test]
 fn frames_appended_to_a_buffer_keep_their_boundaries() {
     let base = base_seed("appended");

@@ -33,6 +33,10 @@ struct Args {
     /// peak RSS above all, are the hub's own.
     #[arg(long)]
     with_modules: bool,
+    /// Threads of the hub's socket runtime (`hub.io_threads`) [default: the
+    /// server's configured default]
+    #[arg(long)]
+    io_threads: Option<usize>,
     /// redis-server binary (Debian package redis-server).
     #[arg(long, default_value = "redis-server")]
     redis_server: PathBuf,
@@ -114,7 +118,7 @@ async fn run_in(
         .agent
         .clone()
         .unwrap_or_else(servers::default_agent_bin);
-    let mut agent = servers::start_agent(&agent_bin, work, !args.with_modules)
+    let mut agent = servers::start_agent(&agent_bin, work, !args.with_modules, args.io_threads)
         .await
         .with_context(|| {
             format!(

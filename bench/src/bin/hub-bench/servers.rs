@@ -90,16 +90,27 @@ const MODULES: [&str; 6] = ["browser", "video_y", "audio_fft", "tts", "brain", "
 /// directory under `work`, and logs in `work/robot-agent.log`. With
 /// `hub_only`, every built-in module is switched off, so that the peak RSS is
 /// the hub's own and not that of OpenCV's cascades or espeak's voice data.
-pub async fn start_agent(bin: &Path, work: &Path, hub_only: bool) -> anyhow::Result<Agent> {
+/// `io_threads`, when given, overrides the hub's `hub.io_threads`.
+pub async fn start_agent(
+    bin: &Path,
+    work: &Path,
+    hub_only: bool,
+    io_threads: Option<usize>,
+) -> anyhow::Result<Agent> {
     let data = work.join("agent-data");
     std::fs::create_dir_all(&data)?;
-    let mut config_args: Vec<std::ffi::OsString> = Vec::new();
+    let mut text = String::new();
+    if let Some(n) = io_threads {
+        text.push_str(&format!("[hub]\nio_threads = {n}\n"));
+    }
     if hub_only {
-        let path = work.join("hub-only.toml");
-        let text: String = MODULES
-            .iter()
-            .map(|m| format!("[modules.{m}]\nenabled = false\n"))
-            .collect();
+        for m in MODULES {
+            text.push_str(&format!("[modules.{m}]\nenabled = false\n"));
+        }
+    }
+    let mut config_args: Vec<std::ffi::OsString> = Vec::new();
+    if !text.is_empty() {
+        let path = work.join("bench.toml");
         std::fs::write(&path, text)?;
         config_args.push("--config".into());
         config_args.push(path.into_os_string());

@@ -138,7 +138,7 @@ struct State {
 struct Inner {
     opts: ConnectOptions,
     addr: Option<FlowAddr>,
-    out: mpsc::Sender<Bytes>,
+    out: mpsc::Sender<OutFrame>,
     state: Mutex<State>,
     next_req: AtomicU32,
     events: broadcast::Sender<ClientEvent>,
@@ -542,10 +542,46 @@ impl Client {
     }
 }
 
-fn encode(req: ReqId, command: Command) -> Bytes {
+fn encode(req: ReqId, command: Command) -> OutFrame {
     let mut buf = BytesMut::new();
     encode_command(&Envelope { req, command }, &mut buf);
-    buf.freeze()
+    OutFrame {
+        head: buf.freeze(),
+        payload: Bytes::new(),
+    }
+}
+
+/// One frame on its way to the session's writer: encoded bytes, then a large
+/// publish's payload, which follows its header uncopied (the writer sends it
+/// from the caller's own buffer, as the hub does for subscribers).
+#[derive(Debug)]
+pub(crate) struct OutFrame {
+    head: Bytes,
+    payload: Bytes,
+}
+
+impl OutFrame {
+    /// A `Publish` on `chan`: the payload is copied next to its header when
+    /// small, and travels as its own piece when large.
+    fn publish(chan: ChanId, payload: Bytes) -> OutFrame {
+        if payload.len() < crate::connection::ZERO_COPY_MIN {
+            return encode(0, Command::Publish { chan, payload });
+        }
+        let mut head = BytesMut::with_capacity(16);
+        crate::protocol::codec::encode_publish_head(chan, payload.len(), &mut head);
+        OutFrame {
+            head: head.freeze(),
+            payload,
+        }
+    }
+
+    /// Hands the frame to `writer`'s next batch.
+    fn queue_on<W: crate::transport::TransportWrite>(self, writer: &mut crate::connection::FrameWriter<W>) {
+        writer.queue_encoded(self.head);
+        if !self.payload.is_empty() {
+            writer.queue_encoded(self.payload);
+        }
+    }
 }
 
 fn call_command(name: &str, payload: Bytes, timeout: Duration) -> Command {

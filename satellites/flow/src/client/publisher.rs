@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
 use bytes::Bytes;
 use tokio::sync::{mpsc, watch};
 
-use super::{Client, encode};
+use super::{Client, OutFrame, encode};
 use crate::error::FlowError;
 use crate::protocol::{CallId, ChanId, ChannelKind, Command};
 use crate::queue::lock;
@@ -148,12 +148,12 @@ impl Publisher {
         }
     }
 
-    fn frame(&self, payload: Bytes) -> Result<Bytes, FlowError> {
+    fn frame(&self, payload: Bytes) -> Result<OutFrame, FlowError> {
         let chan = self
             .owned
             .id()
             .ok_or_else(|| FlowError::NotReady(self.owned.name.clone()))?;
-        Ok(encode(0, Command::Publish { chan, payload }))
+        Ok(OutFrame::publish(chan, payload))
     }
 
     /// Messages `try_publish` dropped because the link was saturated.

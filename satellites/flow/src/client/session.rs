@@ -5,11 +5,10 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use bytes::Bytes;
 use tokio::sync::mpsc;
 use tracing::{debug, info, warn};
 
-use super::{ClientEvent, Hook, Inner, SessionInfo, encode};
+use super::{ClientEvent, Hook, Inner, OutFrame, SessionInfo, encode};
 use crate::connection::{Connection, FrameReader, FrameWriter};
 use crate::error::FlowError;
 use crate::protocol::{ChanRef, Command, ErrorCode, Event, PROTOCOL_VERSION, Reply, decode_event};
@@ -63,7 +62,7 @@ async fn handshake_step(
     req: u32,
     command: Command,
 ) -> Result<Reply, FlowError> {
-    writer.buffer().extend_from_slice(&encode(req, command));
+    encode(req, command).queue_on(writer);
     writer
         .flush()
         .await
@@ -94,7 +93,7 @@ async fn handshake_step(
 /// Runs sessions until the client is closed or reconnection is impossible.
 pub(super) async fn supervise(
     inner: Arc<Inner>,
-    mut out_rx: mpsc::Receiver<Bytes>,
+    mut out_rx: mpsc::Receiver<OutFrame>,
     first: Established,
 ) {
     let mut session = first;
@@ -164,7 +163,7 @@ const WRITE_BATCH: usize = 256 * 1024;
 async fn run(
     inner: &Arc<Inner>,
     session: Established,
-    out_rx: &mut mpsc::Receiver<Bytes>,
+    out_rx: &mut mpsc::Receiver<OutFrame>,
 ) -> String {
     let Established {
         mut reader,
@@ -189,10 +188,10 @@ async fn run(
     };
     let write_loop = async {
         while let Some(first) = out_rx.recv().await {
-            writer.queue_encoded(first);
+            first.queue_on(&mut writer);
             while writer.pending() < WRITE_BATCH {
                 match out_rx.try_recv() {
-                    Ok(more) => writer.queue_encoded(more),
+                    Ok(more) => more.queue_on(&mut writer),
                     Err(_) => break,
                 }
             }
@@ -210,7 +209,7 @@ async fn run(
             // queued) still go out before the connection closes, so a tool that
             // publishes and then closes does not lose its last messages.
             while let Ok(more) = out_rx.try_recv() {
-                writer.queue_encoded(more);
+                more.queue_on(&mut writer);
             }
             let _ = writer.flush().await;
             let _ = writer.shutdown().await;

@@ -181,6 +181,14 @@ pub fn encode_data_head(
     out.put_u64_le(ts_us);
 }
 
+/// Writes the header of a `Publish` command whose payload of `payload_len`
+/// bytes follows separately (sent from its own buffer, uncopied); together
+/// they are byte for byte what [`encode_command`] writes for it.
+pub fn encode_publish_head(chan: ChanId, payload_len: usize, out: &mut BytesMut) {
+    frame::put_header(out, op::PUBLISH, 0, 2 + payload_len);
+    out.put_i16_le(chan);
+}
+
 /// Writes a body after a placeholder header, then patches the header in.
 ///
 /// Encoding in place avoids a second buffer and a copy of every payload.
