@@ -68,6 +68,10 @@ struct Args {
     /// Messages allowed in flight to the slowest subscriber in the lossless flat-out mode.
     #[arg(long, default_value_t = 32)]
     window_msgs: u64,
+    /// Lossless flat-out windows per system and configuration, taken in turn;
+    /// the median is reported.
+    #[arg(long, default_value_t = 3)]
+    rounds: usize,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -156,26 +160,70 @@ async fn run_in(
         timing.rate_run
     );
     let mut outcomes = Vec::new();
+    let wants = |mode: &str| args.modes.iter().any(|m| m == mode);
     for payload in payloads {
         for &subs in &args.subs {
-            let mut rows = Vec::new();
-            let systems = [System::Hub, System::Redis, System::RawTcp]
+            let systems: Vec<System> = [System::Hub, System::Redis, System::RawTcp]
                 .into_iter()
                 .filter(|s| {
                     args.systems
                         .iter()
                         .any(|n| s.label().starts_with(n.as_str()))
-                });
-            for system in systems {
-                let server = match system {
-                    System::Hub => Some(&agent.server),
-                    System::Redis => Some(&redis.server),
-                    System::RawTcp => None,
-                };
-                if let Some(s) = server {
-                    s.reset_peak();
+                })
+                .collect();
+            let server_of = |system: System| match system {
+                System::Hub => Some(&agent.server),
+                System::Redis => Some(&redis.server),
+                System::RawTcp => None,
+            };
+            for s in [&agent.server, &redis.server] {
+                s.reset_peak();
+            }
+            // The throughput figure is the median of several windows taken in
+            // turn (hub, redis, raw, hub, ...): on a shared two-core machine the
+            // rates drift by a third over minutes, and alternating keeps the
+            // ratios between systems fair whatever the drift does.
+            let mut windows: Vec<Vec<modes::FlatOut>> = vec![Vec::new(); systems.len()];
+            if wants("window") {
+                for round in 0..args.rounds.max(1) {
+                    for (i, &system) in systems.iter().enumerate() {
+                        let flat = measure_window(
+                            round,
+                            system,
+                            &ends,
+                            server_of(system).map(|s| s.pid),
+                            payload,
+                            subs,
+                            timing,
+                        )
+                        .await
+                        .with_context(|| {
+                            format!("{} {} x {subs} subscribers", system.label(), payload.name)
+                        })?;
+                        windows[i].push(flat);
+                    }
                 }
-                let measured = measure(
+            }
+            if wants("window") {
+                let spread: Vec<String> = systems
+                    .iter()
+                    .zip(&windows)
+                    .map(|(s, w)| {
+                        let rates: Vec<String> =
+                            w.iter().map(|f| format!("{:.0}", f.delivered_per_s)).collect();
+                        format!("{} [{}]", s.label(), rates.join(", "))
+                    })
+                    .collect();
+                println!(
+                    "hub-bench: {} x {subs} lossless windows, msg/s in turn: {}",
+                    payload.name,
+                    spread.join("; ")
+                );
+            }
+            let mut rows = Vec::new();
+            for (i, &system) in systems.iter().enumerate() {
+                let server = server_of(system);
+                let mut measured = measure(
                     system,
                     &ends,
                     server.map(|s| s.pid),
@@ -188,6 +236,7 @@ async fn run_in(
                 .with_context(|| {
                     format!("{} {} x {subs} subscribers", system.label(), payload.name)
                 })?;
+                measured.flat = modes::median_by_rate(std::mem::take(&mut windows[i]));
                 let peak_rss = server.and_then(servers::Server::peak_rss);
                 rows.push(Measured {
                     peak_rss,
@@ -214,7 +263,30 @@ async fn run_in(
     Ok(())
 }
 
-/// Runs the three modes against one system, each on freshly connected clients.
+/// One lossless flat-out window against one system, on freshly connected clients.
+async fn measure_window(
+    round: usize,
+    system: System,
+    ends: &Endpoints,
+    server_pid: Option<u32>,
+    payload: &Payload,
+    subs: usize,
+    timing: Timing,
+) -> anyhow::Result<modes::FlatOut> {
+    // A fresh channel name per rig: the previous owner's channel may still be
+    // in the middle of being removed.
+    let channel = format!("Bench.{}.{subs}.window.{round}", payload.name);
+    let mut rig = Rig::connect(system, ends, &channel, subs).await?;
+    rig.watch_server(server_pid);
+    let flat = modes::windowed(&mut rig, &payload.bytes, timing).await;
+    rig.close().await;
+    // Let the server finish tearing the connections down before the next system.
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    flat
+}
+
+/// Runs the open-loop and fixed-rate modes against one system, each on
+/// freshly connected clients (the windowed mode runs in rounds, apart).
 async fn measure(
     system: System,
     ends: &Endpoints,
@@ -235,13 +307,6 @@ async fn measure(
         rate: Default::default(),
         peak_rss: None,
     };
-    if wants("window") {
-        let mut rig = Rig::connect(system, ends, &channel("window"), subs).await?;
-        rig.watch_server(server_pid);
-        let flat = modes::windowed(&mut rig, &payload.bytes, timing).await;
-        rig.close().await;
-        measured.flat = flat?;
-    }
     if wants("open") {
         let mut rig = Rig::connect(system, ends, &channel("open"), subs).await?;
         rig.watch_server(server_pid);

@@ -71,6 +71,16 @@ pub struct FlatOut {
     pub damaged: u64,
 }
 
+/// The run with the median delivery rate (the lower middle one of an even
+/// count); the default when there are none.
+pub fn median_by_rate(mut runs: Vec<FlatOut>) -> FlatOut {
+    runs.sort_by(|a, b| a.delivered_per_s.total_cmp(&b.delivered_per_s));
+    match runs.len() {
+        0 => FlatOut::default(),
+        n => runs[(n - 1) / 2],
+    }
+}
+
 /// Result of a fixed-rate run.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct FixedRate {

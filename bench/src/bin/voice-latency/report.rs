@@ -120,12 +120,12 @@ impl Figures {
             },
             Stage {
                 name: "asr",
-                how: "`vad` end received -> final transcript received (claim, whisper, submit, relay)",
+                how: "`vad` end received -> final transcript received (what is left of whisper's decode, submit, relay)",
                 values: of(RunFigures::asr),
             },
             Stage {
                 name: "asr_inference",
-                how: "the transcript's `processing_ms` (whisper alone, inside `asr`)",
+                how: "the transcript's `processing_ms` (whisper alone; a speculative decode starts at the pause, 160 ms into the hangover, so it overlaps `vad_hangover`)",
                 values: of(|r| r.processing_ms as f64),
             },
             Stage {
