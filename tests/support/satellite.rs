@@ -31,7 +31,9 @@ impl Satellite {
             .arg(name)
             .env(
                 "RUST_LOG",
-                std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info,whisper_rs=warn".into()),
+                std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| {
+                    "info,whisper_rs=warn,whisper_rs::whisper_logging_hook=off".into()
+                }),
             )
             .stdin(std::process::Stdio::null());
         let child = cmd.spawn().context("starting whisper-sat")?;

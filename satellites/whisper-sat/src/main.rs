@@ -4,11 +4,17 @@ mod cli;
 
 use clap::Parser;
 
+/// Logging when `RUST_LOG` is not set. whisper.cpp's own messages are left out: every speculative decode that the
+/// voice's return aborts makes it log "failed to encode" or "failed to decode" as an error, which is the expected
+/// end of that decode, and real failures reach the log as the satellite's own `transcription failed` errors.
+/// `RUST_LOG=info,whisper_rs=debug` shows them.
+const DEFAULT_LOG: &str = "info,whisper_rs=warn,whisper_rs::whisper_logging_hook=off";
+
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,whisper_rs=warn")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG)),
         )
         .with_writer(std::io::stderr)
         .init();
