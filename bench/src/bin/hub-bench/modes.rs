@@ -67,6 +67,9 @@ pub struct FlatOut {
     pub disconnected: u64,
     /// Server CPU time per delivered message in the window, in microseconds.
     pub server_cpu_us: Option<f64>,
+    /// This benchmark process's CPU time per delivered message in the window
+    /// (publisher and subscribers: the clients' side), in microseconds.
+    pub client_cpu_us: Option<f64>,
     /// Deliveries that arrived reordered, duplicated or unreadable (should be 0).
     pub damaged: u64,
 }
@@ -111,7 +114,7 @@ async fn flat_out(
     let subscribers = tally.subscribers() as u64;
     let start = Instant::now();
     let mut seq = 0u64;
-    let mut opened: Option<(Instant, u64, u64, Option<u64>)> = None;
+    let mut opened: Option<(Instant, u64, u64, Option<u64>, Option<u64>)> = None;
     let closed = loop {
         if let Some(w) = window
             && !tally.window_open(seq, w)
@@ -131,16 +134,19 @@ async fn flat_out(
             None if elapsed >= t.warmup => {
                 tally.set_recording(true);
                 let cpu = rig.server_cpu_ns();
-                opened = Some((Instant::now(), tally.totals().received, seq, cpu));
+                let own = crate::servers::cpu_ns(std::process::id());
+                opened = Some((Instant::now(), tally.totals().received, seq, cpu, own));
             }
-            Some((at, received, sent, cpu)) if at.elapsed() >= t.window => {
+            Some((at, received, sent, cpu, own)) if at.elapsed() >= t.window => {
                 tally.set_recording(false);
                 let secs = at.elapsed().as_secs_f64();
                 let got = tally.totals().received - received;
-                let cpu_us = cpu
-                    .zip(rig.server_cpu_ns())
-                    .map(|(a, b)| b.saturating_sub(a) as f64 / 1e3 / got.max(1) as f64);
-                break (got as f64 / secs, (seq - sent) as f64 / secs, cpu_us);
+                let per_delivery = |a: u64, b: u64| b.saturating_sub(a) as f64 / 1e3 / got.max(1) as f64;
+                let cpu_us = cpu.zip(rig.server_cpu_ns()).map(|(a, b)| per_delivery(a, b));
+                let own_us = own
+                    .zip(crate::servers::cpu_ns(std::process::id()))
+                    .map(|(a, b)| per_delivery(a, b));
+                break (got as f64 / secs, (seq - sent) as f64 / secs, cpu_us, own_us);
             }
             _ => {}
         }
@@ -153,6 +159,7 @@ async fn flat_out(
         delivered_per_s: closed.0,
         sent_per_s: closed.1,
         server_cpu_us: closed.2,
+        client_cpu_us: closed.3,
         latency: Latency::from_sorted(&tally.latencies()),
         drop_ratio: tally.missing(seq) as f64 / (seq * subscribers).max(1) as f64,
         server_drop_ratio: server_dropped.map(|d| d as f64 / (seq * subscribers).max(1) as f64),
