@@ -361,6 +361,59 @@ async fn a_subscriber_that_stops_reading_loses_old_data_while_another_gets_every
     Ok(())
 }
 
+/// A publisher that sends its last messages and leaves at once: a subscriber that has them queued at the hub (here
+/// one that had stopped reading) still gets every one of them, and only then hears that the channel is gone.
+#[tokio::test]
+async fn a_publisher_that_leaves_loses_none_of_what_subscribers_have_queued() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    // Queues deep enough that nothing is dropped: only the removal could lose messages.
+    let agent = Agent::with_config(
+        &dir,
+        "[hub]\nsubscriber_queue = 64\nsubscriber_queue_bytes = 67108864\n",
+    )
+    .await?;
+    let producer = agent.client("producer").await?;
+    let publisher = producer.publisher("Last.words", "{}").await?;
+    let mut sub = RawConn::login(agent.flow_tcp, agent.token(), true).await?;
+    let reply = sub
+        .request(Command::Subscribe {
+            chan: ChanRef::Name("Last.words".into()),
+        })
+        .await?;
+    assert!(reply.is_ok(), "{reply:?}");
+    until_subscribed(&publisher).await?;
+    // 32 MB while the subscriber does not read: more than the socket buffers between the hub and it can hold, so
+    // most of it is still in the hub's queue for that subscriber when the publisher goes.
+    let total = 64u64;
+    let body = vec![0xa5u8; 512 * 1024];
+    for n in 1..=total {
+        let mut payload = BytesMut::with_capacity(body.len());
+        payload.put_u64_le(n);
+        payload.extend_from_slice(&body[8..]);
+        publisher.publish(payload.freeze()).await?;
+    }
+    drop(publisher);
+    producer.close_and_wait(PATIENCE).await;
+    let mut seqs = Vec::new();
+    loop {
+        match sub.next_event(PATIENCE).await? {
+            Some(Event::Data { seq, payload, .. }) => {
+                assert_eq!(payload[..8], seq.to_le_bytes(), "message {seq} damaged");
+                seqs.push(seq);
+            }
+            Some(Event::ChannelRemoved { name, .. }) if name == "Last.words" => break,
+            Some(_) => {}
+            None => bail!("the hub closed the subscriber after {} messages", seqs.len()),
+        }
+    }
+    assert_eq!(
+        seqs,
+        (1..=total).collect::<Vec<_>>(),
+        "the subscriber did not get every message before the removal"
+    );
+    Ok(())
+}
+
 // ---------------------------------------------------------------- bad peers
 
 /// `len | op | req | body` with the length computed from the body.

@@ -623,8 +623,14 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
     if let Some(owner) = st.conns.get_mut(&ch.owner) {
         owner.owned.remove(&id);
     }
+    // Subscribers still get what they have queued (it was published before
+    // the removal), then the removal; everyone else hears of it at once.
+    let removed = Event::ChannelRemoved {
+        id,
+        name: ch.name.clone(),
+    };
     for (sub, outbox) in &ch.subscribers {
-        outbox.drop_lane(id);
+        outbox.push_after_lane(id, removed.clone());
         if let Some(c) = st.conns.get_mut(sub) {
             c.subs.remove(&id);
         }
@@ -645,11 +651,12 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
             reply_to(st, p.caller, p.req, Err(e));
         }
     }
-    let name = ch.name.clone();
-    broadcast(st, |_| Event::ChannelRemoved {
-        id,
-        name: name.clone(),
-    });
+    let subscribers: Vec<ConnId> = ch.subscribers.iter().map(|(c, _)| *c).collect();
+    for (conn, c) in &st.conns {
+        if c.is_async && !subscribers.contains(conn) {
+            c.outbox.push_control(removed.clone());
+        }
+    }
 }
 
 #[cfg(test)]

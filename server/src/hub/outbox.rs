@@ -12,6 +12,11 @@
 //!
 //! The writer drains control first, then the data lanes round-robin, so a busy
 //! video channel cannot starve an audio channel on the same connection.
+//!
+//! A removed channel's lane is not thrown away: what a subscriber has queued
+//! was published before the removal, so it is still sent, and the removal
+//! event follows the lane's last message ([`Outbox::push_after_lane`]). A
+//! publisher that sends its last messages and disconnects loses none of them.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Mutex;
@@ -51,6 +56,9 @@ struct Inner {
 struct Lane {
     queue: VecDeque<(Event, usize)>,
     bytes: usize,
+    /// The channel is gone: this event goes out right after the last queued
+    /// message, and the lane with it.
+    then: Option<Event>,
 }
 
 /// What `push_data` did.
@@ -102,6 +110,15 @@ impl Outbox {
             if inner.closed.is_some() {
                 return Pushed { dropped: 0 };
             }
+            // A lane still draining a removed channel cannot take a new
+            // channel's data (an id is reused only after 32768 others, so
+            // this is next to impossible): the old tail goes, its removal
+            // event first, as before lanes were drained.
+            if let Some(then) = inner.lanes.get_mut(&chan).and_then(|l| l.then.take()) {
+                inner.lanes.remove(&chan);
+                inner.ready.retain(|c| *c != chan);
+                inner.control.push_back(then);
+            }
             let lane = inner.lanes.entry(chan).or_default();
             let was_empty = lane.queue.is_empty();
             lane.queue.push_back((event, len));
@@ -130,6 +147,26 @@ impl Outbox {
         inner.ready.retain(|c| *c != chan);
     }
 
+    /// Queues `event` (a channel's removal) behind the messages still queued on
+    /// `chan`'s lane, or as a control event if the lane is empty. Returns false
+    /// (and closes the outbox) on control overflow, as [`Outbox::push_control`].
+    pub fn push_after_lane(&self, chan: ChanId, event: Event) -> bool {
+        {
+            let mut inner = lock(&self.inner);
+            if inner.closed.is_some() {
+                return false;
+            }
+            if let Some(lane) = inner.lanes.get_mut(&chan)
+                && !lane.queue.is_empty()
+            {
+                lane.then = Some(event);
+                return true;
+            }
+            inner.lanes.remove(&chan);
+        }
+        self.push_control(event)
+    }
+
     /// Moves queued events into `out`: all control events, then data round-robin
     /// until about `max_bytes` of payload are taken.
     pub fn pop_batch(&self, out: &mut Vec<Event>, max_bytes: usize) {
@@ -152,6 +189,9 @@ impl Outbox {
             out.push(event);
             if more {
                 inner.ready.push_back(chan);
+            } else if let Some(then) = lane.then.take() {
+                out.push(then);
+                inner.lanes.remove(&chan);
             }
         }
     }
@@ -244,6 +284,39 @@ mod tests {
             .collect();
         // Control first; lane 1 lost seq 1; lanes alternate.
         assert_eq!(seqs, vec![(-1, 0), (1, 2), (2, 1), (1, 3)]);
+    }
+
+    #[test]
+    fn a_removed_channels_queued_data_goes_out_before_its_removal() {
+        let ob = Outbox::new(OutboxLimits {
+            lane_msgs: 8,
+            lane_bytes: 1000,
+            control_msgs: 8,
+        });
+        for seq in 1..=3 {
+            ob.push_data(1, data(1, seq), 1);
+        }
+        ob.push_data(2, data(2, 1), 1);
+        assert!(ob.push_after_lane(1, Event::StopPublishing { id: 1 }));
+        // An empty lane: the event goes out at once, as a control event.
+        assert!(ob.push_after_lane(3, Event::StopPublishing { id: 3 }));
+        let mut out = Vec::new();
+        ob.pop_batch(&mut out, 1 << 20);
+        let seen: Vec<_> = out
+            .iter()
+            .map(|e| match e {
+                Event::Data { chan, seq, .. } => (*chan, *seq),
+                Event::StopPublishing { id } => (*id, 0),
+                _ => (-1, 0),
+            })
+            .collect();
+        assert_eq!(seen, vec![(3, 0), (1, 1), (2, 1), (1, 2), (1, 3), (1, 0)]);
+        assert!(ob.is_drained());
+        // The lane is gone with its removal: new data on the id starts afresh.
+        ob.push_data(1, data(1, 9), 1);
+        out.clear();
+        ob.pop_batch(&mut out, 1 << 20);
+        assert_eq!(out.len(), 1);
     }
 
     #[test]

@@ -534,8 +534,16 @@ fn disconnect_removes_channels_tells_everyone_and_fails_pending_calls() {
     hub.disconnect(owner);
     assert!(hub.list_channels().is_empty());
     let sub_events = drain(&sub_ob);
-    // Queued data of the removed channel is discarded; the removals are announced.
-    assert!(data_seqs(&sub_events).is_empty(), "{sub_events:?}");
+    // Data the subscriber had queued was published before the removal: it is
+    // still delivered, and the removal of its channel comes after it.
+    assert_eq!(data_seqs(&sub_events), vec![2], "{sub_events:?}");
+    let data_at = sub_events
+        .iter()
+        .position(|e| matches!(e, Event::Data { .. }));
+    let removed_at = sub_events
+        .iter()
+        .position(|e| matches!(e, Event::ChannelRemoved { id, .. } if *id == s));
+    assert!(data_at < removed_at, "{sub_events:?}");
     for (id, name) in [(s, "S"), (v, "V")] {
         assert!(
             sub_events.contains(&Event::ChannelRemoved {
