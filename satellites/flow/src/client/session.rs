@@ -158,6 +158,8 @@ async fn reconnect(inner: &Arc<Inner>) -> Option<Established> {
 
 /// Upper bound for one batched write.
 const WRITE_BATCH: usize = 256 * 1024;
+/// How long a closing client waits for the hub to close its side.
+const LINGER: Duration = Duration::from_secs(2);
 
 /// Runs the read and write loops of one session; returns why it ended.
 async fn run(
@@ -213,6 +215,15 @@ async fn run(
             }
             let _ = writer.flush().await;
             let _ = writer.shutdown().await;
+            // Then read (and drop) what the hub still sends until it closes its
+            // side. Closing a socket with unread data in it makes the kernel
+            // reset the connection instead, and a reset can throw away frames
+            // the hub has received but not read yet: a publisher's last
+            // messages, lost one time in six in tests/hub.rs.
+            let _ = tokio::time::timeout(LINGER, async {
+                while let Ok(Some(_)) = reader.read_frame().await {}
+            })
+            .await;
             "client closed".to_string()
         }
     }
