@@ -78,6 +78,8 @@ pub struct Decoded {
     pub avg_logprob: f32,
     pub tokens: usize,
     pub processing: Duration,
+    /// The fitted encoder window looped and the text comes from a second decode with the full 30 s window.
+    pub full_window_retry: bool,
 }
 
 /// Why an output was thrown away.
@@ -199,6 +201,7 @@ impl Transcriber {
             } else {
                 tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
                 decoded = self.decode_with(audio, AudioContext::Full, abort)?;
+                decoded.full_window_retry = true;
             }
         }
         decoded.processing = started.elapsed();
@@ -280,6 +283,7 @@ impl Transcriber {
             },
             tokens,
             processing: started.elapsed(),
+            full_window_retry: false,
         })
     }
 }
@@ -413,6 +417,7 @@ mod tests {
             avg_logprob,
             tokens: 3,
             processing: Duration::ZERO,
+            full_window_retry: false,
         }
     }
 

@@ -25,6 +25,10 @@ pub struct TranscriptMessage {
     /// (the very audio it ended with). Only present when true.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub speculative: bool,
+    /// The fitted encoder window made whisper loop, and the text comes from a second decode with the full 30 s
+    /// window, which costs several times more (`processing_ms` includes both). Only present when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub full_window_retry: bool,
 }
 
 /// Which way voice activity changed.
@@ -104,11 +108,13 @@ mod tests {
             processing_ms: 3,
             is_final: true,
             speculative: false,
+            full_window_retry: false,
         };
         let v: serde_json::Value = serde_json::to_value(&t)?;
         assert_eq!(v["final"], true);
         assert_eq!(v["utterance"], "u1");
         assert!(v.get("speculative").is_none());
+        assert!(v.get("full_window_retry").is_none());
         assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, t);
         let speculative = TranscriptMessage {
             speculative: true,
@@ -117,6 +123,13 @@ mod tests {
         let v = serde_json::to_value(&speculative)?;
         assert_eq!(v["speculative"], true);
         assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, speculative);
+        let retried = TranscriptMessage {
+            full_window_retry: true,
+            ..speculative
+        };
+        let v = serde_json::to_value(&retried)?;
+        assert_eq!(v["full_window_retry"], true);
+        assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, retried);
         Ok(())
     }
 }

@@ -26,9 +26,20 @@ pub struct RunFigures {
     pub first_pcm: Instant,
     /// Whisper's inference time as the satellite reports it.
     pub processing_ms: u64,
+    /// How the satellite got the text, as its transcript says.
+    pub decode: Decode,
     /// The satellite's end of speech (the event's `at_ms`) minus ours (wall clock).
     pub vad_end_vs_ours_ms: f64,
     pub text: String,
+}
+
+/// How a transcript was decoded (its `speculative` and `full_window_retry` flags).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Decode {
+    /// Decoded during the hangover, from the audio the utterance paused with.
+    pub speculative: bool,
+    /// The fitted window looped; the text is from a second decode with the full window.
+    pub full_window_retry: bool,
 }
 
 fn ms(from: Instant, to: Instant) -> f64 {
@@ -55,11 +66,13 @@ impl RunFigures {
     /// One line for the progress output.
     pub fn line(&self) -> String {
         format!(
-            "v2v {:>6.1} ms = vad {:>5.1} + asr {:>5.1} (whisper {:>3} ms) + rules {:>4.1} + tts {:>4.1}   \"{}\"",
+            "v2v {:>6.1} ms = vad {:>5.1} + asr {:>5.1} (whisper {:>3} ms{}{}) + rules {:>4.1} + tts {:>4.1}   \"{}\"",
             self.voice_to_voice(),
             self.hangover(),
             self.asr(),
             self.processing_ms,
+            if self.decode.speculative { ", speculative" } else { "" },
+            if self.decode.full_window_retry { ", full-window retry" } else { "" },
             self.rules(),
             self.first_chunk(),
             self.text

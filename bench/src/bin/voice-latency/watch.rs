@@ -8,7 +8,7 @@ use bytes::Bytes;
 use flow::{Client, Subscription};
 use serde_json::Value;
 
-use crate::report::RunFigures;
+use crate::report::{Decode, RunFigures};
 
 /// Subscriptions to what the agent says about an utterance.
 pub struct Watcher {
@@ -66,7 +66,7 @@ impl Watcher {
         deadline: Instant,
     ) -> anyhow::Result<RunFigures> {
         let mut vad_end: Option<(Instant, String, u64)> = None;
-        let mut transcript: Option<(Instant, String, u64)> = None;
+        let mut transcript: Option<(Instant, String, u64, Decode)> = None;
         let mut rules: Option<Instant> = None;
         // The rule changes seen after the transcript, to say why a run found none of its own.
         let mut other_rules: Vec<String> = Vec::new();
@@ -99,11 +99,15 @@ impl Watcher {
                             at,
                             text.trim().to_owned(),
                             v["processing_ms"].as_u64().unwrap_or(0),
+                            Decode {
+                                speculative: v["speculative"].as_bool().unwrap_or(false),
+                                full_window_retry: v["full_window_retry"].as_bool().unwrap_or(false),
+                            },
                         ));
                     }
                 }
                 Seen::Rules(v) => {
-                    if let Some((_, text, _)) = &transcript
+                    if let Some((_, text, _, _)) = &transcript
                         && rules.is_none()
                     {
                         if heard(&v, text) {
@@ -114,7 +118,7 @@ impl Watcher {
                     }
                 }
                 Seen::Speech => {
-                    if let (Some(rules), Some((t_at, text, processing_ms)), Some((v_at, _, vad_ms))) =
+                    if let (Some(rules), Some((t_at, text, processing_ms, decode)), Some((v_at, _, vad_ms))) =
                         (rules, &transcript, &vad_end)
                         && at >= rules
                     {
@@ -125,6 +129,7 @@ impl Watcher {
                             rules,
                             first_pcm: at,
                             processing_ms: *processing_ms,
+                            decode: *decode,
                             vad_end_vs_ours_ms: *vad_ms as f64 - wall_ms(end_of_speech),
                             text: text.clone(),
                         });

@@ -393,6 +393,7 @@ async fn finish(client: &Client, satellite: &str, model: &str, f: &Finished, led
                 processing_ms: d.processing.as_millis() as u64,
                 is_final: true,
                 speculative: f.speculative,
+                full_window_retry: d.full_window_retry,
             };
             tracing::info!(id = %u.id, ms = msg.processing_ms, speculative = f.speculative, text = %msg.text, "transcribed");
             let payload = serde_json::to_vec(&msg).unwrap_or_default();
