@@ -571,8 +571,13 @@ fn owned_channel(st: &mut State, conn: ConnId, id: ChanId) -> HubResult<&mut Cha
 
 /// Queues an event for every asynchronous connection.
 fn broadcast(st: &State, event: impl Fn(ConnId) -> Event) {
+    broadcast_except(st, &[], event);
+}
+
+/// [`broadcast`] to every async connection but those in `skip`.
+fn broadcast_except(st: &State, skip: &[ConnId], event: impl Fn(ConnId) -> Event) {
     for (id, c) in &st.conns {
-        if c.is_async {
+        if c.is_async && !skip.contains(id) {
             c.outbox.push_control(event(*id));
         }
     }
@@ -652,11 +657,7 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
         }
     }
     let subscribers: Vec<ConnId> = ch.subscribers.iter().map(|(c, _)| *c).collect();
-    for (conn, c) in &st.conns {
-        if c.is_async && !subscribers.contains(conn) {
-            c.outbox.push_control(removed.clone());
-        }
-    }
+    broadcast_except(st, &subscribers, |_| removed.clone());
 }
 
 #[cfg(test)]

@@ -110,16 +110,23 @@ impl Outbox {
             if inner.closed.is_some() {
                 return Pushed { dropped: 0 };
             }
+            let Inner {
+                lanes,
+                ready,
+                control,
+                ..
+            } = &mut *inner;
+            let lane = lanes.entry(chan).or_default();
             // A lane still draining a removed channel cannot take a new
             // channel's data (an id is reused only after 32768 others, so
             // this is next to impossible): the old tail goes, its removal
             // event first, as before lanes were drained.
-            if let Some(then) = inner.lanes.get_mut(&chan).and_then(|l| l.then.take()) {
-                inner.lanes.remove(&chan);
-                inner.ready.retain(|c| *c != chan);
-                inner.control.push_back(then);
+            if let Some(then) = lane.then.take() {
+                lane.queue.clear();
+                lane.bytes = 0;
+                ready.retain(|c| *c != chan);
+                control.push_back(then);
             }
-            let lane = inner.lanes.entry(chan).or_default();
             let was_empty = lane.queue.is_empty();
             lane.queue.push_back((event, len));
             lane.bytes += len;
@@ -133,7 +140,7 @@ impl Outbox {
                 }
             }
             if was_empty {
-                inner.ready.push_back(chan);
+                ready.push_back(chan);
             }
         }
         self.notify.notify_one();

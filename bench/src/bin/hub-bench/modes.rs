@@ -104,6 +104,23 @@ pub async fn open_loop(rig: &mut Rig, template: &[u8], t: Timing) -> anyhow::Res
     flat_out(rig, template, t, None).await
 }
 
+/// Where the measurement window of a flat-out run opened.
+#[derive(Debug, Clone, Copy)]
+struct WindowStart {
+    at: Instant,
+    /// Deliveries counted so far.
+    received: u64,
+    /// Messages published so far.
+    sent: u64,
+    server_cpu_ns: Option<u64>,
+    own_cpu_ns: Option<u64>,
+}
+
+/// CPU time used so far by this benchmark process (publisher and subscribers).
+fn own_cpu_ns() -> Option<u64> {
+    crate::servers::cpu_ns(std::process::id())
+}
+
 async fn flat_out(
     rig: &mut Rig,
     template: &[u8],
@@ -114,7 +131,7 @@ async fn flat_out(
     let subscribers = tally.subscribers() as u64;
     let start = Instant::now();
     let mut seq = 0u64;
-    let mut opened: Option<(Instant, u64, u64, Option<u64>, Option<u64>)> = None;
+    let mut opened: Option<WindowStart> = None;
     let closed = loop {
         if let Some(w) = window
             && !tally.window_open(seq, w)
@@ -133,20 +150,28 @@ async fn flat_out(
         match opened {
             None if elapsed >= t.warmup => {
                 tally.set_recording(true);
-                let cpu = rig.server_cpu_ns();
-                let own = crate::servers::cpu_ns(std::process::id());
-                opened = Some((Instant::now(), tally.totals().received, seq, cpu, own));
+                opened = Some(WindowStart {
+                    at: Instant::now(),
+                    received: tally.totals().received,
+                    sent: seq,
+                    server_cpu_ns: rig.server_cpu_ns(),
+                    own_cpu_ns: own_cpu_ns(),
+                });
             }
-            Some((at, received, sent, cpu, own)) if at.elapsed() >= t.window => {
+            Some(w) if w.at.elapsed() >= t.window => {
                 tally.set_recording(false);
-                let secs = at.elapsed().as_secs_f64();
-                let got = tally.totals().received - received;
-                let per_delivery = |a: u64, b: u64| b.saturating_sub(a) as f64 / 1e3 / got.max(1) as f64;
-                let cpu_us = cpu.zip(rig.server_cpu_ns()).map(|(a, b)| per_delivery(a, b));
-                let own_us = own
-                    .zip(crate::servers::cpu_ns(std::process::id()))
-                    .map(|(a, b)| per_delivery(a, b));
-                break (got as f64 / secs, (seq - sent) as f64 / secs, cpu_us, own_us);
+                let secs = w.at.elapsed().as_secs_f64();
+                let got = tally.totals().received - w.received;
+                let per_delivery = |a: Option<u64>, b: Option<u64>| {
+                    a.zip(b)
+                        .map(|(a, b)| b.saturating_sub(a) as f64 / 1e3 / got.max(1) as f64)
+                };
+                break (
+                    got as f64 / secs,
+                    (seq - w.sent) as f64 / secs,
+                    per_delivery(w.server_cpu_ns, rig.server_cpu_ns()),
+                    per_delivery(w.own_cpu_ns, own_cpu_ns()),
+                );
             }
             _ => {}
         }
