@@ -5,6 +5,13 @@ SHELL := /bin/bash
 CARGO ?= cargo
 TARGET_DIR := $(or $(CARGO_TARGET_DIR),$(CURDIR)/target)
 
+# The shared fixtures (recordings, images) live beside the repository; a clone made elsewhere finds them beside
+# the one it was cloned from. An AGENT_FIXTURES already set wins.
+FIXTURES_FOUND := $(shell scripts/fixtures.sh)
+ifneq ($(FIXTURES_FOUND),)
+export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
+endif
+
 .PHONY: run test bench fuzz deps model model-release build build-debug clean
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
