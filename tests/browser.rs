@@ -46,7 +46,7 @@ fn artifacts_dir() -> PathBuf {
 /// The page's URL in kiosk mode (microphone and camera start on their own; no echo cancellation, so the fixture
 /// reaches the hub as recorded).
 fn kiosk_url(agent: &Agent) -> String {
-    format!("http://{}/?autostart=1&aec=0", agent.http)
+    agent.page_url("autostart=1&aec=0")
 }
 
 /// Waits until the page holds the role and has sent at least one camera frame and one audio chunk.

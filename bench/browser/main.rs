@@ -173,7 +173,7 @@ async fn measure(agent: &Agent, hub: &flow::Client, window: Duration) -> anyhow:
 }
 
 fn kiosk_url(agent: &Agent) -> String {
-    format!("http://{}/?autostart=1&aec=0", agent.http)
+    agent.page_url("autostart=1&aec=0")
 }
 
 async fn browser_phase(

@@ -246,6 +246,15 @@ impl Agent {
         &self.token
     }
 
+    /// The page's URL with `query` (e.g. `"autostart=1"`, or `""`), carrying whatever credential the page needs.
+    pub fn page_url(&self, query: &str) -> String {
+        if query.is_empty() {
+            format!("http://{}/", self.http)
+        } else {
+            format!("http://{}/?{query}", self.http)
+        }
+    }
+
     /// Options for a satellite named `name` that does not reconnect (tests say when they want that).
     pub fn options(&self, name: &str) -> ConnectOptions {
         let mut opts = ConnectOptions::new(name, self.token.clone());
