@@ -39,6 +39,7 @@ fuzz:
 
 deps:
 	scripts/deps.sh
+	scripts/web-deps.sh
 
 model:
 	scripts/model.sh
