@@ -1,0 +1,248 @@
+//! The 3D avatar: the generated head (assets/avatar.glb) rendered with three.js, driven like the 2D face.
+//
+// Same commands and debug fields as avatar.js (blink, lookAt, setMood, scheduleVisemes, stopSpeech,
+// debugState), and the same controllers (blink.js, gaze.js, moods.js), so both renderers behave alike and the
+// same tests run against either. What differs: visemes are morph targets blended by viseme-mix.js on the audio
+// clock, eyes are meshes that rotate, and the head turns on the neck (rig3d.js maps one to the other).
+
+import * as THREE from "three";
+import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
+import { BlinkController } from "./blink.js";
+import { GazeController } from "./gaze.js";
+import { expression } from "./moods.js";
+import { VisemeTrack } from "./viseme-track.js";
+import { VisemeMixer } from "./viseme-mix.js";
+import { rig } from "./rig3d.js";
+import { mouthShape } from "./visemes.js";
+
+const MOOD_TAU_MS = 160;
+/** As on the 2D face: between blinks and speech 30 fps is smooth, and halves the cost on GPU-less machines. */
+const CALM_FRAME_MS = 32;
+const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
+const VIEW_HEIGHT_M = 0.32; // what the stage shows of the avatar: hair to upper chest, like the 2D face
+
+export class Avatar3D {
+  /** Loads the model from `url`; rejects when WebGL or the model is unavailable (the caller falls back to 2D). */
+  static async create(canvas, audioClock, url = "assets/avatar.glb") {
+    const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, alpha: true, powerPreference: "low-power" });
+    const gltf = await new GLTFLoader().loadAsync(url);
+    return new Avatar3D(canvas, audioClock, renderer, gltf);
+  }
+
+  constructor(canvas, audioClock, renderer, gltf) {
+    this.canvas = canvas;
+    this.audioClock = audioClock;
+    this.renderer = renderer;
+    this.blinks = new BlinkController();
+    this.gaze = new GazeController();
+    this.track = new VisemeTrack();
+    this.mixer = new VisemeMixer();
+    this.moodName = "neutral";
+    this.moodTarget = expression("neutral");
+    this.mood = { ...this.moodTarget };
+    this.viseme = "sil";
+    this.weights = { sil: 1 };
+    this.jaw = 0;
+    this.eyelid = 1;
+    this.last = performance.now();
+    this.lastDraw = 0;
+    this.frames = 0;
+    this.trace = [];
+    this.blinkStarts = [];
+    this.wasBlinking = false;
+
+    renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+    renderer.outputColorSpace = THREE.SRGBColorSpace;
+    renderer.toneMapping = THREE.NeutralToneMapping;
+    renderer.toneMappingExposure = 1.05;
+    renderer.setClearColor(0x000000, 0); // the stage's own gradient shows through
+
+    this.scene = new THREE.Scene();
+    this.root = gltf.scene;
+    this.scene.add(this.root);
+    this.extras = gltf.parser.json.extras ?? {};
+    const byName = (n) => {
+      const o = this.root.getObjectByName(n);
+      if (!o) throw new Error(`avatar model has no ${n}`);
+      return o;
+    };
+    this.head = byName("Head");
+    this.body = byName("Body");
+    this.neck = byName("Neck");
+    this.eyes = [byName("EyeLeft"), byName("EyeRight")];
+    this.headRest = this.head.position.clone();
+    /** Every mesh with morph targets, and its dictionary, so one weight name drives all meshes that have it. */
+    this.morphMeshes = [];
+    this.root.traverse((o) => {
+      if (o.isMesh && o.morphTargetDictionary) this.morphMeshes.push(o);
+      if (o.isMesh) o.frustumCulled = false; // morphs move vertices outside the rest bounds
+    });
+    this.mouthMesh = this.morphMeshes.find((o) => o.morphTargetDictionary.viseme_aa !== undefined);
+    this.lidMesh = this.morphMeshes.find((o) => o.morphTargetDictionary.eyeBlinkLeft !== undefined);
+
+    // Soft light: a warm sky and a cool floor, a key from the viewer's upper left (where the 2D face's highlights
+    // are), a cool fill from the right, and a teal rim from behind that separates the hair from the dark stage.
+    this.scene.add(new THREE.HemisphereLight(0xfff3ea, 0x6b5560, 1.4));
+    const key = new THREE.DirectionalLight(0xfff4ec, 2.1);
+    key.position.set(-0.6, 0.9, 1.2);
+    const fill = new THREE.DirectionalLight(0xcfe2ff, 0.55);
+    fill.position.set(1, 0.1, 0.7);
+    const rim = new THREE.DirectionalLight(0x7fe6d8, 0.8);
+    rim.position.set(0.4, 0.6, -1);
+    this.scene.add(key, fill, rim);
+
+    this.camera = new THREE.PerspectiveCamera(22, 1, 0.05, 5);
+    const c = this.extras.eyeCentre ?? [0, 0.16, 0.08];
+    this.lookY = c[1] - 0.04;
+    this.size = { w: 0, h: 0 };
+    const fit = () => {
+      const w = canvas.clientWidth;
+      const h = canvas.clientHeight;
+      if (w === 0 || h === 0) return;
+      this.size = { w, h };
+      renderer.setSize(w, h, false);
+      this.camera.aspect = w / h;
+      // Fit VIEW_HEIGHT_M into the smaller of the two sides, as the 2D face fits its 1000 units.
+      const half = ((this.camera.fov / 2) * Math.PI) / 180;
+      const fitH = VIEW_HEIGHT_M / Math.min(1, w / h);
+      const dist = fitH / 2 / Math.tan(half);
+      this.camera.position.set(0, this.lookY + 0.012, dist);
+      this.camera.lookAt(0, this.lookY, 0);
+      this.camera.updateProjectionMatrix();
+      this.lastDraw = 0; // redraw at once
+    };
+    new ResizeObserver(fit).observe(canvas);
+    fit();
+
+    this.frame = this.frame.bind(this);
+    requestAnimationFrame(this.frame);
+  }
+
+  blink(phases, fromServer = true) {
+    this.blinks.blink(performance.now(), phases, fromServer);
+  }
+
+  lookAt(x, y) {
+    this.gaze.look(performance.now(), x, y);
+  }
+
+  setMood(name, intensity = 1) {
+    this.moodName = name;
+    this.moodTarget = expression(name, intensity);
+  }
+
+  scheduleVisemes(utterance, startS, items) {
+    this.track.add(utterance, startS, items);
+    this.mixer.add(utterance, startS, items);
+  }
+
+  stopSpeech(utterance) {
+    this.track.clear(utterance);
+    this.mixer.clear(utterance);
+  }
+
+  frame(now) {
+    requestAnimationFrame(this.frame);
+    const busy = this.blinks.current !== null || this.mixer.pending > 0;
+    if (!busy && now - this.lastDraw < CALM_FRAME_MS) return;
+    const dt = Math.min(100, Math.max(0, now - this.last));
+    this.last = now;
+    this.lastDraw = now;
+    const t0 = performance.now();
+    this.step(now, dt);
+    if (this.size.w > 0) this.renderer.render(this.scene, this.camera);
+    const ms = performance.now() - t0;
+    this.drawMs = this.drawMs === undefined ? ms : this.drawMs * 0.95 + ms * 0.05;
+    this.frames += 1;
+  }
+
+  step(now, dt) {
+    const km = 1 - Math.exp(-dt / MOOD_TAU_MS);
+    for (const k of Object.keys(this.mood)) this.mood[k] += (this.moodTarget[k] - this.mood[k]) * km;
+    const g = this.gaze.update(now, dt);
+    this.g = g;
+    const blink = this.blinks.update(now);
+    if (this.blinks.current && !this.wasBlinking) {
+      this.blinkStarts.push(Math.round(this.blinks.current.start));
+      if (this.blinkStarts.length > 64) this.blinkStarts.shift();
+    }
+    this.wasBlinking = this.blinks.current !== null;
+    // The same eyelid figure as the 2D face reports (the blink narrowed by squint and by looking down).
+    const lidBase = Math.max(0.1, Math.min(1.08, 1 - this.mood.squint - Math.max(0, g.eyeY) * 0.15));
+    this.eyelid = blink * lidBase;
+
+    const audioNow = this.audioClock();
+    this.viseme = this.track.at(audioNow);
+    this.weights = this.mixer.weights(audioNow);
+    const r = rig({ gaze: g, blink, mood: this.mood, visemes: this.weights, nowMs: now });
+    this.jaw = r.jaw;
+    this.rigState = r;
+
+    for (const mesh of this.morphMeshes) {
+      const dict = mesh.morphTargetDictionary;
+      const inf = mesh.morphTargetInfluences;
+      inf.fill(0);
+      for (const [name, w] of Object.entries(r.morphs)) {
+        const i = dict[name];
+        if (i !== undefined) inf[i] = w;
+      }
+    }
+    for (const eye of this.eyes) eye.rotation.set(r.eyes.pitch, r.eyes.yaw, 0, "YXZ");
+    this.head.rotation.set(r.head.pitch, r.head.yaw, r.head.roll, "YXZ");
+    this.head.position.set(this.headRest.x, this.headRest.y + r.breath * 0.0008, this.headRest.z);
+    // Breathing: the chest rises and the shoulders lift a little; the neck follows.
+    this.body.scale.set(1 + r.breath * 0.004, 1 + r.breath * 0.006, 1 + r.breath * 0.006);
+    this.neck.position.y = r.breath * 0.0008;
+
+    const mouth = this.mouthMesh;
+    const lids = this.lidMesh;
+    const trace = {
+      t: Math.round(now * 10) / 10,
+      a: audioNow,
+      jaw: this.jaw,
+      open: mouth ? this.morphOpen(mouth) : 0,
+      v: this.viseme,
+      blink: lids ? lids.morphTargetInfluences[lids.morphTargetDictionary.eyeBlinkLeft] : 0,
+      eyeYaw: this.eyes[0].rotation.y,
+      headYaw: this.head.rotation.y,
+    };
+    this.trace.push(trace);
+    if (this.trace.length > TRACE_FRAMES) this.trace.shift();
+  }
+
+  /** The mouth opening the mesh really has: its viseme and jaw morph influences, weighted by each one's jaw. */
+  morphOpen(mesh) {
+    const dict = mesh.morphTargetDictionary;
+    const inf = mesh.morphTargetInfluences;
+    let open = (inf[dict.jawOpen] ?? 0) * 1;
+    for (const [name, i] of Object.entries(dict)) {
+      if (name.startsWith("viseme_")) open += inf[i] * mouthShape(name.slice(7)).jaw;
+    }
+    return Math.min(1, open);
+  }
+
+  /** A snapshot for `window.agentDebug`, with the same fields as the 2D face's and the 3D ones after them. */
+  debugState() {
+    const r = this.rigState;
+    return {
+      eyelid: this.eyelid,
+      blinks: this.blinks.completed,
+      blinkOwner: this.blinks.owner,
+      gaze: { ...this.gaze.target },
+      gazeCommands: this.gaze.commands,
+      eyeOffset: { x: this.gaze.eye.x, y: this.gaze.eye.y },
+      head: { yaw: this.g?.yaw ?? 0, pitch: (this.g?.pitch ?? 0) * 0.6 },
+      mood: this.moodName,
+      viseme: this.viseme,
+      jaw: this.jaw,
+      drawMs: this.drawMs ?? 0,
+      renderer: "3d",
+      frames: this.frames,
+      eyeRotation: { yaw: this.eyes[0].rotation.y, pitch: this.eyes[0].rotation.x },
+      headRotation: { yaw: this.head.rotation.y, pitch: this.head.rotation.x, roll: this.head.rotation.z },
+      morphs: r ? { ...r.morphs } : {},
+      trace: this.trace.slice(),
+      blinkStarts: this.blinkStarts.slice(),
+    };
+  }
+}
