@@ -231,11 +231,26 @@ export function readGlb(bytes) {
   return { json, bin };
 }
 
-/** The float data of accessor `index` of a parsed GLB. */
+/** The float data of accessor `index` of a parsed GLB (dense or sparse). */
 export function accessorFloats(glb, index) {
   const acc = glb.json.accessors[index];
-  const bv = glb.json.bufferViews[acc.bufferView];
   const width = acc.type === "VEC3" ? 3 : acc.type === "VEC4" ? 4 : 1;
-  const start = glb.bin.byteOffset + bv.byteOffset + (acc.byteOffset ?? 0);
-  return new Float32Array(glb.bin.buffer.slice(start, start + acc.count * width * 4));
+  const slice = (bufferView, bytes) => {
+    const bv = glb.json.bufferViews[bufferView];
+    const start = glb.bin.byteOffset + bv.byteOffset;
+    return glb.bin.buffer.slice(start, start + bytes);
+  };
+  const out = acc.bufferView === undefined
+    ? new Float32Array(acc.count * width)
+    : new Float32Array(slice(acc.bufferView, acc.count * width * 4));
+  if (acc.sparse) {
+    const n = acc.sparse.count;
+    const wide = acc.sparse.indices.componentType === UNSIGNED_INT;
+    const idx = wide
+      ? new Uint32Array(slice(acc.sparse.indices.bufferView, n * 4))
+      : new Uint16Array(slice(acc.sparse.indices.bufferView, n * 2));
+    const values = new Float32Array(slice(acc.sparse.values.bufferView, n * width * 4));
+    idx.forEach((i, j) => out.set(values.subarray(j * width, j * width + width), i * width));
+  }
+  return out;
 }

@@ -1,6 +1,6 @@
 //! `window.agentDebug`: a read-only view of the page's state for end-to-end tests and for debugging by hand.
 
-export function installDebugHook({ avatar, link, page, camera, mic, spectrum, overlay, rules, speech }) {
+export function installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech }) {
   const hook = {};
   const define = (name, get) => Object.defineProperty(hook, name, { get, enumerable: true });
   define("eyelid", () => avatar.debugState().eyelid);
@@ -14,6 +14,14 @@ export function installDebugHook({ avatar, link, page, camera, mic, spectrum, ov
   define("viseme", () => avatar.debugState().viseme);
   define("jaw", () => avatar.debugState().jaw);
   define("avatarDrawMs", () => avatar.debugState().drawMs);
+  // Which renderer draws the avatar ("2d" or "3d"), and what only the 3D head has: its eyes' and head's
+  // rotations (radians), morph weights, and a per-frame trace (audio time, mouth opening, blink) for timing tests.
+  define("avatarRenderer", () => avatarRenderer);
+  define("eyeRotation", () => avatar.debugState().eyeRotation ?? null);
+  define("headRotation", () => avatar.debugState().headRotation ?? null);
+  define("morphs", () => avatar.debugState().morphs ?? null);
+  define("avatarTrace", () => avatar.debugState().trace ?? null);
+  define("blinkStarts", () => avatar.debugState().blinkStarts ?? null);
   define("role", () => page.role);
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));
@@ -32,7 +40,7 @@ export function installDebugHook({ avatar, link, page, camera, mic, spectrum, ov
   define("lastError", () => page.lastError);
   define("snapshot", () => {
     const out = {};
-    for (const k of Object.keys(hook)) if (k !== "snapshot") out[k] = hook[k];
+    for (const k of Object.keys(hook)) if (k !== "snapshot" && k !== "avatarTrace") out[k] = hook[k];
     return out;
   });
   Object.defineProperty(window, "agentDebug", { value: Object.freeze(hook), configurable: false });

@@ -1,6 +1,6 @@
 //! Boots the page: connects the link, builds the avatar and panels, and runs the microphone/camera role.
 
-import { Avatar } from "./avatar/avatar.js";
+import { createAvatar, DEFAULT_RENDERER } from "./avatar/renderer.js";
 import { decodeSpeech, KIND } from "./link/frames.js";
 import { Link, SEND_BACKLOG_LIMIT } from "./link/link.js";
 import { audioClock } from "./media/audio-context.js";
@@ -18,7 +18,12 @@ const autostart = params.get("autostart") === "1";
 const $ = (id) => document.getElementById(id);
 
 const link = new Link({ autostart });
-const avatar = new Avatar($("avatar"), audioClock);
+// `?avatar=2d` or `?avatar=3d` picks the renderer; the 3D head falls back to the 2D face where it cannot run.
+const { avatar, renderer: avatarRenderer } = await createAvatar(
+  $("avatar"),
+  audioClock,
+  params.get("avatar") ?? DEFAULT_RENDERER,
+);
 const overlay = new Overlay($("overlay"));
 const spectrum = new Spectrum($("spectrum"));
 const rules = new RuleTrace($("rules"), $("rules-meta"));
@@ -304,6 +309,6 @@ setInterval(() => {
   refreshAgentControls();
 }, 500);
 
-installDebugHook({ avatar, link, page, camera, mic, spectrum, overlay, rules, speech });
+installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech });
 refreshButtons();
 link.start();
