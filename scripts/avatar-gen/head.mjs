@@ -23,9 +23,9 @@ import {
 export const HEAD_PIVOT = /** @type {V3} */ ([0, 0.1, 0]);
 /** The skull's centre in the head's frame, and its half-width, half-height and half-depth. */
 const C = /** @type {V3} */ ([0, 0.055, 0.008]);
-const A = 0.074;
-const B = 0.1;
-const D = 0.088;
+const A = 0.08;
+const B = 0.093;
+const D = 0.09;
 
 const EYE_R = 0.0165; // eyeball radius: stylised, large eyes like the 2D face's
 const EYE_X = 0.034;
@@ -33,7 +33,7 @@ const EYE_Y = C[1] + 0.003;
 const EYE_OUT = 0.0056; // how far the eyeball's front stands out of the skin
 const LID_R = EYE_R * 1.08;
 const MOUTH_Y = C[1] - 0.059;
-const MOUTH_W = 0.0215; // half-width of the lips
+const MOUTH_W = 0.0195; // half-width of the lips
 const UPPER_LIP = 0.0056;
 const LOWER_LIP = 0.0074;
 const JAW_MAX_RAD = 0.16; // jaw = 1 opens the lips by about 18 mm
@@ -41,15 +41,15 @@ const JAW_HINGE = /** @type {V3} */ ([0, C[1] - 0.012, C[2] - 0.025]);
 
 // ---- palette (the 2D face's) ---------------------------------------------------------------------------------
 
-const SKIN = linear(0xf0c4a5);
+const SKIN = linear(0xf5cdb0);
 const SKIN_SHADE = linear(0xe2a888);
 const BLUSH = linear(0xeb6e78);
 const LIP_UP = linear(0xb9566a);
 const LIP_LOW = linear(0xcf6d7d);
 const LIP_IN = linear(0x9c4257);
 const LIP_LINE = linear(0x7c2f41);
-const HAIR_BASE = linear(0x2b1d2a);
-const HAIR_MID = linear(0x45293d);
+const HAIR_BASE = linear(0x3a2434);
+const HAIR_MID = linear(0x5e3852);
 const IRIS_IN = linear(0x49b3b0);
 const IRIS_OUT = linear(0x1d5e68);
 const IRIS_RING = linear(0x0f3238);
@@ -127,7 +127,7 @@ function relief(x, y) {
   let profile = y > 0.008 ? 0 : 0.22 + 0.78 * Math.pow(k, 1.4);
   if (y < tipY) profile = Math.exp(-(((y - tipY) / 0.0075) ** 2));
   const sigma = lerp(0.0052, 0.0105, k);
-  let z = 0.0138 * profile * Math.exp(-((x / sigma) ** 2));
+  let z = 0.0115 * profile * Math.exp(-((x / sigma) ** 2));
   z += 0.0024 * gauss(ax - 0.0095, 0.0042, y - (tipY - 0.001), 0.005); // nostril wings
   z += 0.0032 * Math.exp(-(((y - 0.034) / 0.009) ** 2)) * smoothstep(0.066, 0.03, ax); // brow ridge
   z += 0.0042 * gauss(ax - 0.043, 0.015, y + 0.014, 0.014); // cheekbones
@@ -143,7 +143,7 @@ function skull(u, v) {
   const ny = Math.cos(v);
   const nz = Math.sin(v) * Math.cos(u);
   const lower = Math.max(0, -ny);
-  let x = A * nx * (1 - 0.3 * Math.pow(lower, 1.5));
+  let x = A * nx * (1 - 0.17 * Math.pow(lower, 1.8));
   const y = B * ny;
   let z = D * nz;
   if (nz > 0) z *= 0.95 - 0.1 * lower * lower;
@@ -504,7 +504,8 @@ function buildLids(eyes) {
           const far = upper ? LID_TOP : -LID_TOP;
           const f = Math.max(0, rows[j]);
           const l = lerp(edge, far, f);
-          const r = rows[j] < 0 ? EYE_R * 1.01 : LID_R * (1 + 0.05 * f);
+          // The lower lid hugs the eye more closely than the upper one, which folds over it.
+          const r = rows[j] < 0 ? EYE_R * 1.01 : (upper ? LID_R : EYE_R * 1.045) * (1 + 0.05 * f);
           const p = g.dir(h, l, r);
           const nearEdge = rows[j] <= 0.04 && Math.abs(h) < g.hc * 1.05;
           let c = mix3(SKIN, SKIN_SHADE, upper ? 0.25 + 0.3 * smoothstep(0.3, 0, Math.abs(rows[j] - 0.2)) : 0.35);
@@ -645,8 +646,9 @@ function buildHair() {
   // above the ears at the sides; a bob down to the nape at the back.
   const vmax = (u) => {
     const au = Math.abs(u);
-    let v = lerp(0.93, 1.42, smoothstep(0.35, 1.45, au));
-    v = lerp(v, 2.72, smoothstep(1.6, 2.7, au));
+    // Front fringe, down the temples, then a bob that hangs to the chin at the sides and the nape at the back.
+    let v = lerp(0.93, 1.5, smoothstep(0.3, 0.75, au));
+    v = lerp(v, 2.95, smoothstep(0.75, 1.3, au));
     if (au < 1.15) {
       const phase = u / 0.23 + 0.35;
       const tri = 1 - Math.abs((phase - Math.floor(phase)) * 2 - 1);

@@ -15,13 +15,16 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("jaw", () => avatar.debugState().jaw);
   define("avatarDrawMs", () => avatar.debugState().drawMs);
   // Which renderer draws the avatar ("2d" or "3d"), and what only the 3D head has: its eyes' and head's
-  // rotations (radians), morph weights, and a per-frame trace (audio time, mouth opening, blink) for timing tests.
+  // rotations (radians), morph weights, and a per-frame trace (audio time, mouth opening, blink) for timing tests;
+  // for both, [page time, cost ms] of recent frames (avatarFrameMs).
   define("avatarRenderer", () => avatarRenderer);
+  define("avatarFrameMs", () => avatar.debugState().frameMs ?? null);
   define("eyeRotation", () => avatar.debugState().eyeRotation ?? null);
   define("headRotation", () => avatar.debugState().headRotation ?? null);
   define("morphs", () => avatar.debugState().morphs ?? null);
   define("avatarTrace", () => avatar.debugState().trace ?? null);
   define("blinkStarts", () => avatar.debugState().blinkStarts ?? null);
+  define("visemeSchedule", () => avatar.debugState().schedule ?? null);
   define("role", () => page.role);
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));
@@ -40,7 +43,7 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("lastError", () => page.lastError);
   define("snapshot", () => {
     const out = {};
-    for (const k of Object.keys(hook)) if (k !== "snapshot" && k !== "avatarTrace") out[k] = hook[k];
+    for (const k of Object.keys(hook)) if (k !== "snapshot" && k !== "avatarTrace" && k !== "visemeSchedule" && k !== "avatarFrameMs") out[k] = hook[k];
     return out;
   });
   Object.defineProperty(window, "agentDebug", { value: Object.freeze(hook), configurable: false });

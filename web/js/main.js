@@ -23,6 +23,7 @@ const { avatar, renderer: avatarRenderer } = await createAvatar(
   $("avatar"),
   audioClock,
   params.get("avatar") ?? DEFAULT_RENDERER,
+  { syncFrames: params.get("avatarsync") === "1" },
 );
 const overlay = new Overlay($("overlay"));
 const spectrum = new Spectrum($("spectrum"));

@@ -19,17 +19,25 @@ const MOOD_TAU_MS = 160;
 /** As on the 2D face: between blinks and speech 30 fps is smooth, and halves the cost on GPU-less machines. */
 const CALM_FRAME_MS = 32;
 const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
+const FRAME_LOG = 1200; // frames whose cost the debug hook keeps, as avatar.js does
 const VIEW_HEIGHT_M = 0.32; // what the stage shows of the avatar: hair to upper chest, like the 2D face
 
 export class Avatar3D {
   /** Loads the model from `url`; rejects when WebGL or the model is unavailable (the caller falls back to 2D). */
-  static async create(canvas, audioClock, url = "assets/avatar.glb") {
+  static async create(canvas, audioClock, url = "assets/avatar.glb", { syncFrames = false } = {}) {
     const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, alpha: true, powerPreference: "low-power" });
     const gltf = await new GLTFLoader().loadAsync(url);
-    return new Avatar3D(canvas, audioClock, renderer, gltf);
+    return new Avatar3D(canvas, audioClock, renderer, gltf, syncFrames);
   }
 
-  constructor(canvas, audioClock, renderer, gltf) {
+  /**
+   * `syncFrames` waits for the GPU at the end of each frame (gl.finish), so that a frame's measured cost includes
+   * the drawing itself and not only the commands' submission: for the benchmark, which compares it with the 2D
+   * face, whose software canvas draws synchronously.
+   */
+  constructor(canvas, audioClock, renderer, gltf, syncFrames = false) {
+    this.syncFrames = syncFrames;
+    this.frameMs = [];
     this.canvas = canvas;
     this.audioClock = audioClock;
     this.renderer = renderer;
@@ -49,6 +57,7 @@ export class Avatar3D {
     this.frames = 0;
     this.trace = [];
     this.blinkStarts = [];
+    this.schedule = []; // the viseme batches received, on the audio clock, for the timing tests
     this.wasBlinking = false;
 
     renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
@@ -82,12 +91,12 @@ export class Avatar3D {
 
     // Soft light: a warm sky and a cool floor, a key from the viewer's upper left (where the 2D face's highlights
     // are), a cool fill from the right, and a teal rim from behind that separates the hair from the dark stage.
-    this.scene.add(new THREE.HemisphereLight(0xfff3ea, 0x6b5560, 1.4));
+    this.scene.add(new THREE.HemisphereLight(0xfff3ea, 0x8a7078, 1.4));
     const key = new THREE.DirectionalLight(0xfff4ec, 2.1);
     key.position.set(-0.6, 0.9, 1.2);
     const fill = new THREE.DirectionalLight(0xcfe2ff, 0.55);
     fill.position.set(1, 0.1, 0.7);
-    const rim = new THREE.DirectionalLight(0x7fe6d8, 0.8);
+    const rim = new THREE.DirectionalLight(0x7fe6d8, 0.5);
     rim.position.set(0.4, 0.6, -1);
     this.scene.add(key, fill, rim);
 
@@ -134,6 +143,9 @@ export class Avatar3D {
   scheduleVisemes(utterance, startS, items) {
     this.track.add(utterance, startS, items);
     this.mixer.add(utterance, startS, items);
+    const cues = items.filter((i) => i && typeof i.v === "string" && Number.isFinite(i.t_ms));
+    this.schedule.push({ utterance, startS, items: cues.map((i) => ({ t_ms: i.t_ms, v: i.v })) });
+    if (this.schedule.length > 16) this.schedule.shift();
   }
 
   stopSpeech(utterance) {
@@ -150,9 +162,14 @@ export class Avatar3D {
     this.lastDraw = now;
     const t0 = performance.now();
     this.step(now, dt);
-    if (this.size.w > 0) this.renderer.render(this.scene, this.camera);
+    if (this.size.w > 0) {
+      this.renderer.render(this.scene, this.camera);
+      if (this.syncFrames) this.renderer.getContext().finish();
+    }
     const ms = performance.now() - t0;
     this.drawMs = this.drawMs === undefined ? ms : this.drawMs * 0.95 + ms * 0.05;
+    this.frameMs.push([Math.round(now), ms]);
+    if (this.frameMs.length > FRAME_LOG) this.frameMs.shift();
     this.frames += 1;
   }
 
@@ -237,12 +254,14 @@ export class Avatar3D {
       jaw: this.jaw,
       drawMs: this.drawMs ?? 0,
       renderer: "3d",
+      frameMs: this.frameMs.slice(),
       frames: this.frames,
       eyeRotation: { yaw: this.eyes[0].rotation.y, pitch: this.eyes[0].rotation.x },
       headRotation: { yaw: this.head.rotation.y, pitch: this.head.rotation.x, roll: this.head.rotation.z },
       morphs: r ? { ...r.morphs } : {},
       trace: this.trace.slice(),
       blinkStarts: this.blinkStarts.slice(),
+      schedule: this.schedule.slice(),
     };
   }
 }

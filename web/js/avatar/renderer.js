@@ -24,16 +24,17 @@ export function webgl2Available() {
 
 /**
  * The avatar for `canvas`: resolves to {avatar, renderer: "2d" | "3d", canvas} (the canvas may be a new
- * element when a failed 3D start had to be undone).
+ * element when a failed 3D start had to be undone). `syncFrames`: see Avatar3D (for the benchmark).
  */
-export async function createAvatar(canvas, audioClock, wanted = DEFAULT_RENDERER) {
+export async function createAvatar(canvas, audioClock, wanted = DEFAULT_RENDERER, { syncFrames = false } = {}) {
   if (wanted === "3d") {
     if (!webgl2Available()) {
       console.info("avatar: WebGL 2 is not available here, showing the 2D face");
     } else {
       try {
         const { Avatar3D } = await import("./avatar3d.js");
-        return { avatar: await Avatar3D.create(canvas, audioClock), renderer: "3d", canvas };
+        const avatar = await Avatar3D.create(canvas, audioClock, "assets/avatar.glb", { syncFrames });
+        return { avatar, renderer: "3d", canvas };
       } catch (err) {
         console.warn(`avatar: the 3D head could not start (${err?.message ?? err}), showing the 2D face`);
         const fresh = canvas.cloneNode(false);
@@ -42,5 +43,5 @@ export async function createAvatar(canvas, audioClock, wanted = DEFAULT_RENDERER
       }
     }
   }
-  return { avatar: new Avatar(canvas, audioClock), renderer: "2d", canvas };
+  return { avatar: new Avatar(canvas, audioClock, { syncFrames }), renderer: "2d", canvas };
 }
