@@ -209,8 +209,10 @@ async fn run_in(
                     .iter()
                     .zip(&windows)
                     .map(|(s, w)| {
-                        let rates: Vec<String> =
-                            w.iter().map(|f| format!("{:.0}", f.delivered_per_s)).collect();
+                        let rates: Vec<String> = w
+                            .iter()
+                            .map(|f| format!("{:.0}", f.delivered_per_s))
+                            .collect();
                         format!("{} [{}]", s.label(), rates.join(", "))
                     })
                     .collect();

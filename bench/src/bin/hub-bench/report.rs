@@ -159,7 +159,11 @@ pub fn print_summary(outcomes: &[Outcome]) {
                 redis.flat.server_cpu_us.unwrap_or(f64::NAN)
             ),
         );
-        let total = |m: &Measured| m.flat.client_cpu_us.map(|c| c + m.flat.server_cpu_us.unwrap_or(0.0));
+        let total = |m: &Measured| {
+            m.flat
+                .client_cpu_us
+                .map(|c| c + m.flat.server_cpu_us.unwrap_or(0.0))
+        };
         println!(
             "SUMMARY hub client cpu per delivery {name}: {} us (redis {} us; raw tcp, writer included, {} us)",
             us(hub.flat.client_cpu_us),
@@ -170,7 +174,10 @@ pub fn print_summary(outcomes: &[Outcome]) {
             "SUMMARY hub clients + server cpu per delivery {name}: {} us (redis {} us, ratio {:.2}: the throughput ratio when the cores are saturated)",
             us(total(hub)),
             us(total(redis)),
-            ratio(total(redis).unwrap_or(f64::NAN), total(hub).unwrap_or(f64::NAN)),
+            ratio(
+                total(redis).unwrap_or(f64::NAN),
+                total(hub).unwrap_or(f64::NAN)
+            ),
         );
         println!(
             "SUMMARY hub open-loop {name}: {:.0} msg/s delivered, {:.1}% dropped (redis {:.0} msg/s, {:.1}% dropped, {} disconnected, ratio {:.2}x; raw tcp {:.0} msg/s, ratio {:.2})",

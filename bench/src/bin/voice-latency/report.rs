@@ -71,8 +71,16 @@ impl RunFigures {
             self.hangover(),
             self.asr(),
             self.processing_ms,
-            if self.decode.speculative { ", speculative" } else { "" },
-            if self.decode.full_window_retry { ", full-window retry" } else { "" },
+            if self.decode.speculative {
+                ", speculative"
+            } else {
+                ""
+            },
+            if self.decode.full_window_retry {
+                ", full-window retry"
+            } else {
+                ""
+            },
             self.rules(),
             self.first_chunk(),
             self.text

@@ -101,7 +101,9 @@ impl Watcher {
                             v["processing_ms"].as_u64().unwrap_or(0),
                             Decode {
                                 speculative: v["speculative"].as_bool().unwrap_or(false),
-                                full_window_retry: v["full_window_retry"].as_bool().unwrap_or(false),
+                                full_window_retry: v["full_window_retry"]
+                                    .as_bool()
+                                    .unwrap_or(false),
                             },
                         ));
                     }
@@ -118,8 +120,11 @@ impl Watcher {
                     }
                 }
                 Seen::Speech => {
-                    if let (Some(rules), Some((t_at, text, processing_ms, decode)), Some((v_at, _, vad_ms))) =
-                        (rules, &transcript, &vad_end)
+                    if let (
+                        Some(rules),
+                        Some((t_at, text, processing_ms, decode)),
+                        Some((v_at, _, vad_ms)),
+                    ) = (rules, &transcript, &vad_end)
                         && at >= rules
                     {
                         return Ok(RunFigures {

@@ -576,7 +576,10 @@ impl OutFrame {
     }
 
     /// Hands the frame to `writer`'s next batch.
-    fn queue_on<W: crate::transport::TransportWrite>(self, writer: &mut crate::connection::FrameWriter<W>) {
+    fn queue_on<W: crate::transport::TransportWrite>(
+        self,
+        writer: &mut crate::connection::FrameWriter<W>,
+    ) {
         writer.queue_encoded(self.head);
         if !self.payload.is_empty() {
             writer.queue_encoded(self.payload);
