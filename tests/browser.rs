@@ -519,9 +519,10 @@ async fn link_refuses_foreign_origins_and_closes_on_malformed_frames() -> anyhow
     let own = format!("http://{}", agent.http);
     let http = agent.http.to_string();
     // A cross-site page can neither get a session nor open the link.
-    let (status, _) = post_session(&http, "http://evil.example").await?;
+    let page_token = agent.page_token().to_string();
+    let (status, _) = post_session(&http, "http://evil.example", &page_token).await?;
     assert_eq!(status, 403);
-    let (status, body) = post_session(&http, &own).await?;
+    let (status, body) = post_session(&http, &own, &page_token).await?;
     assert_eq!(status, 200, "{body}");
     let session: serde_json::Value = serde_json::from_str(&body)?;
     let token = session["session"]
@@ -534,8 +535,10 @@ async fn link_refuses_foreign_origins_and_closes_on_malformed_frames() -> anyhow
             Some(t) => format!("ws://{http}/link?session={t}"),
             None => format!("ws://{http}/link"),
         };
+        let bearer = format!("Bearer {page_token}");
         async move {
             let mut req = url.into_client_request()?;
+            req.headers_mut().insert("Authorization", bearer.parse()?);
             if !origin.is_empty() {
                 req.headers_mut().insert("Origin", origin.parse()?);
             }

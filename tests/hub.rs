@@ -165,7 +165,7 @@ async fn satellites_over_tcp_and_websocket_exchange_streams_and_calls() -> anyho
     );
 
     // The HTTP API sees the same channels with their counters.
-    let list = http::get_json(agent.http, "/api/channels").await?;
+    let list = http::get_json(agent.http, "/api/channels", agent.token()).await?;
     let sat_a = list
         .as_array()
         .and_then(|l| l.iter().find(|c| c["name"] == "Sat.a"))
@@ -364,7 +364,8 @@ async fn a_subscriber_that_stops_reading_loses_old_data_while_another_gets_every
 /// A publisher that sends its last messages and leaves at once: a subscriber that has them queued at the hub (here
 /// one that had stopped reading) still gets every one of them, and only then hears that the channel is gone.
 #[tokio::test]
-async fn a_publisher_that_leaves_loses_none_of_what_subscribers_have_queued() -> anyhow::Result<()> {
+async fn a_publisher_that_leaves_loses_none_of_what_subscribers_have_queued() -> anyhow::Result<()>
+{
     let dir = DataDir::new()?;
     // Queues deep enough that nothing is dropped: only the removal could lose messages.
     let agent = Agent::with_config(
@@ -403,7 +404,10 @@ async fn a_publisher_that_leaves_loses_none_of_what_subscribers_have_queued() ->
             }
             Some(Event::ChannelRemoved { name, .. }) if name == "Last.words" => break,
             Some(_) => {}
-            None => bail!("the hub closed the subscriber after {} messages", seqs.len()),
+            None => bail!(
+                "the hub closed the subscriber after {} messages",
+                seqs.len()
+            ),
         }
     }
     assert_eq!(
@@ -708,7 +712,7 @@ async fn the_sdk_restores_channels_and_subscriptions_after_the_server_is_killed(
         AgentOptions {
             http: Some(http_addr),
             flow_tcp: Some(tcp_addr),
-            config: None,
+            ..AgentOptions::default()
         },
     )
     .await?;

@@ -196,7 +196,7 @@ async fn browser_phase(
     let phase = measure(&agent, &hub, window).await?;
     let sent = browser.eval(&tab, "agentDebug.sent").await?;
     println!("browser phase: page sent {sent}");
-    let status = agent_tests::http::get_json(agent.http, "/api/status").await?;
+    let status = agent_tests::http::get_json(agent.http, "/api/status", agent.token()).await?;
     println!("browser phase: Y module {}", status["modules"]["video_y"]);
     browser.quit().await;
     Ok(phase)
@@ -280,9 +280,13 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     // A minimal page: session, socket, claim, media on.
     let origin = format!("http://{}", agent.http);
     let http = agent.http.to_string();
-    let token = session_token(&http).await?;
+    let token = session_token(&http, agent.page_token()).await?;
     let mut req = format!("ws://{http}/link?session={token}").into_client_request()?;
     req.headers_mut().insert("Origin", origin.parse()?);
+    req.headers_mut().insert(
+        "Authorization",
+        format!("Bearer {}", agent.page_token()).parse()?,
+    );
     // Browsers send WebSocket frames with Nagle's algorithm off; so does this page stand-in.
     let (ws, _) = tokio_tungstenite::connect_async_with_config(req, None, true).await?;
     let (mut tx, mut rx) = ws.split();

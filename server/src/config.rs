@@ -26,9 +26,13 @@ pub struct Config {
     pub server: ServerSection,
     pub hub: HubSection,
     pub ticks: TickSection,
+    pub http: HttpSection,
     /// `[modules.NAME]` tables, handed to each module as JSON parameters.
     #[serde(default)]
     pub modules: BTreeMap<String, toml::Table>,
+    /// Where the configuration came from (the user file, or the embedded defaults), for error messages.
+    #[serde(skip)]
+    pub source: String,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -50,6 +54,21 @@ pub struct HubSection {
     pub control_queue: usize,
     pub service_inflight: usize,
     pub io_threads: usize,
+    pub login_timeout_ms: u64,
+    pub max_unauthenticated: usize,
+}
+
+/// `[http]`: who may use the page and the HTTP API (docs/security.md).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct HttpSection {
+    /// Host names the page may be opened under besides `localhost`, loopback addresses and the address a client
+    /// connected to.
+    pub allowed_hosts: Vec<String>,
+    /// No credential asked while the HTTP server listens on loopback only.
+    pub open_on_loopback: bool,
+    /// How long a page session cookie stays valid.
+    pub cookie_days: u64,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -76,20 +95,57 @@ impl Config {
             }
             None => "<embedded default.toml>".to_string(),
         };
-        let config: Config =
-            serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| {
-                ConfigError {
-                    file: file.clone(),
-                    key: e.path().to_string(),
-                    reason: e.inner().to_string(),
-                }
+        let mut config: Config = serde_path_to_error::deserialize(toml::Value::Table(merged))
+            .map_err(|e| ConfigError {
+                file: file.clone(),
+                key: e.path().to_string(),
+                reason: e.inner().to_string(),
             })?;
         config.validate().map_err(|(key, reason)| ConfigError {
-            file,
+            file: file.clone(),
             key: key.into(),
             reason,
         })?;
+        config.source = file;
         Ok(config)
+    }
+
+    /// An error about `key` of this configuration, naming its file.
+    pub fn error(&self, key: impl Into<String>, reason: impl Into<String>) -> ConfigError {
+        ConfigError {
+            file: self.source.clone(),
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// Turns a module's own message about a section (`[modules.NAME] KEY: REASON`, or any text, taken to be
+    /// about `[modules.NAME]`) into an error naming the file, the key and the reason.
+    pub fn module_error(&self, name: &str, message: &str) -> ConfigError {
+        let Some(rest) = message.strip_prefix("[modules.") else {
+            return self.error(format!("modules.{name}"), message);
+        };
+        // `[modules.tts.behaviour] blink_min_ms: ...` or `[modules.video_y] quality: ...`
+        let (section, rest) = rest.split_once(']').unwrap_or((name, rest));
+        let rest = rest.trim_start();
+        match rest.split_once(": ") {
+            Some((key, reason)) if !key.is_empty() && !key.contains(' ') => {
+                self.error(format!("modules.{section}.{key}"), reason)
+            }
+            _ => self.error(format!("modules.{section}"), rest),
+        }
+    }
+
+    /// Refuses `[modules.X]` sections that name no module in `known`: a misspelt section would otherwise switch
+    /// nothing off, silently.
+    pub fn check_module_names(&self, known: &[&str]) -> Result<(), ConfigError> {
+        match self.modules.keys().find(|k| !known.contains(&k.as_str())) {
+            None => Ok(()),
+            Some(unknown) => Err(self.error(
+                format!("modules.{unknown}"),
+                format!("no such module (the modules are: {})", known.join(", ")),
+            )),
+        }
     }
 
     fn validate(&self) -> Result<(), (&'static str, String)> {
@@ -102,6 +158,27 @@ impl Config {
                 .map_err(|e| (key, format!("{v:?} is not HOST:PORT ({e})")))
         };
         addr("server.http", &self.server.http, false)?;
+        if self.http.open_on_loopback
+            && !self
+                .server
+                .http
+                .parse::<SocketAddr>()
+                .is_ok_and(|a| a.ip().is_loopback())
+        {
+            return Err((
+                "http.open_on_loopback",
+                format!(
+                    "true is only allowed while server.http is a loopback address, not {:?}: beyond loopback the page needs its credential",
+                    self.server.http
+                ),
+            ));
+        }
+        if !(1..=365).contains(&self.http.cookie_days) {
+            return Err((
+                "http.cookie_days",
+                format!("{} is outside 1..=365", self.http.cookie_days),
+            ));
+        }
         addr("server.flow_tcp", &self.server.flow_tcp, true)?;
         let h = &self.hub;
         if h.max_frame < 1024 || h.max_frame > 1 << 30 {
@@ -121,10 +198,17 @@ impl Config {
             ("hub.subscriber_queue_bytes", h.subscriber_queue_bytes),
             ("hub.control_queue", h.control_queue),
             ("hub.service_inflight", h.service_inflight),
+            ("hub.max_unauthenticated", h.max_unauthenticated),
         ] {
             if v == 0 {
                 return Err((key, "must be at least 1".into()));
             }
+        }
+        if !(100..=600_000).contains(&h.login_timeout_ms) {
+            return Err((
+                "hub.login_timeout_ms",
+                format!("{} is outside 100..=600000", h.login_timeout_ms),
+            ));
         }
         if self.ticks.fast_ms == 0 {
             return Err(("ticks.fast_ms", "must be at least 1".into()));
@@ -212,6 +296,45 @@ mod tests {
         let c = load_text("[hub]\nsubscriber_queue = 8\n").expect("load");
         assert_eq!(c.hub.subscriber_queue, 8);
         assert_eq!(c.hub.control_queue, 4096);
+    }
+
+    #[test]
+    fn module_messages_become_file_key_and_reason() {
+        let c = load_text("[hub]\nsubscriber_queue = 8\n").expect("load");
+        let e = c.module_error(
+            "browser",
+            "[modules.video_y] quality: 500 is outside 1..=100",
+        );
+        assert_eq!(e.key, "modules.video_y.quality");
+        assert_eq!(e.reason, "500 is outside 1..=100");
+        assert!(e.file.ends_with(".toml"), "{}", e.file);
+        let e = c.module_error("tts", "[modules.tts.behaviour] blink_min_ms: too long");
+        assert_eq!(e.key, "modules.tts.behaviour.blink_min_ms");
+        let e = c.module_error("brain", "program: config/x.tr: no such file");
+        assert_eq!(e.key, "modules.brain");
+        assert_eq!(e.reason, "program: config/x.tr: no such file");
+    }
+
+    #[test]
+    fn unknown_module_sections_are_refused() {
+        let c = load_text("[modules.bogus]\nenabled = false\n").expect("load");
+        let e = c.check_module_names(&["tts", "vision"]).expect_err("bogus");
+        assert_eq!(e.key, "modules.bogus");
+        assert!(e.reason.contains("tts, vision"), "{e}");
+        assert!(
+            Config::load(None)
+                .expect("defaults")
+                .check_module_names(&["browser", "video_y", "audio_fft", "vision", "brain", "tts"])
+                .is_ok()
+        );
+    }
+
+    #[test]
+    fn open_on_loopback_is_refused_beyond_loopback() {
+        let e = load_text("[server]\nhttp = \"0.0.0.0:8080\"\n[http]\nopen_on_loopback = true\n")
+            .expect_err("open beyond loopback");
+        assert_eq!(e.key, "http.open_on_loopback");
+        assert!(load_text("[http]\nopen_on_loopback = true\n").is_ok());
     }
 
     #[test]

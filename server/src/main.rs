@@ -1,6 +1,7 @@
 //! The robot-agent server binary: parse options, load the configuration, run
 //! until Ctrl-C or SIGTERM, shut down cleanly.
 
+use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -32,6 +33,11 @@ struct Args {
 #[tokio::main]
 async fn main() {
     if let Err(e) = run(Args::parse()).await {
+        // A module's section is checked at start: report it like any other configuration error.
+        if let Some(config) = e.downcast_ref::<robot_agent::config::ConfigError>() {
+            eprintln!("robot-agent: invalid configuration: {config}");
+            std::process::exit(2);
+        }
         eprintln!("robot-agent: {e:#}");
         std::process::exit(1);
     }
@@ -59,12 +65,21 @@ async fn run(args: Args) -> anyhow::Result<()> {
     }
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
-    tracing_subscriber::fmt().with_env_filter(filter).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(quiet_frames(filter))
+        .with_ansi(std::io::stdout().is_terminal())
+        .init();
 
     let server = robot_agent::start(config)
         .await
         .context("starting robot-agent")?;
-    println!("robot-agent ready: open http://{}/", server.http);
+    println!("robot-agent ready: open {}", server.page_url);
+    if server.http.ip().is_unspecified() {
+        println!(
+            "  (from another machine, put this machine's address in place of {})",
+            server.http.ip()
+        );
+    }
     if let Some(tcp) = server.flow_tcp {
         println!("flow hub: tcp://{tcp}  ws://{}/flow", server.http);
     }
@@ -74,6 +89,15 @@ async fn run(args: Args) -> anyhow::Result<()> {
     wait_for_signal().await?;
     server.shutdown().await;
     Ok(())
+}
+
+/// Caps the WebSocket libraries at debug level whatever the filter asks: at trace they print every frame's bytes,
+/// the login frame with its token included.
+fn quiet_frames(filter: EnvFilter) -> EnvFilter {
+    ["tungstenite=debug", "tokio_tungstenite=debug"]
+        .into_iter()
+        .filter_map(|d| d.parse().ok())
+        .fold(filter, EnvFilter::add_directive)
 }
 
 async fn wait_for_signal() -> anyhow::Result<()> {

@@ -26,6 +26,11 @@ pub type ModuleFuture = Pin<Box<dyn Future<Output = anyhow::Result<()>> + Send>>
 pub trait Module: Send + 'static {
     /// Short name: the login name and the `[modules.NAME]` section.
     fn name(&self) -> &'static str;
+    /// Checks `[modules.NAME]` before anything starts, so that a bad value stops the server at start instead of
+    /// failing the module later. Errors say `[modules.NAME] KEY: REASON`.
+    fn check(&self, _params: &serde_json::Value) -> anyhow::Result<()> {
+        Ok(())
+    }
     /// Runs until `ctx.shutdown` fires (return `Ok`) or a fatal error.
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture;
 }

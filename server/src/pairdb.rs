@@ -41,7 +41,8 @@ pub struct PairDb {
 impl PairDb {
     /// Opens (or creates) the store at `path`, with the default database present.
     pub fn open(path: &Path) -> Result<Self, PairDbError> {
-        let db = Database::create(path).map_err(storage)?;
+        let db = Database::create(path)
+            .map_err(|e| PairDbError::Storage(format!("{}: {e}", path.display())))?;
         let this = PairDb { db };
         if !this.exists(DEFAULT_DB)? {
             this.create(DEFAULT_DB)?;

@@ -7,15 +7,16 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context;
-use axum::serve::ListenerExt;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tracing::info;
 
 use crate::config::Config;
+use crate::http::access::{self, Access, PeerInfo};
 use crate::hub::{Hub, HubLimits, OutboxLimits};
-use crate::net::IoRuntime;
+use crate::module::Module;
+use crate::net::{Admission, IoRuntime};
 use crate::pairdb::PairDb;
 use crate::pulse::PulseHub;
 use crate::tokens::Tokens;
@@ -28,6 +29,8 @@ pub struct Shared {
     pub pairdb: Arc<PairDb>,
     pub tokens: Tokens,
     pub pulses: Arc<PulseHub>,
+    /// Connections that have not logged in yet, against `hub.max_unauthenticated`.
+    pub admission: Arc<Admission>,
     /// Flips to true once at shutdown; every task watches it.
     pub shutdown: watch::Sender<bool>,
     reports: Mutex<BTreeMap<String, serde_json::Value>>,
@@ -54,6 +57,8 @@ impl Shared {
 #[derive(Debug)]
 pub struct RunningServer {
     pub http: SocketAddr,
+    /// The page's address with its credential (what the operator opens).
+    pub page_url: String,
     pub flow_tcp: Option<SocketAddr>,
     pub flow_unix: Option<PathBuf>,
     pub shared: Arc<Shared>,
@@ -63,6 +68,25 @@ pub struct RunningServer {
 
 /// Opens the data directory, binds every listener and starts the modules.
 pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
+    // Every module's section is checked before anything is bound or created, so a bad value stops the server at
+    // start with the file, the key and the reason (a `ConfigError` the binary reports as such).
+    let (shutdown, _) = watch::channel(false);
+    let browser = crate::browser::BrowserLink::from_config(&config, shutdown.subscribe())
+        .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
+    let modules: Vec<Box<dyn Module>> = crate::modules::builtin()
+        .into_iter()
+        .chain(browser.modules())
+        .collect();
+    let names: Vec<&str> = modules.iter().map(|m| m.name()).collect();
+    config.check_module_names(&names)?;
+    let modules: Vec<Box<dyn Module>> = modules
+        .into_iter()
+        .filter(|m| config.module_enabled(m.name()))
+        .collect();
+    for m in &modules {
+        m.check(&config.module(m.name()))
+            .map_err(|e| config.module_error(m.name(), &format!("{e:#}")))?;
+    }
     let data_dir = config.server.data_dir.clone();
     std::fs::create_dir_all(&data_dir)
         .with_context(|| format!("creating data dir {}", data_dir.display()))?;
@@ -90,7 +114,8 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         pairdb: Arc::new(pairdb),
         tokens,
         pulses: pulses.clone(),
-        shutdown: watch::channel(false).0,
+        admission: Arc::new(Admission::new(config.hub.max_unauthenticated)),
+        shutdown,
         reports: Mutex::new(BTreeMap::new()),
         config,
     });
@@ -101,7 +126,8 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
 
     // Socket connections are served on the hub's own I/O runtime; listeners are created inside its context so
     // that they, and every connection they accept, belong to its reactor.
-    let io = IoRuntime::start(shared.config.hub.io_threads).context("starting the hub I/O runtime")?;
+    let io =
+        IoRuntime::start(shared.config.hub.io_threads).context("starting the hub I/O runtime")?;
     let flow_tcp = if shared.config.server.flow_tcp.is_empty() {
         None
     } else {
@@ -115,10 +141,10 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
                 .with_context(|| format!("binding flow TCP {addr}"))?
         };
         let bound = listener.local_addr()?;
-        tasks.push(io.handle().spawn(crate::net::tcp::accept_loop(
-            listener,
-            shared.clone(),
-        )));
+        tasks.push(
+            io.handle()
+                .spawn(crate::net::tcp::accept_loop(listener, shared.clone())),
+        );
         Some(bound)
     };
     let flow_unix = match shared.config.unix_socket() {
@@ -142,15 +168,24 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         .await
         .with_context(|| format!("binding HTTP {http_addr}"))?;
     let http = listener.local_addr()?;
-    // Speech and avatar commands are small writes that must not wait for Nagle.
-    let listener = listener.tap_io(|tcp| {
-        let _ = tcp.set_nodelay(true);
-    });
-    let browser =
-        crate::browser::BrowserLink::from_config(&shared.config, shared.shutdown.subscribe())?;
+    let listener = access::HttpListener(listener);
+    let h = &shared.config.http;
+    let access = Arc::new(Access::new(
+        shared.tokens.clone(),
+        http.port(),
+        Duration::from_secs(h.cookie_days * 24 * 3600),
+        h.allowed_hosts.clone(),
+        h.open_on_loopback,
+    ));
+    let page_url = if access.is_open() {
+        format!("http://{http}/")
+    } else {
+        format!("http://{http}/?token={}", shared.tokens.page())
+    };
     let app = crate::http::app(shared.clone())
         .merge(browser.router())
-        .into_make_service_with_connect_info::<SocketAddr>();
+        .layer(axum::middleware::from_fn_with_state(access, access::gate))
+        .into_make_service_with_connect_info::<PeerInfo>();
     let mut stop = shared.shutdown.subscribe();
     tasks.push(tokio::spawn(async move {
         let graceful = axum::serve(listener, app).with_graceful_shutdown(async move {
@@ -160,19 +195,13 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
             tracing::error!("http server failed: {e}");
         }
     }));
-    let browser_modules = browser
-        .modules()
-        .into_iter()
-        .filter(|m| shared.config.module_enabled(m.name()));
-    for module in crate::modules::builtin(&shared.config)
-        .into_iter()
-        .chain(browser_modules)
-    {
+    for module in modules {
         tasks.push(crate::module::spawn(shared.clone(), module).await?);
     }
     info!(%http, ?flow_tcp, ?flow_unix, "robot-agent is up");
     Ok(RunningServer {
         http,
+        page_url,
         flow_tcp,
         flow_unix,
         shared,

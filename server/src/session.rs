@@ -68,6 +68,11 @@ impl Session {
         }
     }
 
+    /// Whether the connection has logged in.
+    pub fn is_logged_in(&self) -> bool {
+        self.stage == Stage::Ready
+    }
+
     /// Handles one decoded command.
     pub async fn handle(&mut self, env: Envelope) -> Outcome {
         let Envelope { req, command } = env;

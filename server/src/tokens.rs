@@ -1,5 +1,10 @@
 //! Authentication tokens: generated at first start into the data directory
 //! (mode 0600), read by flowctl and satellites, compared in constant time.
+//!
+//! Three credentials, each granting less than the next: the page token opens
+//! the avatar page and the HTTP API (it is what the printed URL carries); the
+//! user token logs a satellite in to the hub; the admin token also lets it
+//! remove anyone's channel. See docs/security.md.
 
 use std::io::Write;
 use std::path::Path;
@@ -10,12 +15,24 @@ use rand::Rng;
 pub const TOKEN_FILE: &str = "token";
 /// File holding the token that grants admin rights (remove anyone's channel).
 pub const ADMIN_TOKEN_FILE: &str = "admin.token";
+/// File holding the page token: the credential in the page's URL.
+pub const PAGE_TOKEN_FILE: &str = "page.token";
 
-/// The two tokens a login may present.
+/// A token file that could not be read or written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", path.display())]
+pub struct TokenError {
+    pub path: std::path::PathBuf,
+    #[source]
+    pub source: std::io::Error,
+}
+
+/// The tokens a login or a page may present.
 #[derive(Clone)]
 pub struct Tokens {
     user: String,
     admin: String,
+    page: String,
 }
 
 impl std::fmt::Debug for Tokens {
@@ -27,10 +44,15 @@ impl std::fmt::Debug for Tokens {
 
 impl Tokens {
     /// Loads the tokens from `dir`, creating any that is missing.
-    pub fn load_or_create(dir: &Path) -> std::io::Result<Tokens> {
+    pub fn load_or_create(dir: &Path) -> Result<Tokens, TokenError> {
+        let file = |name: &str| {
+            let path = dir.join(name);
+            load_or_create(&path).map_err(|source| TokenError { path, source })
+        };
         Ok(Tokens {
-            user: load_or_create(&dir.join(TOKEN_FILE))?,
-            admin: load_or_create(&dir.join(ADMIN_TOKEN_FILE))?,
+            user: file(TOKEN_FILE)?,
+            admin: file(ADMIN_TOKEN_FILE)?,
+            page: file(PAGE_TOKEN_FILE)?,
         })
     }
 
@@ -43,6 +65,16 @@ impl Tokens {
         } else {
             None
         }
+    }
+
+    /// Whether `presented` is the page token.
+    pub fn is_page(&self, presented: &str) -> bool {
+        constant_time_eq(presented.as_bytes(), self.page.as_bytes())
+    }
+
+    /// The page token: it goes into the URL the server prints, and keys the page's session cookies.
+    pub fn page(&self) -> &str {
+        &self.page
     }
 
     /// The admin token, for modules started inside the server.

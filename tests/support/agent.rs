@@ -50,6 +50,15 @@ impl DataDir {
     pub fn admin_token(&self) -> anyhow::Result<String> {
         Ok(resolve_token(None, self.path(), TokenKind::Admin)?)
     }
+
+    /// The page token (the credential in the page's URL).
+    pub fn page_token(&self) -> anyhow::Result<String> {
+        let path = self.path().join("page.token");
+        Ok(std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?
+            .trim()
+            .to_string())
+    }
 }
 
 /// How to start a server.
@@ -60,6 +69,8 @@ pub struct AgentOptions {
     pub flow_tcp: Option<SocketAddr>,
     /// Extra configuration (TOML), written to the data directory and passed with `--config`.
     pub config: Option<String>,
+    /// `RUST_LOG` for the server (default: `$AGENT_TEST_LOG`, else `info`).
+    pub log: Option<String>,
 }
 
 /// Everything a process printed, line by line, with a wake-up for waiters.
@@ -134,6 +145,7 @@ pub struct Agent {
     pub data_dir: PathBuf,
     pub output: Arc<Output>,
     token: String,
+    page_token: String,
 }
 
 impl Agent {
@@ -173,6 +185,9 @@ impl Agent {
     pub async fn start_with(dir: &DataDir, opts: AgentOptions) -> anyhow::Result<Agent> {
         let any = "127.0.0.1:0".to_string();
         let mut cmd = Command::new(binary("robot-agent")?);
+        // From the repository root, as `make run` starts it: the default configuration's relative paths (the rule
+        // program) resolve there.
+        cmd.current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
         cmd.arg("--http")
             .arg(opts.http.map_or(any.clone(), |a| a.to_string()))
             .arg("--flow-tcp")
@@ -189,7 +204,9 @@ impl Agent {
         let mut child = cmd
             .env(
                 "RUST_LOG",
-                std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info".into()),
+                opts.log.clone().unwrap_or_else(|| {
+                    std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| "info".into())
+                }),
             )
             .env("NO_COLOR", "1")
             .stdin(Stdio::null())
@@ -210,7 +227,7 @@ impl Agent {
         ready?;
         let lines = output.lines();
         let http = after(&lines, "robot-agent ready: open http://")
-            .map(|s| s.trim_end_matches('/').to_string())
+            .and_then(|s| s.split('/').next())
             .context("no HTTP address printed")?
             .parse()?;
         let flow_tcp = after(&lines, "flow hub: tcp://")
@@ -227,6 +244,7 @@ impl Agent {
             data_dir: dir.path().to_path_buf(),
             output,
             token: dir.token()?,
+            page_token: dir.page_token()?,
         })
     }
 
@@ -246,13 +264,19 @@ impl Agent {
         &self.token
     }
 
-    /// The page's URL with `query` (e.g. `"autostart=1"`, or `""`), carrying whatever credential the page needs.
+    /// The page's URL with `query` (e.g. `"autostart=1"`, or `""`), carrying the page token; the server trades it
+    /// for a session cookie and redirects to the same address without it.
     pub fn page_url(&self, query: &str) -> String {
         if query.is_empty() {
-            format!("http://{}/", self.http)
+            format!("http://{}/?token={}", self.http, self.page_token)
         } else {
-            format!("http://{}/?{query}", self.http)
+            format!("http://{}/?token={}&{query}", self.http, self.page_token)
         }
+    }
+
+    /// The page token, for requests that play the page's part (`Authorization: Bearer`).
+    pub fn page_token(&self) -> &str {
+        &self.page_token
     }
 
     /// Options for a satellite named `name` that does not reconnect (tests say when they want that).
@@ -291,6 +315,29 @@ impl Agent {
     pub async fn kill9(mut self) -> anyhow::Result<()> {
         self.child.kill().await.context("killing robot-agent")?;
         Ok(())
+    }
+
+    /// Sends SIGTERM (a clean shutdown); [`Agent::wait_exit`] waits for it.
+    pub fn terminate(&self) -> anyhow::Result<()> {
+        let pid = self.pid().context("robot-agent has exited")?;
+        let status = std::process::Command::new("kill")
+            .arg("-TERM")
+            .arg(pid.to_string())
+            .status()
+            .context("running kill")?;
+        anyhow::ensure!(status.success(), "kill -TERM {pid} failed");
+        Ok(())
+    }
+
+    /// The server's resident memory now, in kB (`VmRSS`).
+    pub fn rss_kb(&self) -> anyhow::Result<u64> {
+        let pid = self.pid().context("robot-agent has exited")?;
+        let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .context("no VmRSS in /proc/PID/status")
     }
 
     /// The process id, for signals other than SIGKILL.

@@ -4,11 +4,16 @@
 use anyhow::Context;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-/// `POST /api/session` on `http` (host:port) with an `Origin` header; returns the status and body.
-pub async fn post_session(http: &str, origin: &str) -> anyhow::Result<(u16, String)> {
+/// `POST /api/session` on `http` (host:port) with an `Origin` header and `page_token` as the bearer credential;
+/// returns the status and body.
+pub async fn post_session(
+    http: &str,
+    origin: &str,
+    page_token: &str,
+) -> anyhow::Result<(u16, String)> {
     let mut s = tokio::net::TcpStream::connect(http).await?;
     let req = format!(
-        "POST /api/session HTTP/1.1\r\nHost: {http}\r\nOrigin: {origin}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
+        "POST /api/session HTTP/1.1\r\nHost: {http}\r\nOrigin: {origin}\r\nAuthorization: Bearer {page_token}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
     );
     s.write_all(req.as_bytes()).await?;
     let mut buf = Vec::new();
@@ -27,8 +32,8 @@ pub async fn post_session(http: &str, origin: &str) -> anyhow::Result<(u16, Stri
 }
 
 /// A session token for the page at `http`, asked for with the server's own origin.
-pub async fn session_token(http: &str) -> anyhow::Result<String> {
-    let (status, body) = post_session(http, &format!("http://{http}")).await?;
+pub async fn session_token(http: &str, page_token: &str) -> anyhow::Result<String> {
+    let (status, body) = post_session(http, &format!("http://{http}"), page_token).await?;
     anyhow::ensure!(status == 200, "session refused with {status}: {body}");
     let v: serde_json::Value = serde_json::from_str(body.trim())?;
     Ok(v["session"]
@@ -38,7 +43,7 @@ pub async fn session_token(http: &str) -> anyhow::Result<String> {
 }
 
 /// Server configuration for the browser tests and benchmark: the modules that publish avatar commands, speech and
-/// detections themselves (or process the camera) are off, so the test owns those channels and measures the link
+/// detections themselves (or process the camera) are off (the behaviour controllers are part of tts), so the test owns those channels and measures the link
 /// alone. Their own tests cover them.
 pub const LINK_ONLY_CONFIG: &str = "\
 [modules.tts]
@@ -46,8 +51,6 @@ enabled = false
 [modules.brain]
 enabled = false
 [modules.vision]
-enabled = false
-[modules.behaviour]
 enabled = false
 ";
 

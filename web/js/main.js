@@ -166,6 +166,8 @@ link.addEventListener("state", (ev) => {
 });
 
 link.addEventListener("welcome", (ev) => {
+  // Connected again: an earlier refusal shown in the banner no longer holds.
+  showBanner(null);
   spectrum.configure(ev.detail.fft);
   if (autostart) {
     page.wantMic = true;
@@ -215,6 +217,10 @@ link.addEventListener("status", (ev) => {
 link.addEventListener("error", (ev) => {
   page.lastError = ev.detail.message ?? ev.detail.code ?? "error";
   console.warn("link:", page.lastError);
+  // A refused session (signed out, too many pages) is something the user can act on: say it on the page.
+  if (String(page.lastError).startsWith("cannot reach the agent: ")) {
+    showBanner(String(page.lastError).slice("cannot reach the agent: ".length));
+  }
 });
 
 function handleAvatar(cmd) {

@@ -75,6 +75,11 @@ impl<R: TransportRead> FrameReader<R> {
         }
     }
 
+    /// Changes the largest frame accepted from now on (a hub allows only a small one before login).
+    pub fn set_max_frame(&mut self, max_frame: usize) {
+        self.max_frame = max_frame;
+    }
+
     /// How many read buffers this reader has allocated, the first included.
     pub fn buffers_allocated(&self) -> u64 {
         self.allocated
@@ -367,7 +372,10 @@ mod tests {
                 let Event::Data { payload, .. } = event else {
                     panic!("not data: {event:?}");
                 };
-                assert!(payload.iter().all(|b| *b == seq as u8), "frame {seq} damaged");
+                assert!(
+                    payload.iter().all(|b| *b == seq as u8),
+                    "frame {seq} damaged"
+                );
                 if keep {
                     kept.push(payload);
                 }
@@ -377,7 +385,10 @@ mod tests {
         let reused = read_all(false).await;
         let pinned = read_all(true).await;
         assert!(reused <= 3, "{reused} buffers for frames dropped at once");
-        assert!(pinned >= 10, "only {pinned} buffers for 60 kept 52 kB frames");
+        assert!(
+            pinned >= 10,
+            "only {pinned} buffers for 60 kept 52 kB frames"
+        );
     }
 
     /// Small and large payloads, mixed with other events, arrive byte-identical

@@ -7,9 +7,9 @@
 mod assets;
 pub mod audio_fft;
 mod downlink;
+mod links;
 mod luma;
 mod on_demand;
-mod origin;
 mod pacing;
 mod role;
 mod routes;
@@ -31,7 +31,7 @@ use tokio::sync::{mpsc, watch};
 use crate::config::Config;
 use crate::module::{Module, ModuleContext, ModuleFuture};
 
-use origin::OriginPolicy;
+use links::LinkBoard;
 use session::SessionLimits;
 
 use role::{PageId, RoleBoard};
@@ -56,18 +56,21 @@ pub mod channels {
 pub struct BrowserConfig {
     /// Whether the link runs at all (`false`: the page is still served, its WebSocket is refused).
     pub enabled: bool,
-    /// Host names besides loopback names and IP literals that the page may be opened under.
-    pub extra_hosts: Vec<String>,
     /// Seconds a fresh session token may wait for its WebSocket.
     pub session_ttl_s: u64,
+    /// Page sockets open at once, in total.
+    pub max_links: usize,
+    /// Page sockets open at once under one credential (one browser's session cookie).
+    pub max_links_per_session: usize,
 }
 
 impl Default for BrowserConfig {
     fn default() -> Self {
         BrowserConfig {
             enabled: true,
-            extra_hosts: Vec::new(),
             session_ttl_s: 60,
+            max_links: 16,
+            max_links_per_session: 4,
         }
     }
 }
@@ -127,7 +130,7 @@ enum Notice {
 struct Shared {
     /// The link's hub connection, set when the `browser` module starts.
     client: OnceLock<flow::Client>,
-    origin: OriginPolicy,
+    links: Arc<Mutex<LinkBoard>>,
     sessions: Mutex<SessionStore>,
     session_ttl_s: u64,
     roles: Mutex<RoleBoard>,
@@ -174,6 +177,9 @@ impl BrowserLink {
         if browser.session_ttl_s == 0 {
             anyhow::bail!("[modules.browser] session_ttl_s: must be at least 1");
         }
+        if browser.max_links == 0 || browser.max_links_per_session == 0 {
+            anyhow::bail!("[modules.browser] max_links, max_links_per_session: must be at least 1");
+        }
         let limits = SessionLimits {
             unused_ttl: Duration::from_secs(browser.session_ttl_s),
             ..SessionLimits::default()
@@ -181,9 +187,10 @@ impl BrowserLink {
         Ok(BrowserLink {
             shared: Arc::new(Shared {
                 client: OnceLock::new(),
-                origin: OriginPolicy {
-                    extra_hosts: browser.extra_hosts,
-                },
+                links: Arc::new(Mutex::new(LinkBoard::new(
+                    browser.max_links,
+                    browser.max_links_per_session,
+                ))),
                 sessions: Mutex::new(SessionStore::new(limits)),
                 session_ttl_s: browser.session_ttl_s,
                 roles: Mutex::new(RoleBoard::default()),

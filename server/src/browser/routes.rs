@@ -1,17 +1,21 @@
-//! HTTP side of the browser link: the page's files, the session endpoint and the WebSocket upgrade.
+//! HTTP side of the browser link: the page's files, the session endpoint and the WebSocket upgrade. The server's
+//! access gate (`crate::http::access`) has let every request here in with a credential; this side checks Origin
+//! and caps the sockets per credential.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use axum::Router;
 use axum::extract::ws::WebSocketUpgrade;
-use axum::extract::{Path, Query, State};
+use axum::extract::{Extension, Path, Query, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use serde::Deserialize;
 
+use super::links::{LinkBoard, LinkSlot};
 use super::{Shared, assets, lock, socket, wire};
+use crate::http::access::{Credential, header_str as header, same_origin};
 
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
@@ -40,17 +44,27 @@ fn asset_response(path: &str, headers: &HeaderMap) -> Response {
     assets::serve(path)
 }
 
-fn header(headers: &HeaderMap, name: header::HeaderName) -> Option<&str> {
-    headers.get(name).and_then(|v| v.to_str().ok())
+/// The key the link caps count under; requests without a credential never get past the gate.
+fn credential_key(credential: Option<&Extension<Credential>>) -> &str {
+    credential.map_or("none", |c| c.0.key())
 }
 
-async fn new_session(State(shared): State<Arc<Shared>>, headers: HeaderMap) -> Response {
+async fn new_session(
+    State(shared): State<Arc<Shared>>,
+    credential: Option<Extension<Credential>>,
+    headers: HeaderMap,
+) -> Response {
     let host = header(&headers, header::HOST);
     let origin = header(&headers, header::ORIGIN);
     // Browsers send Origin on a fetch POST; a tool without one (curl) is not a cross-site page.
-    if !shared.origin.allows(host, origin, false) {
+    if !same_origin(host, origin, false) {
         tracing::warn!(?host, ?origin, "session refused: not our own origin");
         return (StatusCode::FORBIDDEN, "forbidden origin").into_response();
+    }
+    // Refused here too, where the page can read the reason (a refused WebSocket upgrade shows it nothing).
+    if let Err(e) = lock::<LinkBoard>(&shared.links).check(credential_key(credential.as_ref())) {
+        tracing::warn!(error = %e, "session refused");
+        return too_many(&e.to_string());
     }
     let token = lock(&shared.sessions).issue(Instant::now());
     let body = serde_json::json!({
@@ -66,15 +80,24 @@ struct LinkQuery {
     session: Option<String>,
 }
 
+fn too_many(reason: &str) -> Response {
+    (
+        StatusCode::TOO_MANY_REQUESTS,
+        axum::Json(serde_json::json!({ "error": reason })),
+    )
+        .into_response()
+}
+
 async fn link(
     State(shared): State<Arc<Shared>>,
+    credential: Option<Extension<Credential>>,
     Query(q): Query<LinkQuery>,
     headers: HeaderMap,
     upgrade: WebSocketUpgrade,
 ) -> Response {
     let host = header(&headers, header::HOST);
     let origin = header(&headers, header::ORIGIN);
-    if !shared.origin.allows(host, origin, true) {
+    if !same_origin(host, origin, true) {
         tracing::warn!(?host, ?origin, "link refused: not our own origin");
         return (StatusCode::FORBIDDEN, "forbidden origin").into_response();
     }
@@ -88,6 +111,13 @@ async fn link(
     let Some(token) = q.session else {
         return (StatusCode::FORBIDDEN, "missing session").into_response();
     };
+    let slot = match LinkSlot::take(&shared.links, credential_key(credential.as_ref())) {
+        Ok(slot) => slot,
+        Err(e) => {
+            tracing::warn!(error = %e, "link refused");
+            return too_many(&e.to_string());
+        }
+    };
     if let Err(e) = lock(&shared.sessions).bind(&token, Instant::now()) {
         tracing::warn!(error = %e, "link refused");
         return (StatusCode::FORBIDDEN, e.to_string()).into_response();
@@ -99,5 +129,9 @@ async fn link(
             tracing::warn!(error = %e, "WebSocket upgrade failed");
             lock(&failed.0.sessions).unbind(&failed.1, Instant::now());
         })
-        .on_upgrade(move |ws| async move { socket::run(shared, ws, &token).await })
+        .on_upgrade(move |ws| async move {
+            // The slot is held for as long as the socket lives.
+            socket::run(shared, ws, &token).await;
+            drop(slot);
+        })
 }

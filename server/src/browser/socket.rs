@@ -25,6 +25,7 @@ const OUT_QUEUE: usize = 64;
 /// Close codes (RFC 6455).
 const CLOSE_AWAY: u16 = 1001;
 const CLOSE_UNSUPPORTED: u16 = 1003;
+const CLOSE_TOO_BIG: u16 = 1009;
 const CLOSE_ERROR: u16 = 1011;
 
 /// Why the loop ended.
@@ -93,7 +94,8 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId, token: &str) {
                 tokio::select! {
                     _ = shutdown.changed() => break End::Close(CLOSE_AWAY, "server shutting down".into()),
                     msg = stream.next() => match msg {
-                        None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break End::PageClosed,
+                        None | Some(Ok(Message::Close(_))) => break End::PageClosed,
+                        Some(Err(e)) => break read_error(e),
                         Some(Ok(Message::Binary(b))) => if let Err(e) = conn.binary(b) { break e },
                         Some(Ok(Message::Text(t))) => if let Err(e) = conn.text(t.as_str()).await { break e },
                         Some(Ok(_)) => {}
@@ -116,8 +118,8 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId, token: &str) {
     match end {
         End::PageClosed => tracing::info!("page disconnected"),
         End::Close(code, reason) => {
-            if code == CLOSE_UNSUPPORTED {
-                tracing::warn!(%reason, "closing page socket: malformed input");
+            if code == CLOSE_UNSUPPORTED || code == CLOSE_TOO_BIG {
+                tracing::warn!(code, %reason, "closing page socket: malformed input");
             } else {
                 tracing::info!(code, %reason, "closing page socket");
             }
@@ -131,6 +133,28 @@ async fn serve(shared: Arc<Shared>, ws: WebSocket, page: PageId, token: &str) {
     drop(conn);
     drop(out);
     let _ = writer.await;
+}
+
+/// How a failed read ends the socket: a message over the size limit is the page's fault and gets 1009 with the
+/// reason; anything else means the connection is gone.
+fn read_error(e: axum::Error) -> End {
+    match e.into_inner().downcast::<tungstenite::Error>() {
+        Ok(e) if matches!(*e, tungstenite::Error::Capacity(_)) => End::Close(
+            CLOSE_TOO_BIG,
+            format!(
+                "{e} (a message may hold at most {} bytes)",
+                wire::HEADER_BYTES + wire::MAX_VIDEO_BYTES
+            ),
+        ),
+        Ok(e) => {
+            tracing::debug!(error = %e, "page socket failed");
+            End::PageClosed
+        }
+        Err(e) => {
+            tracing::debug!(error = %e, "page socket failed");
+            End::PageClosed
+        }
+    }
 }
 
 struct Conn {

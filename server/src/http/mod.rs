@@ -1,11 +1,13 @@
-//! The HTTP edge: health, JSON status APIs and the WebSocket flow link.
+//! The HTTP edge: health, JSON status APIs and the WebSocket flow link. Who may call them is decided in front of
+//! every route by [`access::gate`].
 
-use std::net::SocketAddr;
+pub mod access;
+
 use std::sync::Arc;
 
 use axum::Router;
 use axum::extract::{ConnectInfo, State, WebSocketUpgrade};
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use serde_json::{Value, json};
@@ -13,6 +15,7 @@ use serde_json::{Value, json};
 use crate::net::serve_connection;
 use crate::net::ws::WsServerTransport;
 use crate::server::Shared;
+use access::{PeerInfo, header_str, same_origin};
 
 /// Errors at HTTP handlers, turned into a status and a JSON body.
 #[derive(Debug)]
@@ -76,14 +79,25 @@ async fn status(State(shared): State<Arc<Shared>>) -> Result<axum::Json<Value>, 
     })))
 }
 
-/// `GET /flow`: FlowProtocol over WebSocket binary messages.
+/// `GET /flow`: FlowProtocol over WebSocket binary messages. Tools send no `Origin`; a browser always does, and then
+/// it must be the server's own, or any web page the operator visits could open hub connections.
 async fn flow_link(
     State(shared): State<Arc<Shared>>,
-    ConnectInfo(peer): ConnectInfo<SocketAddr>,
+    ConnectInfo(peer): ConnectInfo<PeerInfo>,
+    headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
-    let max = shared.config.hub.max_frame;
-    ws.max_message_size(max)
+    let peer = peer.remote;
+    let host = header_str(&headers, header::HOST);
+    let origin = header_str(&headers, header::ORIGIN);
+    if !same_origin(host, origin, false) {
+        tracing::warn!(%peer, ?origin, "flow link refused: a browser page of another origin");
+        return (StatusCode::FORBIDDEN, "forbidden origin").into_response();
+    }
+    // The byte stream arrives in messages of at most WS_MESSAGE_MAX; frames are reassembled and checked by size
+    // behind it, so one message never holds more than that before the frame check.
+    ws.max_message_size(flow::transport::WS_MESSAGE_MAX)
+        .max_frame_size(flow::transport::WS_MESSAGE_MAX)
         .on_upgrade(move |socket| async move {
             serve_connection(
                 WsServerTransport::new(socket, format!("ws:{peer}")),

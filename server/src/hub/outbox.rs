@@ -61,6 +61,9 @@ struct Lane {
     then: Option<Event>,
 }
 
+/// Why an outbox closes itself when its control queue is full.
+const OVERFLOW: &str = "control queue overflow: the peer is not reading";
+
 /// What `push_data` did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Pushed {
@@ -90,7 +93,7 @@ impl Outbox {
                 return false;
             }
             if inner.control.len() >= self.limits.control_msgs {
-                inner.closed = Some("control queue overflow: the peer is not reading".into());
+                inner.closed = Some(OVERFLOW.into());
                 self.closing.notify_waiters();
                 false
             } else {
@@ -240,6 +243,12 @@ impl Outbox {
             }
             notified.await;
         }
+    }
+
+    /// Whether the outbox closed itself because the peer stopped reading (a
+    /// fault of the peer, unlike a close by the hub or the connection).
+    pub fn overflowed(&self) -> bool {
+        lock(&self.inner).closed.as_deref() == Some(OVERFLOW)
     }
 
     /// Why the outbox was closed, if it was.

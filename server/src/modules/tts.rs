@@ -32,6 +32,10 @@ impl Module for TtsModule {
         "tts"
     }
 
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        TtsParams::from_json(params).map(drop)
+    }
+
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(run(ctx))
     }

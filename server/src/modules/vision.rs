@@ -40,6 +40,12 @@ impl Module for VisionModule {
         "vision"
     }
 
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        let settings = VisionSettings::from_json(params).context("[modules.vision]")?;
+        settings.pipeline_params().context("[modules.vision]")?;
+        Ok(())
+    }
+
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(run(ctx))
     }

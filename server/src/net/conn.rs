@@ -1,7 +1,12 @@
 //! Drives one connection over any transport: a reader loop that decodes
 //! commands into the session, and a writer loop that drains the outbox.
+//!
+//! Before login a connection is a stranger: it may send only a small frame,
+//! must log in within the login timeout, and counts against the cap on
+//! unauthenticated connections (see [`Admission`]).
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use flow::connection::{ConnError, Connection, FrameWriter};
@@ -22,41 +27,158 @@ const WRITE_BATCH: usize = 512 * 1024;
 const FAIR_SHARE: usize = 32;
 /// How long a closing connection may take to flush what is queued.
 const FLUSH_GRACE: Duration = Duration::from_secs(2);
+/// The largest frame a connection may send before it has logged in. A login
+/// (version, a 40-character token, a name) takes well under 1 kB; a stranger
+/// must not make the hub reserve megabytes for a frame it will never finish.
+pub const PRE_LOGIN_MAX_FRAME: usize = 16 * 1024;
+
+/// Why a connection ended: a normal close is logged at info, a misbehaving
+/// client at warn as `killing spurious client`.
+#[derive(Debug)]
+enum End {
+    /// The peer left, the server shut down, or the hub closed the outbox for a
+    /// reason of its own (logged as given).
+    Closed(String),
+    /// The client broke the protocol or a limit.
+    Spurious(String),
+}
+
+/// How the writer task ended.
+#[derive(Debug)]
+enum WriterEnd {
+    /// The outbox was closed and everything queued went out.
+    Drained,
+    Failed(String),
+}
+
+/// The count of connections that have not logged in yet, against a cap.
+#[derive(Debug)]
+pub struct Admission {
+    waiting: AtomicUsize,
+    cap: usize,
+}
+
+impl Admission {
+    pub fn new(cap: usize) -> Self {
+        Admission {
+            waiting: AtomicUsize::new(0),
+            cap,
+        }
+    }
+
+    /// Admits one more unauthenticated connection, or refuses it when the cap
+    /// is reached.
+    fn admit(self: &Arc<Self>) -> Option<Stranger> {
+        let admitted = self
+            .waiting
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < self.cap).then_some(n + 1)
+            })
+            .is_ok();
+        admitted.then(|| Stranger(Some(self.clone())))
+    }
+
+    /// Connections waiting to log in now.
+    pub fn waiting(&self) -> usize {
+        self.waiting.load(Ordering::Acquire)
+    }
+}
+
+/// One place among the unauthenticated connections, given back on login or close.
+#[derive(Debug)]
+struct Stranger(Option<Arc<Admission>>);
+
+impl Stranger {
+    fn logged_in(&mut self) {
+        if let Some(a) = self.0.take() {
+            a.waiting.fetch_sub(1, Ordering::AcqRel);
+        }
+    }
+}
+
+impl Drop for Stranger {
+    fn drop(&mut self) {
+        self.logged_in();
+    }
+}
 
 /// Serves one connection until it closes, misbehaves or the server shuts down.
+/// `internal` connections are the server's own modules: trusted, never capped.
 pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, internal: bool) {
     let mut shutdown = shared.shutdown.subscribe();
     let Connection {
         peer,
         mut reader,
         writer,
-    } = Connection::new(transport, shared.config.hub.max_frame);
+    } = Connection::new(transport, PRE_LOGIN_MAX_FRAME);
+    let mut stranger = if internal {
+        Stranger(None)
+    } else {
+        match shared.admission.admit() {
+            Some(s) => s,
+            None => {
+                warn!(
+                    %peer,
+                    "refusing connection: {} connections are already waiting to log in (hub.max_unauthenticated)",
+                    shared.admission.waiting()
+                );
+                return;
+            }
+        }
+    };
     let (conn, outbox) = shared.hub.connect(&peer);
     debug!(%peer, conn, "connection opened");
     let mut writer_task = tokio::spawn(write_loop(writer, outbox.clone()));
+    // Set once the writer task has finished and been awaited: a finished
+    // JoinHandle must not be polled again.
+    let mut writer_done = false;
     let mut session = Session::new(conn, peer.clone(), outbox.clone(), shared.clone(), internal);
+    let login_deadline =
+        tokio::time::sleep(Duration::from_millis(shared.config.hub.login_timeout_ms));
+    tokio::pin!(login_deadline);
     let mut since_yield = 0usize;
-    let reason: Option<String> = 'serve: loop {
+    let end: End = 'serve: loop {
+        let awaiting_login = !session.is_logged_in();
         let read = tokio::select! {
             frame = reader.read_frame() => frame,
-            _ = outbox.wait_closed() => break outbox.closed(),
-            _ = shutdown.changed() => break None,
-            _ = &mut writer_task => break Some("write failed".into()),
+            _ = outbox.wait_closed() => {
+                let reason = outbox.closed().unwrap_or_default();
+                break if outbox.overflowed() { End::Spurious(reason) } else { End::Closed(reason) };
+            }
+            _ = shutdown.changed() => break End::Closed("server shutting down".into()),
+            _ = &mut login_deadline, if awaiting_login => break End::Spurious(format!(
+                "no login within {} ms (hub.login_timeout_ms)", shared.config.hub.login_timeout_ms
+            )),
+            ended = &mut writer_task => {
+                writer_done = true;
+                break match ended {
+                    Ok(WriterEnd::Failed(e)) => End::Closed(format!("write failed: {e}")),
+                    Ok(WriterEnd::Drained) => End::Closed(outbox.closed().unwrap_or_default()),
+                    Err(e) => End::Spurious(format!("writer task failed: {e}")),
+                };
+            }
         };
         let mut next = match read {
             Ok(Some(raw)) => Some(raw),
-            Ok(None) => break None,
-            Err(e) => break Some(e.to_string()),
+            Ok(None) => break End::Closed("closed by the peer".into()),
+            Err(e @ ConnError::Io(_)) => break End::Closed(e.to_string()),
+            Err(e) => break End::Spurious(e.to_string()),
         };
         // Frames that came with the same read are handled here, without
         // setting up the select above again for each one.
         while let Some(raw) = next {
             let env = match decode_command(raw) {
                 Ok(env) => env,
-                Err(e) => break 'serve Some(format!("undecodable command: {e}")),
+                Err(e) => break 'serve End::Spurious(format!("undecodable command: {e}")),
             };
+            let was_logged_in = session.is_logged_in();
             if let Outcome::Close(reason) = session.handle(env).await {
-                break 'serve Some(reason);
+                break 'serve End::Spurious(reason);
+            }
+            if !was_logged_in && session.is_logged_in() {
+                // Known now: full-size frames, no deadline, no place among strangers.
+                reader.set_max_frame(shared.config.hub.max_frame);
+                stranger.logged_in();
             }
             since_yield += 1;
             if since_yield == FAIR_SHARE {
@@ -68,27 +190,37 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
             }
             next = match reader.parse_buffered() {
                 Ok(frame) => frame,
-                Err(e) => break 'serve Some(ConnError::Frame(e).to_string()),
+                Err(e) => break 'serve End::Spurious(ConnError::Frame(e).to_string()),
             };
         }
     };
-    if let Some(reason) = &reason {
-        warn!(%peer, conn, "killing spurious client: {reason}");
-    } else {
-        info!(%peer, conn, "connection closed");
-    }
+    drop(stranger);
+    let reason = match end {
+        End::Spurious(reason) => {
+            warn!(%peer, conn, "killing spurious client: {reason}");
+            reason
+        }
+        End::Closed(reason) => {
+            info!(%peer, conn, "connection closed: {reason}");
+            reason
+        }
+    };
     shared.hub.disconnect(conn);
-    outbox.close(reason.unwrap_or_else(|| "closed".into()));
+    outbox.close(reason);
     // Let the writer send what is queued (e.g. the refusal of a bad login).
-    if tokio::time::timeout(FLUSH_GRACE, &mut writer_task)
-        .await
-        .is_err()
+    if !writer_done
+        && tokio::time::timeout(FLUSH_GRACE, &mut writer_task)
+            .await
+            .is_err()
     {
         writer_task.abort();
     }
 }
 
-async fn write_loop<W: TransportWrite>(mut writer: FrameWriter<W>, outbox: Arc<Outbox>) {
+async fn write_loop<W: TransportWrite>(
+    mut writer: FrameWriter<W>,
+    outbox: Arc<Outbox>,
+) -> WriterEnd {
     let mut batch = Vec::new();
     loop {
         outbox.ready().await;
@@ -105,8 +237,9 @@ async fn write_loop<W: TransportWrite>(mut writer: FrameWriter<W>, outbox: Arc<O
         if let Err(e) = writer.flush().await {
             debug!("write failed: {e}");
             outbox.close(format!("write failed: {e}"));
-            return;
+            return WriterEnd::Failed(e.to_string());
         }
     }
     let _ = writer.shutdown().await;
+    WriterEnd::Drained
 }

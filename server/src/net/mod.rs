@@ -7,5 +7,5 @@ pub mod tcp;
 pub mod unix;
 pub mod ws;
 
-pub use conn::serve_connection;
+pub use conn::{Admission, PRE_LOGIN_MAX_FRAME, serve_connection};
 pub use io_runtime::IoRuntime;

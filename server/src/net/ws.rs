@@ -4,7 +4,7 @@ use std::io;
 
 use axum::extract::ws::{Message, WebSocket};
 use bytes::{Bytes, BytesMut};
-use flow::transport::{Transport, TransportRead, TransportWrite};
+use flow::transport::{Transport, TransportRead, TransportWrite, WS_MESSAGE_MAX};
 use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 
@@ -70,10 +70,14 @@ impl TransportRead for WsReader {
 
 impl TransportWrite for WsWriter {
     async fn write_all(&mut self, data: &[u8]) -> io::Result<()> {
-        self.0
-            .send(Message::Binary(Bytes::copy_from_slice(data)))
-            .await
-            .map_err(io::Error::other)
+        // Clients accept messages of at most WS_MESSAGE_MAX bytes; the byte stream is cut to fit.
+        for piece in data.chunks(WS_MESSAGE_MAX) {
+            self.0
+                .feed(Message::Binary(Bytes::copy_from_slice(piece)))
+                .await
+                .map_err(io::Error::other)?;
+        }
+        self.0.flush().await.map_err(io::Error::other)
     }
 
     async fn shutdown(&mut self) -> io::Result<()> {

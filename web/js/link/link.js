@@ -135,7 +135,14 @@ export class Link extends EventTarget {
 
 async function requestSession() {
   const res = await fetch("/api/session", { method: "POST", cache: "no-store" });
-  if (!res.ok) throw new Error(`session refused (HTTP ${res.status})`);
+  if (res.status === 401) {
+    throw new Error("signed out: open the address robot-agent printed at start (it ends in ?token=...) again");
+  }
+  if (!res.ok) {
+    // The server says why (e.g. too many pages open); show its words.
+    const reason = await res.json().then((b) => b?.error, () => null);
+    throw new Error(reason ? String(reason) : `session refused (HTTP ${res.status})`);
+  }
   const body = await res.json();
   if (typeof body.session !== "string" || typeof body.link !== "string") throw new Error("malformed session answer");
   return body;

@@ -20,6 +20,12 @@ pub mod ws;
 
 pub use addr::FlowAddr;
 
+/// The largest WebSocket message either side of a `/flow` link sends or accepts. FlowProtocol over WebSocket is a
+/// byte stream cut into binary messages, so a large frame travels as several messages; the cap keeps what a peer
+/// can make the other side buffer before a single frame is checked small (WebSocket libraries collect a whole
+/// message before handing it over).
+pub const WS_MESSAGE_MAX: usize = 256 * 1024;
+
 /// A bidirectional link that can be split into independent halves, so that
 /// reading and writing run in separate tasks.
 pub trait Transport: Send + 'static {

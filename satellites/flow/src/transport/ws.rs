@@ -7,9 +7,10 @@ use futures_util::stream::{SplitSink, SplitStream};
 use futures_util::{SinkExt, StreamExt};
 use tokio::net::TcpStream;
 use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
-use super::{Transport, TransportRead, TransportWrite};
+use super::{Transport, TransportRead, TransportWrite, WS_MESSAGE_MAX};
 
 type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
@@ -22,7 +23,10 @@ pub struct WsClientTransport {
 
 impl WsClientTransport {
     pub async fn connect(url: &str) -> io::Result<Self> {
-        let (ws, _response) = tokio_tungstenite::connect_async(url)
+        let config = WebSocketConfig::default()
+            .max_message_size(Some(WS_MESSAGE_MAX))
+            .max_frame_size(Some(WS_MESSAGE_MAX));
+        let (ws, _response) = tokio_tungstenite::connect_async_with_config(url, Some(config), true)
             .await
             .map_err(ws_error)?;
         Ok(WsClientTransport {
@@ -82,10 +86,14 @@ impl TransportRead for WsReader {
 
 impl TransportWrite for WsWriter {
     async fn write_all(&mut self, data: &[u8]) -> io::Result<()> {
-        self.0
-            .send(Message::Binary(Bytes::copy_from_slice(data)))
-            .await
-            .map_err(ws_error)
+        // The hub accepts messages of at most WS_MESSAGE_MAX bytes; the byte stream is cut to fit.
+        for piece in data.chunks(WS_MESSAGE_MAX) {
+            self.0
+                .feed(Message::Binary(Bytes::copy_from_slice(piece)))
+                .await
+                .map_err(ws_error)?;
+        }
+        self.0.flush().await.map_err(ws_error)
     }
 
     async fn shutdown(&mut self) -> io::Result<()> {

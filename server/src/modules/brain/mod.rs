@@ -37,6 +37,17 @@ impl Module for BrainModule {
         "brain"
     }
 
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        let params = BrainParams::from_json(params)?;
+        let capabilities = Capabilities {
+            commands: params.commands.keys().cloned().collect(),
+        };
+        ProgramFile::new(params.program.clone(), capabilities)
+            .load()
+            .map(drop)
+            .map_err(|e| anyhow::anyhow!("[modules.brain] program: {e:#}"))
+    }
+
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(run(ctx))
     }
