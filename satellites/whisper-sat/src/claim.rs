@@ -4,6 +4,8 @@
 //! second channel of the same name, so exactly one satellite succeeds; the hub removes a dead connection's channels
 //! and tells everyone, which is how the others learn that a claim was orphaned and the utterance is free again.
 
+use serde::{Deserialize, Serialize};
+
 /// Prefix of claim channels.
 pub const CLAIM_PREFIX: &str = "Agent.asr.claim.";
 /// Prefix of the presence channels satellites keep while they run.
@@ -20,22 +22,54 @@ pub fn claimed_utterance(channel: &str) -> Option<&str> {
 }
 
 /// The JSON header of a claim channel: the interval, so satellites whose segmentation differs slightly can still
-/// see that an overlapping utterance is taken. `speculative` marks a claim made when the utterance paused, before
-/// it ended (its interval is then the speech so far); it is for people and tests reading the hub, the claim rules
-/// do not depend on it.
-pub fn claim_header(start_us: u64, end_us: u64, satellite: &str, speculative: bool) -> String {
-    let mut header =
-        serde_json::json!({ "start_us": start_us, "end_us": end_us, "satellite": satellite });
-    if speculative {
-        header["speculative"] = serde_json::Value::Bool(true);
-    }
-    header.to_string()
+/// see that an overlapping utterance is taken, and who holds it. `speculative` marks a claim made when the utterance
+/// paused, before it ended (its interval is then the speech so far); it is for people and tests reading the hub, the
+/// claim rules do not depend on it. `done` is set once the holder has finished with the utterance (transcript
+/// submitted, or none to give), so the others drop it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClaimHeader {
+    pub start_us: u64,
+    pub end_us: u64,
+    /// The holder's name; a header without one (written by hand, say) still counts as a claim.
+    #[serde(default)]
+    pub satellite: String,
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub speculative: bool,
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub done: bool,
 }
 
-/// The interval in a claim header, if it has one.
-pub fn claim_interval(header: &str) -> Option<(u64, u64)> {
-    let v: serde_json::Value = serde_json::from_str(header).ok()?;
-    Some((v.get("start_us")?.as_u64()?, v.get("end_us")?.as_u64()?))
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+impl ClaimHeader {
+    /// The header of a fresh claim (not done).
+    pub fn new(start_us: u64, end_us: u64, satellite: &str, speculative: bool) -> Self {
+        ClaimHeader {
+            start_us,
+            end_us,
+            satellite: satellite.to_owned(),
+            speculative,
+            done: false,
+        }
+    }
+
+    /// Reads a claim channel's header; `None` when it is not a claim header (not JSON, or no interval).
+    pub fn parse(header: &str) -> Option<Self> {
+        serde_json::from_str(header).ok()
+    }
+
+    /// The claimed speech, start and end in microseconds.
+    pub fn interval(&self) -> (u64, u64) {
+        (self.start_us, self.end_us)
+    }
+
+    /// The header as the claim channel carries it (compact JSON).
+    pub fn to_json(&self) -> String {
+        // A struct of numbers, a string and booleans always serialises; the fallback is never used.
+        serde_json::to_string(self).unwrap_or_else(|_| "{}".to_owned())
+    }
 }
 
 /// True when two intervals share more than `min_us`.
@@ -54,15 +88,41 @@ mod tests {
         let name = claim_channel("u1700000000123");
         assert_eq!(claimed_utterance(&name), Some("u1700000000123"));
         assert_eq!(claimed_utterance("Agent.audio"), None);
+        let plain = ClaimHeader::new(5, 9, "s1", false);
+        assert_eq!(ClaimHeader::parse(&plain.to_json()), Some(plain.clone()));
+        assert_eq!(plain.interval(), (5, 9));
+        assert!(!plain.to_json().contains("speculative"));
+        assert!(!plain.to_json().contains("done"));
+        let speculative = ClaimHeader::new(5, 9, "s1", true);
         assert_eq!(
-            claim_interval(&claim_header(5, 9, "s1", false)),
-            Some((5, 9))
+            ClaimHeader::parse(&speculative.to_json()),
+            Some(speculative.clone())
         );
-        let speculative = claim_header(5, 9, "s1", true);
-        assert_eq!(claim_interval(&speculative), Some((5, 9)));
-        assert!(speculative.contains("\"speculative\":true"));
-        assert!(!claim_header(5, 9, "s1", false).contains("speculative"));
-        assert_eq!(claim_interval("{}"), None);
+        assert!(speculative.to_json().contains("\"speculative\":true"));
+        assert_eq!(ClaimHeader::parse("{}"), None);
+        assert_eq!(ClaimHeader::parse("not json"), None);
+    }
+
+    #[test]
+    fn a_done_claim_says_so_in_its_header_and_parses_back() {
+        let done = ClaimHeader {
+            done: true,
+            ..ClaimHeader::new(5, 9, "s1", true)
+        };
+        // Tests and people reading the hub look for this exact text.
+        assert!(done.to_json().contains("\"done\":true"));
+        assert!(ClaimHeader::parse(&done.to_json()).is_some_and(|h| h.done));
+        let foreign = r#"{"start_us":1,"end_us":2,"done":true,"extra":[1]}"#;
+        assert_eq!(
+            ClaimHeader::parse(foreign),
+            Some(ClaimHeader {
+                start_us: 1,
+                end_us: 2,
+                satellite: String::new(),
+                speculative: false,
+                done: true,
+            })
+        );
     }
 
     #[test]

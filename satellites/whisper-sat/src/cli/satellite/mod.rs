@@ -19,11 +19,12 @@ use std::collections::{HashSet, VecDeque};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use bytes::Bytes;
 use flow::{Client, ClientEvent, ErrorCode, Publisher};
-use tokio::sync::watch;
+use tokio::sync::{broadcast, watch};
 use tokio::task::JoinHandle;
 use whisper_sat::abort::AbortFlag;
-use whisper_sat::claim::{self, CLAIM_PREFIX, PRESENCE_PREFIX};
+use whisper_sat::claim::{self, CLAIM_PREFIX, ClaimHeader, PRESENCE_PREFIX};
 use whisper_sat::ledger::{Ledger, Pending, Standing};
 use whisper_sat::segmenter::SegmenterConfig;
 use whisper_sat::speculation::{Action, Hold};
@@ -137,6 +138,220 @@ impl Worker {
     }
 }
 
+/// What woke the satellite's loop: one variant per input it waits on.
+enum Wake {
+    /// The segmenter found, extended, resumed or abandoned an utterance (`None`: the segmenter stopped).
+    Heard(Option<Heard>),
+    /// The decode in flight came back with the transcriber (`None`: the blocking task panicked).
+    Decoded(Option<(Transcriber, Decode)>),
+    /// A transcript on `Agent.transcript` (`None`: the subscription ended).
+    Transcript(Option<Bytes>),
+    /// A hub event: channels coming and going, claims marked done, the connection's state.
+    Hub(Result<ClientEvent, broadcast::error::RecvError>),
+    /// A ledger deadline (a claim delay or a release grace) may have passed.
+    Timer,
+}
+
+/// Whether the loop goes on after an event.
+enum Next {
+    Continue,
+    Stop,
+}
+
+/// The satellite's state between events: what it knows of the utterances, its peers, its transcriber and its
+/// claims. Each input the loop waits on has one method here.
+struct Satellite {
+    client: Client,
+    settings: Settings,
+    model: String,
+    /// Our own presence channel's name, which is not a peer.
+    presence: String,
+    listener: audio::Listener,
+    /// The other satellites' presence channels: with none, nobody waits for fairness.
+    peers: HashSet<String>,
+    ledger: Ledger,
+    worker: Worker,
+    /// Finished claim channels, kept a while so late segmenters still see the utterance as taken.
+    retained: VecDeque<(Instant, Publisher)>,
+    /// When this satellite finished its recent utterances, for the fairness delay.
+    recent_jobs: VecDeque<Instant>,
+}
+
+impl Satellite {
+    /// Claims the next claimable utterance when the worker is free; the decode it starts may finish at once.
+    async fn claim_if_idle(&mut self, now: Instant) -> Option<Finished> {
+        if !self.worker.idle() {
+            return None;
+        }
+        let (pending, claim) =
+            try_claim(&self.client, &mut self.ledger, &self.settings.name, now).await?;
+        let (hold, first) = Hold::claimed(pending.utterance, pending.ended);
+        self.worker.held = Some(Held { hold, claim });
+        self.worker.carry_out(Some(first))
+    }
+
+    /// Lets go of retained claims and fairness marks that are old enough.
+    fn expire(&mut self, now: Instant) {
+        let retention = self.settings.claim_retention;
+        while self
+            .retained
+            .front()
+            .is_some_and(|(at, _)| now.duration_since(*at) > retention)
+        {
+            self.retained.pop_front();
+        }
+        while self
+            .recent_jobs
+            .front()
+            .is_some_and(|at| now.duration_since(*at) > FAIRNESS_WINDOW)
+        {
+            self.recent_jobs.pop_front();
+        }
+    }
+
+    /// When to look at the ledger again if nothing else happens: its next deadline while idle (a busy satellite
+    /// claims nothing), else in a while anyway.
+    fn next_wake(&self, now: Instant) -> Instant {
+        self.ledger
+            .next_deadline()
+            .filter(|_| self.worker.idle())
+            .unwrap_or(now + Duration::from_secs(5))
+            .max(now + Duration::from_millis(5))
+    }
+
+    /// The segmenter's news: a held utterance goes to its hold, any other to the ledger.
+    fn on_heard(&mut self, heard: Heard) -> Option<Finished> {
+        // The wait for this event may have been long: fairness delays count from now.
+        let now = Instant::now();
+        let delay = if self.peers.is_empty() {
+            Duration::ZERO
+        } else {
+            FAIRNESS_STEP * self.recent_jobs.len().min(4) as u32
+        };
+        let action = match heard {
+            Heard::Paused(u) => match self.worker.holding(&u.id) {
+                Some(hold) => hold.paused(u),
+                None => {
+                    self.ledger.found(u, false, now, now + delay);
+                    None
+                }
+            },
+            Heard::Ended(u) => match self.worker.holding(&u.id) {
+                Some(hold) => hold.ended(u),
+                None => {
+                    self.ledger.found(u, true, now, now + delay);
+                    None
+                }
+            },
+            Heard::Resumed { id } => match self.worker.holding(&id) {
+                Some(hold) => hold.resumed(),
+                None => {
+                    self.ledger.resumed(&id);
+                    None
+                }
+            },
+            Heard::Abandoned { id } => return self.abandon(&id),
+        };
+        self.worker.carry_out(action)
+    }
+
+    /// Recognition was switched off during utterance `id`: forget it, and if it is ours, stop decoding and finish
+    /// the claim without a transcript.
+    fn abandon(&mut self, id: &str) -> Option<Finished> {
+        self.ledger.forget(id);
+        self.worker.holding(id)?;
+        let held = self.worker.held.take()?;
+        if let Some(d) = &self.worker.decoding {
+            d.abort.abort();
+        }
+        Some(Finished {
+            claim: held.claim,
+            utterance: held.hold.utterance().clone(),
+            outcome: Err(TranscribeError::Aborted),
+            speculative: false,
+        })
+    }
+
+    /// The decode came back: the transcriber is free again, and the hold decides what the result is worth.
+    fn on_decoded(
+        &mut self,
+        done: Option<(Transcriber, Decode)>,
+    ) -> anyhow::Result<Option<Finished>> {
+        self.worker.decoding = None;
+        let Some((t, outcome)) = done else {
+            anyhow::bail!("the transcription task panicked");
+        };
+        self.worker.transcriber = Some(t);
+        // Without a claim (abandoned meanwhile) the result is not wanted.
+        let action = self
+            .worker
+            .held
+            .as_mut()
+            .and_then(|h| h.hold.decoded(outcome));
+        Ok(self.worker.carry_out(action))
+    }
+
+    /// Someone's transcript: its utterance is done with.
+    fn on_transcript(&mut self, payload: &[u8]) {
+        if let Ok(t) = serde_json::from_slice::<TranscriptMessage>(payload) {
+            self.ledger.finished(&t.utterance, t.start_us, t.end_us);
+        }
+    }
+
+    /// A hub event: peers arriving and leaving, claims taken, released or marked done.
+    fn on_hub(&mut self, event: Result<ClientEvent, broadcast::error::RecvError>) -> Next {
+        match event {
+            Ok(ClientEvent::ChannelAdded(info)) => {
+                if info.name.starts_with(PRESENCE_PREFIX) && info.name != self.presence {
+                    self.peers.insert(info.name);
+                } else if let Some(id) = claim::claimed_utterance(&info.name) {
+                    self.ledger.taken(id);
+                }
+            }
+            Ok(ClientEvent::ChannelRemoved { name, .. }) => {
+                self.peers.remove(&name);
+                if name == "Agent.audio" {
+                    self.listener.send(audio::Feed::Flush);
+                }
+                if let Some(id) = claim::claimed_utterance(&name) {
+                    self.ledger.released(id, Instant::now() + RELEASE_GRACE);
+                }
+            }
+            Ok(ClientEvent::HeaderChanged { name, header, .. }) => {
+                if let (Some(id), Some(claim)) =
+                    (claim::claimed_utterance(&name), ClaimHeader::parse(&header))
+                    && claim.done
+                {
+                    let (start, end) = claim.interval();
+                    self.ledger.finished(id, start, end);
+                }
+            }
+            Ok(ClientEvent::Disconnected(why)) => tracing::warn!("hub connection lost: {why}"),
+            Ok(_) => {}
+            Err(broadcast::error::RecvError::Lagged(n)) => tracing::warn!("missed {n} hub events"),
+            Err(broadcast::error::RecvError::Closed) => return Next::Stop,
+        }
+        Next::Continue
+    }
+
+    /// Sends out what a finished claim produced, marks the claim done and keeps its channel a while.
+    async fn on_finished(&mut self, f: Finished) {
+        // Fairness counts the utterances a satellite finished; one abandoned unheard is no work done.
+        if !matches!(f.outcome, Err(TranscribeError::Aborted)) {
+            self.recent_jobs.push_back(Instant::now());
+        }
+        finish(
+            &self.client,
+            &self.settings.name,
+            &self.model,
+            &f,
+            &mut self.ledger,
+        )
+        .await;
+        self.retained.push_back((Instant::now(), f.claim));
+    }
+}
+
 /// Runs a satellite until the client closes or Ctrl-C.
 pub async fn run(
     client: Client,
@@ -169,7 +384,7 @@ pub async fn run(
     ];
     let transcripts = client.subscribe(relay::TRANSCRIPT).await?;
     let mut events = client.events();
-    let mut peers: HashSet<String> = client
+    let peers: HashSet<String> = client
         .channels()
         .await?
         .into_iter()
@@ -177,146 +392,69 @@ pub async fn run(
         .map(|c| c.name)
         .collect();
 
-    // Generous: on a loaded machine a backlog may take minutes to clear, and losing speech is worse than lateness.
-    let mut ledger = Ledger::new(Duration::from_secs(600));
-    let model = transcriber.model_name().to_owned();
-    let mut worker = Worker {
-        transcriber: Some(transcriber),
-        ..Worker::default()
+    let mut sat = Satellite {
+        client: client.clone(),
+        model: transcriber.model_name().to_owned(),
+        presence: presence.name().to_owned(),
+        settings,
+        listener,
+        peers,
+        // Generous: on a loaded machine a backlog may take minutes to clear, and losing speech is worse than
+        // lateness.
+        ledger: Ledger::new(Duration::from_secs(600)),
+        worker: Worker {
+            transcriber: Some(transcriber),
+            ..Worker::default()
+        },
+        retained: VecDeque::new(),
+        recent_jobs: VecDeque::new(),
     };
-    let mut retained: VecDeque<(Instant, Publisher)> = VecDeque::new();
-    let mut recent_jobs: VecDeque<Instant> = VecDeque::new();
+    // Created once: a fresh `ctrl_c()` per turn of the loop would register with the signal driver again each time.
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
 
     loop {
         let now = Instant::now();
-        let mut finished = None;
-        if worker.idle()
-            && let Some((pending, claim)) =
-                try_claim(&client, &mut ledger, &settings.name, now).await
-        {
-            let (hold, first) = Hold::claimed(pending.utterance, pending.ended);
-            worker.held = Some(Held { hold, claim });
-            finished = worker.carry_out(Some(first));
-        }
-        while retained
-            .front()
-            .is_some_and(|(at, _)| now.duration_since(*at) > settings.claim_retention)
-        {
-            retained.pop_front();
-        }
-        while recent_jobs
-            .front()
-            .is_some_and(|at| now.duration_since(*at) > FAIRNESS_WINDOW)
-        {
-            recent_jobs.pop_front();
-        }
-        let wake = ledger
-            .next_deadline()
-            .filter(|_| worker.idle())
-            .unwrap_or(now + Duration::from_secs(5))
-            .max(now + Duration::from_millis(5));
+        let claimed = sat.claim_if_idle(now).await;
+        sat.expire(now);
+        let wake = sat.next_wake(now);
 
-        tokio::select! {
-            found = utterances.recv() => {
-                let Some(heard) = found else { break };
-                // The wait above may have been long: fairness delays count from now.
-                let now = Instant::now();
-                let delay = if peers.is_empty() { Duration::ZERO } else { FAIRNESS_STEP * recent_jobs.len().min(4) as u32 };
-                let action = match heard {
-                    Heard::Paused(u) => match worker.holding(&u.id) {
-                        Some(hold) => hold.paused(u),
-                        None => { ledger.found(u, false, now, now + delay); None }
-                    },
-                    Heard::Ended(u) => match worker.holding(&u.id) {
-                        Some(hold) => hold.ended(u),
-                        None => { ledger.found(u, true, now, now + delay); None }
-                    },
-                    Heard::Resumed { id } => match worker.holding(&id) {
-                        Some(hold) => hold.resumed(),
-                        None => { ledger.resumed(&id); None }
-                    },
-                    Heard::Abandoned { id } => {
-                        ledger.forget(&id);
-                        if worker.holding(&id).is_some() && let Some(h) = worker.held.take() {
-                            if let Some(d) = &worker.decoding {
-                                d.abort.abort();
-                            }
-                            finished = Some(Finished {
-                                claim: h.claim,
-                                utterance: h.hold.utterance().clone(),
-                                outcome: Err(TranscribeError::Aborted),
-                                speculative: false,
-                            });
-                        }
-                        None
-                    }
-                };
-                let submit = worker.carry_out(action);
-                finished = finished.or(submit);
+        let woke = tokio::select! {
+            heard = utterances.recv() => Wake::Heard(heard),
+            done = async { (&mut sat.worker.decoding.as_mut()?.job).await.ok() }, if sat.worker.decoding.is_some() => {
+                Wake::Decoded(done)
             }
-            done = async { (&mut worker.decoding.as_mut()?.job).await.ok() }, if worker.decoding.is_some() => {
-                worker.decoding = None;
-                let Some((t, outcome)) = done else {
-                    anyhow::bail!("the transcription task panicked");
-                };
-                worker.transcriber = Some(t);
-                // Without a claim (abandoned meanwhile) the result is not wanted.
-                let action = worker.held.as_mut().and_then(|h| h.hold.decoded(outcome));
-                let submit = worker.carry_out(action);
-                finished = finished.or(submit);
+            data = transcripts.recv() => Wake::Transcript(data.map(|d| d.payload)),
+            event = events.recv() => Wake::Hub(event),
+            () = tokio::time::sleep_until(wake.into()) => Wake::Timer,
+            _ = &mut ctrl_c => break,
+        };
+        let finished = match woke {
+            Wake::Heard(None) | Wake::Transcript(None) => break,
+            Wake::Heard(Some(heard)) => sat.on_heard(heard),
+            Wake::Decoded(done) => sat.on_decoded(done)?,
+            Wake::Transcript(Some(payload)) => {
+                sat.on_transcript(&payload);
+                None
             }
-            data = transcripts.recv() => {
-                let Some(d) = data else { break };
-                if let Ok(t) = serde_json::from_slice::<TranscriptMessage>(&d.payload) {
-                    ledger.finished(&t.utterance, t.start_us, t.end_us);
-                }
-            }
-            event = events.recv() => match event {
-                Ok(ClientEvent::ChannelAdded(info)) if info.name.starts_with(PRESENCE_PREFIX) && info.name != presence.name() => {
-                    peers.insert(info.name);
-                }
-                Ok(ClientEvent::ChannelAdded(info)) => {
-                    if let Some(id) = claim::claimed_utterance(&info.name) {
-                        ledger.taken(id);
-                    }
-                }
-                Ok(ClientEvent::ChannelRemoved { name, .. }) => {
-                    peers.remove(&name);
-                    if name == "Agent.audio" {
-                        listener.send(audio::Feed::Flush);
-                    }
-                    if let Some(id) = claim::claimed_utterance(&name) {
-                        ledger.released(id, Instant::now() + RELEASE_GRACE);
-                    }
-                }
-                Ok(ClientEvent::HeaderChanged { name, header, .. }) => {
-                    if let (Some(id), Some((s, e))) = (claim::claimed_utterance(&name), claim::claim_interval(&header))
-                        && header.contains("\"done\":true")
-                    {
-                        ledger.finished(id, s, e);
-                    }
-                }
-                Ok(ClientEvent::Disconnected(why)) => tracing::warn!("hub connection lost: {why}"),
-                Ok(_) => {}
-                Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => tracing::warn!("missed {n} hub events"),
-                Err(_) => break,
+            Wake::Hub(event) => match sat.on_hub(event) {
+                Next::Continue => None,
+                Next::Stop => break,
             },
-            () = tokio::time::sleep_until(wake.into()) => {}
-            _ = tokio::signal::ctrl_c() => break,
-        }
-        if let Some(f) = finished {
-            // Fairness counts the utterances a satellite finished; one abandoned unheard is no work done.
-            if !matches!(f.outcome, Err(TranscribeError::Aborted)) {
-                recent_jobs.push_back(Instant::now());
-            }
-            finish(&client, &settings.name, &model, &f, &mut ledger).await;
-            retained.push_back((Instant::now(), f.claim));
+            Wake::Timer => None,
+        };
+        // A claim finished by the decode it started and one finished by this event are both sent out.
+        for f in [claimed, finished].into_iter().flatten() {
+            sat.on_finished(f).await;
         }
     }
     for t in tasks {
         t.abort();
     }
-    let dropped = listener.dropped.load(std::sync::atomic::Ordering::Relaxed);
+    let dropped = sat
+        .listener
+        .dropped
+        .load(std::sync::atomic::Ordering::Relaxed);
     tracing::info!(dropped, "satellite stopped");
     drop(presence);
     Ok(())
@@ -339,8 +477,8 @@ async fn try_claim(
             Ok(list) => list.into_iter().any(|c| {
                 c.name.starts_with(CLAIM_PREFIX)
                     && claim::claimed_utterance(&c.name) != Some(u.id.as_str())
-                    && claim::claim_interval(&c.header).is_some_and(|i| {
-                        claim::overlaps(i, span, whisper_sat::ledger::SAME_SPEECH_US)
+                    && ClaimHeader::parse(&c.header).is_some_and(|h| {
+                        claim::overlaps(h.interval(), span, whisper_sat::ledger::SAME_SPEECH_US)
                     })
             }),
             Err(e) => {
@@ -353,7 +491,7 @@ async fn try_claim(
             ledger.put_back(p, Standing::Taken, now);
             continue;
         }
-        let header = claim::claim_header(u.start_us, u.speech_end_us, name, !p.ended);
+        let header = ClaimHeader::new(u.start_us, u.speech_end_us, name, !p.ended).to_json();
         match client
             .publisher(&claim::claim_channel(&u.id), &header)
             .await
@@ -424,15 +562,11 @@ async fn finish(client: &Client, satellite: &str, model: &str, f: &Finished, led
         Err(e) => tracing::error!(id = %u.id, "transcription failed: {e}"),
     }
     ledger.finished(&u.id, u.start_us, u.speech_end_us);
-    let mut header: serde_json::Value = serde_json::from_str(&claim::claim_header(
-        u.start_us,
-        u.speech_end_us,
-        satellite,
-        f.speculative,
-    ))
-    .unwrap_or_default();
-    header["done"] = serde_json::Value::Bool(true);
-    if let Err(e) = f.claim.set_header(&header.to_string()).await {
+    let header = ClaimHeader {
+        done: true,
+        ..ClaimHeader::new(u.start_us, u.speech_end_us, satellite, f.speculative)
+    };
+    if let Err(e) = f.claim.set_header(&header.to_json()).await {
         tracing::warn!(id = %u.id, "marking the claim done: {e}");
     }
 }
