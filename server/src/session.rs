@@ -3,7 +3,6 @@
 //! come in as values and replies go out through the connection's outbox.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use flow::protocol::{
     Command, Envelope, ErrorCode, ErrorReply, Event, PROTOCOL_VERSION, Reply, ReqId,
@@ -128,21 +127,16 @@ impl Session {
                 chan,
                 timeout_ms,
                 payload,
-            } => {
-                match self.shared.hub.call(self.conn, req, &chan, payload) {
-                    // The reply comes from the service owner, or from the timer.
-                    Ok(call) => {
-                        let hub = self.shared.hub.clone();
-                        let timeout_ms = timeout_ms.clamp(1, 600_000);
-                        tokio::spawn(async move {
-                            tokio::time::sleep(Duration::from_millis(u64::from(timeout_ms))).await;
-                            hub.expire_call(call, timeout_ms);
-                        });
-                        return Outcome::Continue;
-                    }
-                    Err(e) => Err(e),
-                }
-            }
+            } => match self
+                .shared
+                .hub
+                .call(self.conn, req, &chan, payload, timeout_ms)
+            {
+                // The reply comes from the service owner, or from the hub's
+                // call timer once the timeout has passed.
+                Ok(_) => return Outcome::Continue,
+                Err(e) => Err(e),
+            },
             Command::Respond { call, result } => self
                 .shared
                 .hub

@@ -4,7 +4,7 @@
 //! events. Transports and sessions live elsewhere.
 
 use std::collections::{BTreeSet, HashMap};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use bytes::Bytes;
@@ -13,8 +13,10 @@ use flow::protocol::{
     Reply, ReqId, channel_hash, validate_name,
 };
 
+mod deadlines;
 pub mod outbox;
 
+pub use deadlines::MAX_CALL_TIMEOUT_MS;
 pub use outbox::{Outbox, OutboxLimits};
 
 /// A connection (satellite or module) as the hub knows it.
@@ -80,6 +82,10 @@ struct PendingCall {
     caller: ConnId,
     req: ReqId,
     chan: ChanId,
+    /// When the caller gets `Timeout`; the same instant is in `State::deadlines`.
+    deadline: Instant,
+    /// The timeout applied, for the caller's error message.
+    timeout_ms: u32,
 }
 
 #[derive(Debug, Default)]
@@ -91,6 +97,8 @@ struct State {
     by_hash: HashMap<u64, ChanId>,
     next_id: u16,
     calls: HashMap<CallId, PendingCall>,
+    /// The pending calls' deadlines, earliest first: what the timer task sleeps on.
+    deadlines: deadlines::Deadlines,
     next_call: CallId,
     last_rate: Option<Instant>,
 }
@@ -98,8 +106,22 @@ struct State {
 /// The hub: shared by every connection task.
 #[derive(Debug)]
 pub struct Hub {
-    state: Mutex<State>,
+    /// Shared with the call timer task, which holds it weakly.
+    state: Arc<Mutex<State>>,
     limits: HubLimits,
+    timer: deadlines::CallTimer,
+}
+
+impl Drop for Hub {
+    fn drop(&mut self) {
+        self.timer.stop();
+    }
+}
+
+fn lock_state(state: &Mutex<State>) -> MutexGuard<'_, State> {
+    // Methods validate before they mutate, so state stays consistent even
+    // if a panic poisoned the lock; keep serving rather than crash the hub.
+    state.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
 fn now_us() -> u64 {
@@ -112,21 +134,18 @@ fn now_us() -> u64 {
 impl Hub {
     pub fn new(limits: HubLimits) -> Self {
         Hub {
-            state: Mutex::new(State {
+            state: Arc::new(Mutex::new(State {
                 next_conn: 1,
                 next_call: 1,
                 ..State::default()
-            }),
+            })),
             limits,
+            timer: deadlines::CallTimer::default(),
         }
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {
-        // Methods validate before they mutate, so state stays consistent even
-        // if a panic poisoned the lock; keep serving rather than crash the hub.
-        self.state
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
+        lock_state(&self.state)
     }
 
     // ------------------------------------------------------------ connections
@@ -390,13 +409,16 @@ impl Hub {
     }
 
     /// Forwards a service request to the channel's owner; the reply to the
-    /// caller comes later from [`Hub::respond`] or [`Hub::expire_call`].
+    /// caller comes later from [`Hub::respond`], or as `Timeout` once
+    /// `timeout_ms` (clamped to 1 ms ..= [`MAX_CALL_TIMEOUT_MS`]) has passed.
+    /// The hub's one timer task meets the deadline; no task waits per call.
     pub fn call(
         &self,
         conn: ConnId,
         req: ReqId,
         chan: &ChanRef,
         payload: Bytes,
+        timeout_ms: u32,
     ) -> HubResult<CallId> {
         let mut st = self.lock();
         let id = resolve(&st, chan)?;
@@ -422,14 +444,18 @@ impl Hub {
         let owner = ch.owner;
         let call = st.next_call;
         st.next_call += 1;
+        let (deadline, timeout_ms) = deadlines::deadline(Instant::now(), timeout_ms);
         st.calls.insert(
             call,
             PendingCall {
                 caller: conn,
                 req,
                 chan: id,
+                deadline,
+                timeout_ms,
             },
         );
+        st.deadlines.insert((deadline, call));
         let delivered = st.conns.get(&owner).is_some_and(|o| {
             o.outbox.push_control(Event::ServiceRequest {
                 chan: id,
@@ -440,6 +466,12 @@ impl Hub {
         if !delivered {
             finish_call(&mut st, call);
             return err(ErrorCode::ServiceGone, "the service owner is not reachable");
+        }
+        let earliest = st.deadlines.first().is_some_and(|&(_, c)| c == call);
+        drop(st);
+        if earliest {
+            // The timer sleeps until a later deadline, or not at all: wake it.
+            self.timer.earlier(&self.state);
         }
         Ok(call)
     }
@@ -470,23 +502,11 @@ impl Hub {
         Ok(())
     }
 
-    /// Fails a call that got no response in time. No-op if it was answered.
-    pub fn expire_call(&self, call: CallId, waited_ms: u32) {
-        let mut st = self.lock();
-        if let Some(pending) = finish_call(&mut st, call) {
-            let name = st
-                .channels
-                .get(&pending.chan)
-                .map(|c| c.name.clone())
-                .unwrap_or_default();
-            let message = format!("service {name} did not answer within {waited_ms} ms");
-            reply_to(
-                &st,
-                pending.caller,
-                pending.req,
-                Err(ErrorReply::new(ErrorCode::Timeout, message)),
-            );
-        }
+    /// Fails every call whose deadline is at or before `now` with `Timeout`
+    /// and returns the next deadline. The timer task calls this; tests call
+    /// it with a `now` of their choosing.
+    pub fn expire_due(&self, now: Instant) -> Option<Instant> {
+        expire_due_locked(&mut self.lock(), now)
     }
 
     // ------------------------------------------------------------ queries
@@ -595,12 +615,50 @@ fn reply_to(st: &State, conn: ConnId, req: ReqId, result: Result<Reply, ErrorRep
     }
 }
 
-fn finish_call(st: &mut State, call: CallId) -> Option<PendingCall> {
+/// Takes a call out of the pending ones, deadline included, wherever it is answered.
+fn take_call(st: &mut State, call: CallId) -> Option<PendingCall> {
     let pending = st.calls.remove(&call)?;
+    st.deadlines.remove(&(pending.deadline, call));
+    Some(pending)
+}
+
+fn finish_call(st: &mut State, call: CallId) -> Option<PendingCall> {
+    let pending = take_call(st, call)?;
     if let Some(ch) = st.channels.get_mut(&pending.chan) {
         ch.inflight = ch.inflight.saturating_sub(1);
     }
     Some(pending)
+}
+
+/// [`Hub::expire_due`] under the lock the caller holds.
+fn expire_due_locked(st: &mut State, now: Instant) -> Option<Instant> {
+    while let Some(&(deadline, call)) = st.deadlines.first() {
+        if deadline > now {
+            return Some(deadline);
+        }
+        let Some(pending) = finish_call(st, call) else {
+            // A deadline without its call cannot happen (both go together);
+            // drop it rather than spin on it.
+            st.deadlines.remove(&(deadline, call));
+            continue;
+        };
+        let name = st
+            .channels
+            .get(&pending.chan)
+            .map(|c| c.name.clone())
+            .unwrap_or_default();
+        let message = format!(
+            "service {name} did not answer within {} ms",
+            pending.timeout_ms
+        );
+        reply_to(
+            st,
+            pending.caller,
+            pending.req,
+            Err(ErrorReply::new(ErrorCode::Timeout, message)),
+        );
+    }
+    None
 }
 
 fn unsubscribe_locked(st: &mut State, conn: ConnId, id: ChanId) {
@@ -648,7 +706,7 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
         .map(|(k, _)| *k)
         .collect();
     for call in orphaned {
-        if let Some(p) = st.calls.remove(&call) {
+        if let Some(p) = take_call(st, call) {
             let e = ErrorReply::new(
                 ErrorCode::ServiceGone,
                 format!("service {} went away", ch.name),

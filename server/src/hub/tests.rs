@@ -1,6 +1,11 @@
 //! Unit tests of the hub core's semantics, driven without any socket.
 
+use std::time::Duration;
+
 use super::*;
+
+/// The timeout of the tests' service calls: long enough never to pass by itself.
+const T: u32 = 60_000;
 
 pub(crate) fn limits(lane_msgs: usize) -> HubLimits {
     HubLimits {
@@ -336,7 +341,7 @@ fn kinds_are_enforced() {
         ErrorCode::WrongKind
     );
     assert_eq!(
-        code_of(hub.call(other, 1, &ChanRef::Id(s), Bytes::new())),
+        code_of(hub.call(other, 1, &ChanRef::Id(s), Bytes::new(), T)),
         ErrorCode::WrongKind
     );
     // Synchronous connections get no events, so they can neither subscribe nor serve.
@@ -526,7 +531,7 @@ fn disconnect_removes_channels_tells_everyone_and_fails_pending_calls() {
     hub.subscribe(sub, &by_name("S")).expect("sub");
     hub.publish(owner, s, Bytes::from_static(b"queued"))
         .expect("pub");
-    hub.call(caller, 77, &by_name("V"), Bytes::from_static(b"req"))
+    hub.call(caller, 77, &by_name("V"), Bytes::from_static(b"req"), T)
         .expect("call");
     assert_eq!(data_seqs(&drain(&sub_ob)), vec![1]);
     hub.publish(owner, s, Bytes::from_static(b"never read"))
@@ -557,7 +562,7 @@ fn disconnect_removes_channels_tells_everyone_and_fails_pending_calls() {
     assert_eq!(reply.expect_err("failed").code, ErrorCode::ServiceGone);
     // Calls to the gone service now fail at once, and the subscription is over.
     assert_eq!(
-        code_of(hub.call(caller, 78, &by_name("V"), Bytes::new())),
+        code_of(hub.call(caller, 78, &by_name("V"), Bytes::new(), T)),
         ErrorCode::NotFound
     );
     assert_eq!(
@@ -593,7 +598,7 @@ fn a_caller_going_away_leaves_the_service_working() {
     let (caller, _) = sync_conn(&hub, "caller");
     service(&hub, owner, "V");
     let call = hub
-        .call(caller, 1, &by_name("V"), Bytes::from_static(b"q"))
+        .call(caller, 1, &by_name("V"), Bytes::from_static(b"q"), T)
         .expect("call");
     hub.disconnect(caller);
     // The owner's late answer is accepted quietly.
@@ -602,7 +607,7 @@ fn a_caller_going_away_leaves_the_service_working() {
     // The in-flight slot was released: a new caller is not told "overloaded".
     let (caller2, caller2_ob) = sync_conn(&hub, "caller2");
     let call2 = hub
-        .call(caller2, 2, &by_name("V"), Bytes::new())
+        .call(caller2, 2, &by_name("V"), Bytes::new(), T)
         .expect("slot free again");
     assert_eq!(service_requests(&drain(&owner_ob)).len(), 2);
     hub.respond(owner, call2, Ok(Bytes::from_static(b"b")))
@@ -647,6 +652,7 @@ fn service_calls_are_answered_to_the_right_caller() {
             10,
             &by_name("Robot.move"),
             Bytes::from_static(b"{\"x\":1}"),
+            T,
         )
         .expect("call 1");
     let c2 = hub
@@ -655,6 +661,7 @@ fn service_calls_are_answered_to_the_right_caller() {
             10,
             &ChanRef::Id(v),
             Bytes::from_static(b"{\"x\":2}"),
+            T,
         )
         .expect("call 2");
     assert_ne!(c1, c2);
@@ -698,7 +705,7 @@ fn only_the_service_owner_may_respond() {
     let (forger, _) = async_conn(&hub, "forger");
     service(&hub, owner, "V");
     let call = hub
-        .call(caller, 5, &by_name("V"), Bytes::new())
+        .call(caller, 5, &by_name("V"), Bytes::new(), T)
         .expect("call");
     assert_eq!(
         code_of(hub.respond(forger, call, Ok(Bytes::from_static(b"forged")))),
@@ -719,10 +726,15 @@ fn an_unanswered_call_times_out_once() {
     let (owner, _) = async_conn(&hub, "owner");
     let (caller, caller_ob) = sync_conn(&hub, "caller");
     service(&hub, owner, "Slow.svc");
+    let start = Instant::now();
     let call = hub
-        .call(caller, 3, &by_name("Slow.svc"), Bytes::new())
+        .call(caller, 3, &by_name("Slow.svc"), Bytes::new(), 250)
         .expect("call");
-    hub.expire_call(call, 250);
+    // Before its deadline the call stays pending, and the hub says when to look again.
+    let next = hub.expire_due(start).expect("a deadline");
+    assert!(next >= start + Duration::from_millis(250), "{next:?}");
+    assert!(drain(&caller_ob).is_empty());
+    assert_eq!(hub.expire_due(next), None);
     let err = reply_for(&drain(&caller_ob), 3)
         .expect("reply")
         .expect_err("timeout");
@@ -735,8 +747,126 @@ fn an_unanswered_call_times_out_once() {
     // The owner's late answer and a second expiry both go nowhere.
     hub.respond(owner, call, Ok(Bytes::from_static(b"late")))
         .expect("late");
-    hub.expire_call(call, 250);
+    assert_eq!(hub.expire_due(next + Duration::from_secs(1)), None);
     assert!(drain(&caller_ob).is_empty());
+}
+
+#[test]
+fn a_timeout_out_of_range_is_clamped() {
+    let hub = Hub::new(limits(8));
+    let (owner, _) = async_conn(&hub, "owner");
+    let (caller, caller_ob) = sync_conn(&hub, "caller");
+    service(&hub, owner, "V");
+    hub.call(caller, 1, &by_name("V"), Bytes::new(), 0)
+        .expect("zero");
+    hub.call(caller, 2, &by_name("V"), Bytes::new(), u32::MAX)
+        .expect("huge");
+    // A zero timeout waits 1 ms; a huge one at most MAX_CALL_TIMEOUT_MS.
+    let now = Instant::now();
+    let longest = now + Duration::from_millis(u64::from(MAX_CALL_TIMEOUT_MS));
+    let next = hub
+        .expire_due(now + Duration::from_millis(1))
+        .expect("the long call is left");
+    assert!(next <= longest, "{next:?}");
+    assert!(reply_for(&drain(&caller_ob), 1).is_some_and(|r| r.is_err()));
+    assert_eq!(hub.expire_due(next), None);
+    let err = reply_for(&drain(&caller_ob), 2)
+        .expect("reply")
+        .expect_err("timeout");
+    assert!(err.message.contains("600000 ms"), "{}", err.message);
+}
+
+/// A hub whose outboxes hold `n` control events, for floods of calls.
+fn roomy_hub(n: usize) -> Hub {
+    Hub::new(HubLimits {
+        outbox: OutboxLimits {
+            control_msgs: n + 16,
+            ..limits(8).outbox
+        },
+        service_inflight: n,
+        max_channels: MAX_CHANNELS,
+    })
+}
+
+#[tokio::test(flavor = "current_thread")]
+async fn ten_thousand_calls_answered_at_once_leave_no_deadline_and_one_timer_behind() {
+    const N: u32 = 10_000;
+    let hub = roomy_hub(N as usize);
+    let (owner, owner_ob) = async_conn(&hub, "owner");
+    let (caller, caller_ob) = sync_conn(&hub, "caller");
+    service(&hub, owner, "V");
+    drain(&owner_ob);
+    let tasks_before = tokio::runtime::Handle::current()
+        .metrics()
+        .num_alive_tasks();
+    for req in 1..=N {
+        hub.call(caller, req, &by_name("V"), Bytes::new(), T)
+            .expect("call");
+    }
+    // However many calls wait, the hub keeps one timer task, not one per call.
+    assert_eq!(hub.timer.tasks(), 1);
+    assert_eq!(
+        tokio::runtime::Handle::current()
+            .metrics()
+            .num_alive_tasks(),
+        tasks_before + 1
+    );
+    assert_eq!(hub.lock().deadlines.len(), N as usize);
+    for (_, call, _) in service_requests(&drain(&owner_ob)) {
+        hub.respond(owner, call, Ok(Bytes::new())).expect("respond");
+    }
+    assert!(hub.lock().deadlines.is_empty());
+    assert!(hub.lock().calls.is_empty());
+    let replies = drain(&caller_ob);
+    assert_eq!(replies.len(), N as usize);
+    assert!((1..=N).all(|req| reply_for(&replies, req).is_some_and(|r| r.is_ok())));
+    // Nothing is left to expire, and the answered calls' deadlines never fire.
+    assert_eq!(
+        hub.expire_due(Instant::now() + Duration::from_secs(3600)),
+        None
+    );
+    assert!(drain(&caller_ob).is_empty());
+    // The timer goes with its hub.
+    drop(hub);
+    tokio::task::yield_now().await;
+    assert_eq!(
+        tokio::runtime::Handle::current()
+            .metrics()
+            .num_alive_tasks(),
+        tasks_before
+    );
+}
+
+#[tokio::test(flavor = "current_thread")]
+async fn the_timer_task_fails_a_call_exactly_once_even_behind_a_longer_one() {
+    let hub = Hub::new(limits(8));
+    let (owner, _) = async_conn(&hub, "owner");
+    let (caller, caller_ob) = sync_conn(&hub, "caller");
+    service(&hub, owner, "V");
+    // The timer first sleeps until the long call's deadline; the short call
+    // made after it must wake it to sleep less.
+    hub.call(caller, 1, &by_name("V"), Bytes::new(), T)
+        .expect("long call");
+    tokio::task::yield_now().await;
+    let short = hub
+        .call(caller, 2, &by_name("V"), Bytes::new(), 20)
+        .expect("short call");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut replies = Vec::new();
+    while replies.is_empty() && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        replies = drain(&caller_ob);
+    }
+    let err = reply_for(&replies, 2)
+        .expect("the short call timed out")
+        .expect_err("timeout");
+    assert_eq!(err.code, ErrorCode::Timeout);
+    assert_eq!(replies.len(), 1, "{replies:?}");
+    // Later wake-ups, a late answer: nothing more for the caller.
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    hub.respond(owner, short, Ok(Bytes::new())).expect("late");
+    assert!(drain(&caller_ob).is_empty());
+    assert_eq!(hub.lock().deadlines.len(), 1);
 }
 
 #[test]
@@ -745,14 +875,16 @@ fn too_many_calls_in_flight_are_refused_as_overloaded() {
     let (owner, owner_ob) = async_conn(&hub, "owner");
     let (caller, caller_ob) = sync_conn(&hub, "caller");
     service(&hub, owner, "V");
+    // Call 2 may wait less than the others, so it alone can be expired below.
     let calls: Vec<CallId> = (1..=4)
         .map(|req| {
-            hub.call(caller, req, &by_name("V"), Bytes::new())
+            let timeout = if req == 2 { 100 } else { T };
+            hub.call(caller, req, &by_name("V"), Bytes::new(), timeout)
                 .expect("call")
         })
         .collect();
     let refused = hub
-        .call(caller, 99, &by_name("V"), Bytes::new())
+        .call(caller, 99, &by_name("V"), Bytes::new(), T)
         .expect_err("fifth call");
     assert_eq!(refused.code, ErrorCode::Overloaded);
     assert!(
@@ -765,13 +897,13 @@ fn too_many_calls_in_flight_are_refused_as_overloaded() {
     // An answer and an expiry each free a slot.
     hub.respond(owner, calls[0], Ok(Bytes::new()))
         .expect("respond");
-    hub.expire_call(calls[1], 100);
-    hub.call(caller, 100, &by_name("V"), Bytes::new())
+    hub.expire_due(Instant::now() + Duration::from_millis(100));
+    hub.call(caller, 100, &by_name("V"), Bytes::new(), T)
         .expect("slot 1");
-    hub.call(caller, 101, &by_name("V"), Bytes::new())
+    hub.call(caller, 101, &by_name("V"), Bytes::new(), T)
         .expect("slot 2");
     assert_eq!(
-        code_of(hub.call(caller, 102, &by_name("V"), Bytes::new())),
+        code_of(hub.call(caller, 102, &by_name("V"), Bytes::new(), T)),
         ErrorCode::Overloaded
     );
     let replies = drain(&caller_ob);
@@ -793,14 +925,14 @@ fn a_call_to_an_owner_that_stopped_reading_fails_as_gone() {
     service(&hub, owner, "V");
     owner_ob.close("write failed");
     assert_eq!(
-        code_of(hub.call(caller, 1, &by_name("V"), Bytes::new())),
+        code_of(hub.call(caller, 1, &by_name("V"), Bytes::new(), T)),
         ErrorCode::ServiceGone
     );
     // The failed call does not hold an in-flight slot.
     let limit = limits(8).service_inflight;
     for i in 0..limit as u32 * 2 {
         assert_eq!(
-            code_of(hub.call(caller, i, &by_name("V"), Bytes::new())),
+            code_of(hub.call(caller, i, &by_name("V"), Bytes::new(), T)),
             ErrorCode::ServiceGone
         );
     }
