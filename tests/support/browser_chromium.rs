@@ -66,6 +66,13 @@ impl Chromium {
 
     /// Starts `chromium` (or `$CHROMIUM`) headless offering `devices` to pages.
     pub async fn launch_with(devices: &Devices) -> anyhow::Result<Chromium> {
+        Self::launch_with_flags(devices, &[]).await
+    }
+
+    /// As [`Chromium::launch_with`], with `extra` command-line switches after the usual ones (a later
+    /// `--window-size` wins; `--disable-3d-apis` takes WebGL away; `--enable-unsafe-swiftshader` keeps software
+    /// WebGL, which Chromium otherwise only falls back to with a deprecation warning).
+    pub async fn launch_with_flags(devices: &Devices, extra: &[&str]) -> anyhow::Result<Chromium> {
         let exe = std::env::var("CHROMIUM").unwrap_or_else(|_| "chromium".into());
         let profile = tempfile::Builder::new()
             .prefix("agent-chromium-")
@@ -87,6 +94,7 @@ impl Chromium {
             ])
             .arg(format!("--user-data-dir={}", profile.path().display()))
             .args(device_flags(devices))
+            .args(extra)
             .arg("about:blank")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -237,6 +245,37 @@ impl Chromium {
             )
             .await?;
         let data = r["data"].as_str().context("captureScreenshot: no data")?;
+        Ok(base64::engine::general_purpose::STANDARD.decode(data)?)
+    }
+
+    /// A PNG screenshot of the part of the tab that the first element matching CSS `selector` covers.
+    pub async fn screenshot_of(&self, tab: &Tab, selector: &str) -> anyhow::Result<Vec<u8>> {
+        let sel = serde_json::to_string(selector)?;
+        let rect = self
+            .eval(
+                tab,
+                &format!(
+                    "(() => {{ const r = document.querySelector({sel}).getBoundingClientRect(); \
+                     return [r.x, r.y, r.width, r.height]; }})()"
+                ),
+            )
+            .await?;
+        let r: Vec<f64> = serde_json::from_value(rect).context("element rectangle")?;
+        anyhow::ensure!(
+            r.len() == 4 && r[2] > 0.0 && r[3] > 0.0,
+            "{selector} has no area: {r:?}"
+        );
+        let clip = json!({"x": r[0], "y": r[1], "width": r[2], "height": r[3], "scale": 1});
+        let shot = self
+            .command(
+                Some(&tab.session_id),
+                "Page.captureScreenshot",
+                json!({"format": "png", "clip": clip}),
+            )
+            .await?;
+        let data = shot["data"]
+            .as_str()
+            .context("captureScreenshot: no data")?;
         Ok(base64::engine::general_purpose::STANDARD.decode(data)?)
     }
 

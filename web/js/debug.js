@@ -19,11 +19,12 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   // for both, [page time, cost ms] of recent frames (avatarFrameMs).
   define("avatarRenderer", () => avatarRenderer);
   define("avatarFrameMs", () => avatar.debugState().frameMs ?? null);
+  define("avatarQuality", () => avatar.debugState().quality ?? null);
   define("eyeRotation", () => avatar.debugState().eyeRotation ?? null);
   define("headRotation", () => avatar.debugState().headRotation ?? null);
   define("morphs", () => avatar.debugState().morphs ?? null);
   define("avatarTrace", () => avatar.debugState().trace ?? null);
-  define("blinkStarts", () => avatar.debugState().blinkStarts ?? null);
+  define("blinkLog", () => avatar.debugState().blinkLog ?? null);
   define("visemeSchedule", () => avatar.debugState().schedule ?? null);
   define("role", () => page.role);
   define("connection", () => link.state);
@@ -38,6 +39,7 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("spectrumFrames", () => spectrum.frames);
   define("spectrumPeakHz", () => spectrum.peakHz);
   define("detections", () => overlay.count);
+  define("overlayItems", () => overlay.items);
   define("rules", () => rules.count);
   define("speechChunks", () => speech.chunks);
   define("lastError", () => page.lastError);

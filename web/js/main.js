@@ -23,7 +23,11 @@ const { avatar, renderer: avatarRenderer } = await createAvatar(
   $("avatar"),
   audioClock,
   params.get("avatar") ?? DEFAULT_RENDERER,
-  { syncFrames: params.get("avatarsync") === "1" },
+  {
+    syncFrames: params.get("avatarsync") === "1",
+    // `avatarquality=full`: GPU settings (PBR materials, antialiasing, full resolution) even on software WebGL.
+    quality: params.get("avatarquality") === "full" ? { software: false, adaptive: false } : {},
+  },
 );
 const overlay = new Overlay($("overlay"));
 const spectrum = new Spectrum($("spectrum"));

@@ -20,14 +20,33 @@ const MOOD_TAU_MS = 160;
 const CALM_FRAME_MS = 32;
 const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
 const FRAME_LOG = 1200; // frames whose cost the debug hook keeps, as avatar.js does
+const MIN_PIXEL_RATIO = 0.45; // below this the head turns visibly blurry; slower machines get fewer frames
 const VIEW_HEIGHT_M = 0.32; // what the stage shows of the avatar: hair to upper chest, like the 2D face
 
 export class Avatar3D {
   /** Loads the model from `url`; rejects when WebGL or the model is unavailable (the caller falls back to 2D). */
-  static async create(canvas, audioClock, url = "assets/avatar.glb", { syncFrames = false } = {}) {
-    const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, alpha: true, powerPreference: "low-power" });
+  static async create(canvas, audioClock, url = "assets/avatar.glb", { syncFrames = false, quality = {} } = {}) {
+    // Software WebGL (SwiftShader, llvmpipe: no GPU) shades every pixel on the CPU: there the head uses Lambert
+    // materials without multisampling, and drops its resolution when frames come late (see `adapt`), so it
+    // stays smooth; a GPU gets physically based materials and antialiasing.
+    const software = quality.software ?? softwareWebgl();
+    const antialias = quality.antialias ?? !software;
+    const material = quality.material ?? (software ? "lambert" : "standard");
+    const renderer = new THREE.WebGLRenderer({ canvas, antialias, alpha: true, powerPreference: "low-power" });
     const gltf = await new GLTFLoader().loadAsync(url);
-    return new Avatar3D(canvas, audioClock, renderer, gltf, syncFrames);
+    if (material === "lambert" || material === "phong") {
+      gltf.scene.traverse((o) => {
+        if (!o.isMesh) return;
+        const m = o.material;
+        const opts = { color: m.color, vertexColors: m.vertexColors, side: m.side, emissive: m.emissive };
+        if (material === "lambert") o.material = new THREE.MeshLambertMaterial(opts);
+        else o.material = new THREE.MeshPhongMaterial({ ...opts, shininess: (1 - m.roughness) * 80, specular: 0x333333 });
+      });
+    }
+    const avatar = new Avatar3D(canvas, audioClock, renderer, gltf, syncFrames);
+    avatar.quality = { software, antialias, material, pixelRatio: renderer.getPixelRatio(), adaptive: quality.adaptive ?? true };
+    if (quality.pixelRatio) avatar.setPixelRatio(quality.pixelRatio);
+    return avatar;
   }
 
   /**
@@ -56,7 +75,7 @@ export class Avatar3D {
     this.lastDraw = 0;
     this.frames = 0;
     this.trace = [];
-    this.blinkStarts = [];
+    this.blinkLog = []; // [start, end] page times of recent blinks, for the interval tests
     this.schedule = []; // the viseme batches received, on the audio clock, for the timing tests
     this.wasBlinking = false;
 
@@ -127,6 +146,33 @@ export class Avatar3D {
     requestAnimationFrame(this.frame);
   }
 
+  setPixelRatio(ratio) {
+    this.renderer.setPixelRatio(ratio);
+    if (this.size.w > 0) this.renderer.setSize(this.size.w, this.size.h, false);
+    this.quality.pixelRatio = ratio;
+  }
+
+  /**
+   * Keeps the frame rate up by trading resolution: each second, if frames came much later than the loop asks
+   * for them (busy: every animation frame; calm: every CALM_FRAME_MS), the head renders fewer pixels; when they
+   * come on time for a while, it goes back up towards the screen's own resolution.
+   */
+  adapt(now, interval, busy) {
+    if (!this.quality?.adaptive) return;
+    const wanted = busy ? 1000 / 60 : CALM_FRAME_MS;
+    const late = Math.min(4, interval / wanted);
+    this.lateness = this.lateness === undefined ? late : this.lateness * 0.9 + late * 0.1;
+    if (now - (this.lastAdapt ?? 0) < 1000) return;
+    this.lastAdapt = now;
+    const max = Math.min(window.devicePixelRatio || 1, 2);
+    const pr = this.quality.pixelRatio;
+    if (this.lateness > 1.6 && pr > MIN_PIXEL_RATIO) this.setPixelRatio(Math.max(MIN_PIXEL_RATIO, pr * 0.8));
+    else if (this.lateness < 1.15 && pr < max && now - (this.lastRaise ?? 0) > 4000) {
+      this.lastRaise = now;
+      this.setPixelRatio(Math.min(max, pr * 1.12));
+    }
+  }
+
   blink(phases, fromServer = true) {
     this.blinks.blink(performance.now(), phases, fromServer);
   }
@@ -157,9 +203,11 @@ export class Avatar3D {
     requestAnimationFrame(this.frame);
     const busy = this.blinks.current !== null || this.mixer.pending > 0;
     if (!busy && now - this.lastDraw < CALM_FRAME_MS) return;
-    const dt = Math.min(100, Math.max(0, now - this.last));
+    const interval = now - this.last;
+    const dt = Math.min(100, Math.max(0, interval));
     this.last = now;
     this.lastDraw = now;
+    this.adapt(now, interval, busy);
     const t0 = performance.now();
     this.step(now, dt);
     if (this.size.w > 0) {
@@ -180,8 +228,10 @@ export class Avatar3D {
     this.g = g;
     const blink = this.blinks.update(now);
     if (this.blinks.current && !this.wasBlinking) {
-      this.blinkStarts.push(Math.round(this.blinks.current.start));
-      if (this.blinkStarts.length > 64) this.blinkStarts.shift();
+      this.blinkLog.push([Math.round(this.blinks.current.start), null]);
+      if (this.blinkLog.length > 64) this.blinkLog.shift();
+    } else if (!this.blinks.current && this.wasBlinking && this.blinkLog.length) {
+      this.blinkLog[this.blinkLog.length - 1][1] = Math.round(now);
     }
     this.wasBlinking = this.blinks.current !== null;
     // The same eyelid figure as the 2D face reports (the blink narrowed by squint and by looking down).
@@ -260,8 +310,23 @@ export class Avatar3D {
       headRotation: { yaw: this.head.rotation.y, pitch: this.head.rotation.x, roll: this.head.rotation.z },
       morphs: r ? { ...r.morphs } : {},
       trace: this.trace.slice(),
-      blinkStarts: this.blinkStarts.slice(),
+      blinkLog: this.blinkLog.map((b) => b.slice()),
       schedule: this.schedule.slice(),
+      quality: { ...this.quality },
     };
+  }
+}
+
+/** Whether WebGL here is a software rasteriser (no GPU): SwiftShader, llvmpipe, softpipe. */
+function softwareWebgl() {
+  try {
+    const gl = document.createElement("canvas").getContext("webgl2");
+    if (!gl) return true;
+    const info = gl.getExtension("WEBGL_debug_renderer_info");
+    const name = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : String(gl.getParameter(gl.RENDERER));
+    gl.getExtension("WEBGL_lose_context")?.loseContext();
+    return /swiftshader|llvmpipe|softpipe|software/i.test(name);
+  } catch {
+    return true;
   }
 }

@@ -24,16 +24,16 @@ export function webgl2Available() {
 
 /**
  * The avatar for `canvas`: resolves to {avatar, renderer: "2d" | "3d", canvas} (the canvas may be a new
- * element when a failed 3D start had to be undone). `syncFrames`: see Avatar3D (for the benchmark).
+ * element when a failed 3D start had to be undone). `syncFrames` and `quality`: see Avatar3D.create.
  */
-export async function createAvatar(canvas, audioClock, wanted = DEFAULT_RENDERER, { syncFrames = false } = {}) {
+export async function createAvatar(canvas, audioClock, wanted = DEFAULT_RENDERER, { syncFrames = false, quality = {} } = {}) {
   if (wanted === "3d") {
     if (!webgl2Available()) {
       console.info("avatar: WebGL 2 is not available here, showing the 2D face");
     } else {
       try {
         const { Avatar3D } = await import("./avatar3d.js");
-        const avatar = await Avatar3D.create(canvas, audioClock, "assets/avatar.glb", { syncFrames });
+        const avatar = await Avatar3D.create(canvas, audioClock, "assets/avatar.glb", { syncFrames, quality });
         return { avatar, renderer: "3d", canvas };
       } catch (err) {
         console.warn(`avatar: the 3D head could not start (${err?.message ?? err}), showing the 2D face`);

@@ -1,0 +1,250 @@
+//! Benchmark of the avatar's renderers (`make bench`): the page's animation-frame cost with the 3D head
+//! (three.js on SwiftShader's software WebGL, no GPU) against the 2D canvas face, in the same run, in headless
+//! Chromium with the avatar's canvas at 800x600.
+//!
+//! Each renderer gets its own tab (the other closed), speaking all the time (visemes on a tone, so every frame is
+//! drawn: the page only drops to 30 fps when idle) with blinks and gaze changes. Per frame the page records its
+//! avatar's cost: animation plus drawing, made synchronous (`?avatarsync=1`: `gl.finish` for WebGL, a one-pixel
+//! read for the canvas) so the GPU process's software rasterisation is counted, not only the command
+//! submission. The frame interval (the rAF loop's period) is reported beside it. Rounds alternate the
+//! renderers; the median round is reported.
+//!
+//! Options: `--seconds N` per renderer and round (default 10), `--rounds N` (default 3). Needs a built
+//! `robot-agent` (found like the integration tests find it) and chromium.
+
+use std::time::Duration;
+
+use agent_tests::Agent;
+use agent_tests::DataDir;
+use agent_tests::browser_chromium::{Chromium, Devices};
+use agent_tests::browser_link::start_link_only;
+use anyhow::{Context, bail, ensure};
+use serde_json::{Value, json};
+
+const RATE: usize = 22050;
+
+#[tokio::main]
+async fn main() -> anyhow::Result<()> {
+    let mut seconds = 10u64;
+    let mut rounds = 3usize;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--seconds" => seconds = args.next().context("--seconds N")?.parse()?,
+            "--rounds" => rounds = args.next().context("--rounds N")?.parse()?,
+            other => bail!("unknown option {other} (use --seconds N, --rounds N)"),
+        }
+    }
+    ensure!(seconds >= 2 && rounds >= 1, "--seconds >= 2, --rounds >= 1");
+    let data = DataDir::new()?;
+    let agent = start_link_only(&data).await?;
+    let hub = agent.client("bench-avatar").await?;
+    let avatar = hub
+        .publisher("Agent.avatar", r#"{"format":"json"}"#)
+        .await?;
+    let speech = hub
+        .publisher(
+            "Agent.speech",
+            r#"{"format":"s16le","rate":22050,"channels":1,"framing":"utterance-offset"}"#,
+        )
+        .await?;
+    // No microphone or camera: the page's media work (JPEG encoding) would compete with the avatar for the CPU.
+    let browser = Chromium::launch_with_flags(
+        &Devices::Absent,
+        &["--enable-unsafe-swiftshader", "--window-size=1000,700"],
+    )
+    .await?;
+
+    println!(
+        "avatar renderer benchmark: {seconds} s per renderer and round, {rounds} rounds, canvas 800x600"
+    );
+    println!("round renderer  frames  cost p50  cost p95  interval p50  interval p95   (ms)");
+    let mut results: Vec<(Stats, Stats)> = Vec::new();
+    let mut utterance = 1u32;
+    for round in 0..rounds {
+        let mut pair = Vec::new();
+        for renderer in ["2d", "3d"] {
+            let s = measure(
+                &browser,
+                &agent,
+                renderer,
+                seconds,
+                &avatar,
+                &speech,
+                &mut utterance,
+            )
+            .await?;
+            println!(
+                "{:>5} {renderer:<9} {:>6}  {:>8.2}  {:>8.2}  {:>12.2}  {:>12.2}",
+                round + 1,
+                s.frames,
+                s.cost_p50,
+                s.cost_p95,
+                s.interval_p50,
+                s.interval_p95
+            );
+            pair.push(s);
+        }
+        let three = pair.pop().context("3d stats")?;
+        let two = pair.pop().context("2d stats")?;
+        results.push((two, three));
+    }
+    // The median round by the 3D head's p95.
+    results.sort_by(|a, b| a.1.cost_p95.total_cmp(&b.1.cost_p95));
+    let (two, three) = &results[results.len() / 2];
+    println!();
+    println!(
+        "SUMMARY avatar_frame_cost_p95_2d: {:.2} ms (median of {rounds} rounds of {seconds} s; {} frames, interval p95 {:.1} ms)",
+        two.cost_p95, two.frames, two.interval_p95
+    );
+    let ratio = three.cost_p95 / two.cost_p95.max(1e-9);
+    let met = ratio <= 2.0 && three.cost_p95 <= 8.0;
+    println!(
+        "SUMMARY avatar_frame_cost_p95_3d: {:.2} ms (baseline 2D {:.2} ms, ratio {ratio:.2}; target <= 2x 2D and <= 8 ms: {}; {} frames, interval p95 {:.1} ms)",
+        three.cost_p95,
+        two.cost_p95,
+        if met { "met" } else { "not met" },
+        three.frames,
+        three.interval_p95
+    );
+    println!(
+        "SUMMARY avatar_fps_3d: {:.1} fps drawn (2D {:.1} fps; target: at least 30 fps without a GPU)",
+        three.fps, two.fps
+    );
+    browser.quit().await;
+    Ok(())
+}
+
+#[derive(Debug, Clone)]
+struct Stats {
+    frames: usize,
+    cost_p50: f64,
+    cost_p95: f64,
+    interval_p50: f64,
+    interval_p95: f64,
+    fps: f64,
+}
+
+async fn measure(
+    browser: &Chromium,
+    agent: &Agent,
+    renderer: &str,
+    seconds: u64,
+    avatar: &flow::Publisher,
+    speech: &flow::Publisher,
+    utterance: &mut u32,
+) -> anyhow::Result<Stats> {
+    let url = match renderer {
+        "2d" => agent.page_url("avatar=2d&avatarsync=1"),
+        _ => agent.page_url("avatar=3d&avatarsync=1"),
+    };
+    let tab = browser.open(&url).await?;
+    browser
+        .wait_for(
+            &tab,
+            "window.agentDebug && agentDebug.connection === 'open' && agentDebug.avatarFrameMs !== null",
+            Duration::from_secs(40),
+        )
+        .await?;
+    let got = browser.eval(&tab, "agentDebug.avatarRenderer").await?;
+    ensure!(
+        got == json!(renderer),
+        "asked for {renderer}, the page shows {got}"
+    );
+    // The stage fills an 800x600 box; the avatar's canvas follows its size.
+    browser
+        .eval(
+            &tab,
+            "(() => { const s = document.querySelector('.stage'); \
+             s.style.cssText = 'position:fixed;left:0;top:0;width:800px;height:600px;z-index:50;border-radius:0'; \
+             return true; })()",
+        )
+        .await?;
+    browser
+        .wait_for(
+            &tab,
+            "(() => { const c = document.getElementById('avatar'); return c.clientWidth === 800 && c.clientHeight === 600; })()",
+            Duration::from_secs(5),
+        )
+        .await?;
+    // Warm up (shader compilation, first uploads), then record frame intervals with a rAF loop of our own.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    browser
+        .eval(
+            &tab,
+            "(() => { window.__intervals = []; let last = 0; \
+             const f = (t) => { if (last) window.__intervals.push(t - last); last = t; requestAnimationFrame(f); }; \
+             requestAnimationFrame(f); return true; })()",
+        )
+        .await?;
+    let window_start: f64 = serde_json::from_value(browser.eval(&tab, "performance.now()").await?)?;
+    // Speak for the whole window: visemes every 90 ms over a quiet tone; blink and glance now and then.
+    let script = [
+        "sil", "PP", "aa", "E", "O", "FF", "I", "U", "kk", "SS", "aa", "nn", "RR", "CH", "TH", "DD",
+    ];
+    let items: Vec<Value> = (0..(seconds as usize * 1000 / 90))
+        .map(|i| json!({"t_ms": i * 90, "v": script[i % script.len()]}))
+        .collect();
+    *utterance += 1;
+    avatar
+        .publish(json!({"cmd": "visemes", "utterance": *utterance, "items": items}).to_string())
+        .await?;
+    let total = seconds as usize * RATE;
+    let mut offset = 0;
+    while offset < total {
+        let n = (RATE / 5).min(total - offset);
+        let mut payload = utterance.to_le_bytes().to_vec();
+        payload.extend_from_slice(&(offset as u32).to_le_bytes());
+        payload.extend((0..n).flat_map(|i| {
+            let t = (offset + i) as f64 / RATE as f64;
+            (((t * 220.0 * std::f64::consts::TAU).sin() * 300.0) as i16).to_le_bytes()
+        }));
+        speech.publish(payload).await?;
+        offset += n;
+    }
+    for k in 0..seconds {
+        let x = if k % 2 == 0 { 0.3 } else { 0.7 };
+        avatar
+            .publish(json!({"cmd": "gaze", "x": x, "y": 0.45}).to_string())
+            .await?;
+        if k % 3 == 1 {
+            avatar
+                .publish(r#"{"cmd":"blink","close_ms":70,"hold_ms":40,"open_ms":150}"#)
+                .await?;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+    let log: Vec<(f64, f64)> =
+        serde_json::from_value(browser.eval(&tab, "agentDebug.avatarFrameMs").await?)?;
+    let intervals: Vec<f64> =
+        serde_json::from_value(browser.eval(&tab, "window.__intervals").await?)?;
+    let window_end: f64 = serde_json::from_value(browser.eval(&tab, "performance.now()").await?)?;
+    browser.close(&tab).await?;
+    let costs: Vec<f64> = log
+        .iter()
+        .filter(|(t, _)| *t >= window_start)
+        .map(|&(_, ms)| ms)
+        .collect();
+    ensure!(
+        costs.len() >= 20,
+        "only {} frames drawn in {seconds} s",
+        costs.len()
+    );
+    Ok(Stats {
+        frames: costs.len(),
+        cost_p50: percentile(&costs, 0.5),
+        cost_p95: percentile(&costs, 0.95),
+        interval_p50: percentile(&intervals, 0.5),
+        interval_p95: percentile(&intervals, 0.95),
+        fps: costs.len() as f64 / ((window_end - window_start) / 1000.0),
+    })
+}
+
+fn percentile(v: &[f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}

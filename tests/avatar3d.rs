@@ -1,0 +1,613 @@
+//! End-to-end tests of the avatar's two renderers, the 2D canvas face (`?avatar=2d`) and the 3D head
+//! (`?avatar=3d`, three.js on SwiftShader's software WebGL): the same commands move both alike; the 3D head's
+//! mouth follows the viseme schedule on the audio clock, its eyes turn towards the gaze target, it blinks at the
+//! specified intervals and phases; without WebGL the page falls back to the 2D face. Screenshots of both
+//! renderers (rest, mid-viseme "aa", "O", "FF", blinking, looking left and right) go to `artifacts/`.
+//!
+//! Needs `chromium`, `ffmpeg`, `node` and a built `robot-agent`, like tests/browser.rs.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+use std::time::Duration;
+
+use agent_tests::browser_chromium::{Chromium, Devices, FakeMedia, Tab};
+use agent_tests::browser_link::start_link_only;
+use agent_tests::browser_media::prepare;
+use agent_tests::{Agent, DataDir};
+use anyhow::{Context, ensure};
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+const RATE: usize = 22050;
+const PAGE_READY: Duration = Duration::from_secs(40);
+/// Software WebGL without the deprecation fallback, as a GPU-less user's Chromium gets it.
+const WEBGL: &[&str] = &["--enable-unsafe-swiftshader"];
+
+/// One browser at a time (as in tests/browser.rs): SwiftShader renders on the CPU, and two pages drawing at once on
+/// a 2-core machine would measure the machine.
+static ONE_BROWSER: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+fn media() -> &'static FakeMedia {
+    static MEDIA: OnceLock<FakeMedia> = OnceLock::new();
+    MEDIA.get_or_init(|| {
+        static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
+        let dir = DIR.get_or_init(|| {
+            tempfile::Builder::new()
+                .prefix("avatar3d-fixtures-")
+                .tempdir()
+                .expect("temp dir")
+        });
+        prepare(dir.path())
+            .expect("converting fixtures with ffmpeg")
+            .0
+    })
+}
+
+fn artifacts_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
+}
+
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The page of `agent` with renderer `renderer` ("2d", "3d", or "3d-full": the 3D head with the settings it uses
+/// on a GPU, for screenshots), in kiosk mode as tests/browser.rs opens it.
+fn page(agent: &Agent, renderer: &str) -> String {
+    match renderer {
+        "2d" => agent.page_url("autostart=1&aec=0&avatar=2d"),
+        "3d-full" => agent.page_url("autostart=1&aec=0&avatar=3d&avatarquality=full"),
+        _ => agent.page_url("autostart=1&aec=0&avatar=3d"),
+    }
+}
+
+/// A browser and a page showing `renderer`, with the hub publishers the tests drive the avatar through.
+struct Stage {
+    browser: Chromium,
+    tab: Tab,
+    avatar: flow::Publisher,
+    speech: flow::Publisher,
+    _hub: flow::Client,
+    _agent: Agent,
+    _data: DataDir,
+}
+
+impl Stage {
+    async fn open(renderer: &str, flags: &[&str]) -> anyhow::Result<Stage> {
+        let data = DataDir::new()?;
+        let agent = start_link_only(&data).await?;
+        let hub = agent.client("avatar3d-test").await?;
+        let avatar = hub
+            .publisher("Agent.avatar", r#"{"format":"json"}"#)
+            .await?;
+        let speech = hub
+            .publisher(
+                "Agent.speech",
+                r#"{"format":"s16le","rate":22050,"channels":1,"framing":"utterance-offset"}"#,
+            )
+            .await?;
+        let browser =
+            Chromium::launch_with_flags(&Devices::Granted(media().clone()), flags).await?;
+        let tab = browser.open(&page(&agent, renderer)).await?;
+        browser
+            .wait_for(
+                &tab,
+                "window.agentDebug && agentDebug.role === 'holder' && agentDebug.avatarRenderer !== undefined",
+                PAGE_READY,
+            )
+            .await?;
+        // Let the renderer warm up (SwiftShader compiles each material's shaders on first use, which stalls the
+        // first frames for seconds), so the tests' timing starts on a running animation.
+        browser
+            .wait_for(
+                &tab,
+                "agentDebug.avatarFrameMs.length > 40",
+                Duration::from_secs(60),
+            )
+            .await?;
+        Ok(Stage {
+            browser,
+            tab,
+            avatar,
+            speech,
+            _hub: hub,
+            _agent: agent,
+            _data: data,
+        })
+    }
+
+    async fn eval(&self, expr: &str) -> anyhow::Result<Value> {
+        self.browser.eval(&self.tab, expr).await
+    }
+
+    async fn wait(&self, expr: &str, secs: u64) -> anyhow::Result<()> {
+        self.browser
+            .wait_for(&self.tab, expr, Duration::from_secs(secs))
+            .await
+    }
+
+    async fn command(&self, cmd: Value) -> anyhow::Result<()> {
+        self.avatar.publish(cmd.to_string()).await?;
+        Ok(())
+    }
+
+    /// Plays `seconds` of quiet PCM as utterance `utterance` after sending its `visemes`.
+    async fn speak(&self, utterance: u32, visemes: Value, seconds: f64) -> anyhow::Result<()> {
+        self.command(json!({"cmd": "visemes", "utterance": utterance, "items": visemes}))
+            .await?;
+        let total = (seconds * RATE as f64) as usize;
+        let chunk = RATE / 5;
+        let mut offset = 0;
+        while offset < total {
+            let n = chunk.min(total - offset);
+            let mut payload = utterance.to_le_bytes().to_vec();
+            payload.extend_from_slice(&(offset as u32).to_le_bytes());
+            // A faint tone, not digital silence, so nothing along the way can skip it as empty.
+            payload.extend((0..n).flat_map(|i| {
+                let t = (offset + i) as f64 / RATE as f64;
+                (((t * 220.0 * std::f64::consts::TAU).sin() * 300.0) as i16).to_le_bytes()
+            }));
+            self.speech.publish(payload).await?;
+            offset += n;
+        }
+        Ok(())
+    }
+
+    async fn shot(&self, name: &str) -> anyhow::Result<()> {
+        let png = self.browser.screenshot_of(&self.tab, ".stage").await?;
+        ensure!(
+            png.len() > 5_000,
+            "screenshot {name} is only {} bytes",
+            png.len()
+        );
+        std::fs::create_dir_all(artifacts_dir())?;
+        let path = artifacts_dir().join(format!("{name}.png"));
+        std::fs::write(&path, &png).with_context(|| format!("writing {}", path.display()))?;
+        println!("screenshot: {}", path.display());
+        Ok(())
+    }
+
+    async fn quit(self) {
+        self.browser.quit().await;
+    }
+}
+
+/// The avatar assertions of tests/browser.rs, on one renderer: page blinks, a server blink closes and reopens the
+/// lids, gaze turns eyes and head, mood changes, visemes open and close the mouth on the audio clock.
+async fn commands_move_the_avatar(renderer: &str) -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open(renderer, WEBGL).await?;
+    assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!(renderer));
+
+    let before: u64 = serde_json::from_value(s.eval("agentDebug.blinks").await?)?;
+    s.wait(&format!("agentDebug.blinks > {before}"), 10).await?;
+    assert_eq!(s.eval("agentDebug.blinkOwner").await?, json!("page"));
+    let blinks: u64 = serde_json::from_value(s.eval("agentDebug.blinks").await?)?;
+    s.command(json!({"cmd": "blink", "close_ms": 80, "hold_ms": 600, "open_ms": 200}))
+        .await?;
+    s.wait("agentDebug.eyelid < 0.05", 5).await?;
+    s.wait(
+        &format!("agentDebug.blinks > {blinks} && agentDebug.eyelid > 0.9"),
+        5,
+    )
+    .await?;
+    assert_eq!(s.eval("agentDebug.blinkOwner").await?, json!("server"));
+
+    s.command(json!({"cmd": "gaze", "x": 0.9, "y": 0.3, "source": "face"}))
+        .await?;
+    s.wait("agentDebug.gaze.x === 0.9 && agentDebug.gaze.y === 0.3", 5)
+        .await?;
+    s.wait(
+        "agentDebug.eyeOffset.x < -0.6 && agentDebug.head.yaw < -0.2",
+        5,
+    )
+    .await?;
+    s.command(json!({"cmd": "gaze", "x": 0.1, "y": 0.5}))
+        .await?;
+    s.wait(
+        "agentDebug.eyeOffset.x > 0.6 && agentDebug.head.yaw > 0.2",
+        5,
+    )
+    .await?;
+
+    s.command(json!({"cmd": "mood", "mood": "happy"})).await?;
+    s.wait("agentDebug.mood === 'happy'", 5).await?;
+
+    s.speak(
+        7,
+        json!([{"t_ms": 0, "v": "sil"}, {"t_ms": 100, "v": "aa"}, {"t_ms": 500, "v": "O"},
+               {"t_ms": 900, "v": "E"}, {"t_ms": 1300, "v": "PP"}, {"t_ms": 1700, "v": "sil"}]),
+        2.0,
+    )
+    .await?;
+    s.wait("agentDebug.viseme === 'O' && agentDebug.jaw > 0.3", 8)
+        .await?;
+    s.wait("agentDebug.viseme === 'sil' && agentDebug.jaw < 0.15", 8)
+        .await?;
+    s.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_2d_face_obeys_the_avatar_commands() -> anyhow::Result<()> {
+    commands_move_the_avatar("2d").await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_3d_head_obeys_the_same_avatar_commands() -> anyhow::Result<()> {
+    commands_move_the_avatar("3d").await
+}
+
+#[derive(Debug, Deserialize)]
+struct Frame {
+    /// Page time (ms), audio clock (s), mouth opening read back from the mesh's morph influences.
+    t: f64,
+    a: f64,
+    open: f64,
+    blink: f64,
+}
+
+#[derive(Debug, Deserialize)]
+struct Batch {
+    #[serde(rename = "startS")]
+    start_s: f64,
+    items: Vec<Cue>,
+}
+
+#[derive(Debug, Deserialize)]
+struct Cue {
+    t_ms: f64,
+    v: String,
+}
+
+/// The 2D face's jaw per viseme (web/js/avatar/visemes.js): what the mouth opening must show for each cue.
+fn jaw_of(v: &str) -> f64 {
+    match v {
+        "FF" | "SS" => 0.1,
+        "TH" | "nn" => 0.2,
+        "DD" => 0.25,
+        "kk" => 0.32,
+        "CH" | "RR" => 0.22,
+        "aa" => 0.85,
+        "E" => 0.5,
+        "I" | "U" => 0.3,
+        "O" => 0.6,
+        _ => 0.0,
+    }
+}
+
+async fn trace(s: &Stage) -> anyhow::Result<Vec<Frame>> {
+    Ok(serde_json::from_value(
+        s.eval("agentDebug.avatarTrace").await?,
+    )?)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_3d_mouth_follows_the_viseme_schedule_within_40_ms_of_the_audio_clock()
+-> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("3d", WEBGL).await?;
+    ensure!(s.eval("agentDebug.avatarRenderer").await? == json!("3d"));
+    let cues = json!([{"t_ms": 0, "v": "sil"}, {"t_ms": 200, "v": "aa"}, {"t_ms": 700, "v": "PP"},
+        {"t_ms": 1100, "v": "O"}, {"t_ms": 1600, "v": "FF"}, {"t_ms": 2000, "v": "E"},
+        {"t_ms": 2400, "v": "U"}, {"t_ms": 2800, "v": "kk"}, {"t_ms": 3200, "v": "sil"}]);
+    s.speak(11, cues, 3.5).await?;
+    s.wait("agentDebug.visemeSchedule.length > 0", 8).await?;
+    let batches: Vec<Batch> = serde_json::from_value(s.eval("agentDebug.visemeSchedule").await?)?;
+    let batch = batches.last().context("no viseme batch")?;
+    let steps: Vec<(f64, f64)> = batch
+        .items
+        .iter()
+        .map(|c| (batch.start_s + c.t_ms / 1000.0, jaw_of(&c.v)))
+        .collect();
+    let first = steps[0].0;
+    let last = steps[steps.len() - 1].0;
+    s.wait(
+        &format!("agentDebug.avatarTrace.at(-1).a > {}", last + 0.4),
+        10,
+    )
+    .await?;
+
+    // The expected opening is a step function of audio time; the mesh must be within the range the steps take
+    // in a 40 ms window around each frame's audio time: blending may lead or lag a cue by no more than that.
+    let expected = |a: f64| {
+        let mut j = 0.0;
+        for &(at, jaw) in &steps {
+            if at <= a {
+                j = jaw;
+            }
+        }
+        j
+    };
+    // The page's audio clock starts over when speech first plays: only frames after its last restart count.
+    let all = trace(&s).await?;
+    let restart = (1..all.len())
+        .rev()
+        .find(|&i| all[i].a < all[i - 1].a)
+        .unwrap_or(0);
+    let frames: Vec<Frame> = all
+        .into_iter()
+        .skip(restart)
+        .filter(|f| f.a >= first - 0.1 && f.a <= last + 0.3)
+        .collect();
+    // Software WebGL on a busy machine may draw only ~10 frames a second; each one is checked.
+    ensure!(
+        frames.len() >= 15,
+        "only {} frames drawn during 3.5 s of speech",
+        frames.len()
+    );
+    for f in &frames {
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        let mut x = f.a - 0.04;
+        while x <= f.a + 0.04 + 1e-9 {
+            lo = lo.min(expected(x));
+            hi = hi.max(expected(x));
+            x += 0.002;
+        }
+        let off = if f.open < lo - 0.01 {
+            lo - f.open
+        } else if f.open > hi + 0.01 {
+            f.open - hi
+        } else {
+            0.0
+        };
+        ensure!(
+            off == 0.0,
+            "at audio {:.3} s the mouth is open {:.3}, the schedule allows {lo:.2}..{hi:.2} within 40 ms \
+             (schedule {steps:?}; frames {:?})",
+            f.a,
+            f.open,
+            frames.iter().map(|f| (f.a, f.open)).collect::<Vec<_>>()
+        );
+    }
+    // Not vacuous: the mouth really opened wide for "aa" and closed for "PP".
+    ensure!(
+        frames.iter().any(|f| f.open > 0.8),
+        "the mouth never opened for aa"
+    );
+    ensure!(
+        frames
+            .iter()
+            .any(|f| f.a > steps[2].0 + 0.05 && f.a < steps[3].0 - 0.02 && f.open < 0.05),
+        "the mouth never closed for PP"
+    );
+    println!("{} frames checked against the schedule", frames.len());
+    s.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_3d_eyes_rotate_towards_the_gaze_target_and_lead_the_head() -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("3d", WEBGL).await?;
+    ensure!(s.eval("agentDebug.avatarRenderer").await? == json!("3d"));
+    // Image-right is the avatar's left: the viewer's left, a negative yaw in three.js's frame.
+    s.command(json!({"cmd": "gaze", "x": 0.9, "y": 0.5}))
+        .await?;
+    s.wait("agentDebug.eyeRotation.yaw < -0.15", 5).await?;
+    // The eyes get there first; the head is still turning a moment later.
+    let early: Value = s
+        .eval("[agentDebug.eyeRotation.yaw, agentDebug.headRotation.yaw]")
+        .await?;
+    s.wait("agentDebug.headRotation.yaw < -0.1", 5).await?;
+    let e: Vec<f64> = serde_json::from_value(early)?;
+    ensure!(
+        e[0].abs() > e[1].abs(),
+        "eyes at {:.3} rad, head already at {:.3} rad",
+        e[0],
+        e[1]
+    );
+    s.command(json!({"cmd": "gaze", "x": 0.1, "y": 0.5}))
+        .await?;
+    s.wait(
+        "agentDebug.eyeRotation.yaw > 0.15 && agentDebug.headRotation.yaw > 0.1",
+        5,
+    )
+    .await?;
+    // Lower in the image is looking down: a positive pitch.
+    s.command(json!({"cmd": "gaze", "x": 0.5, "y": 0.95}))
+        .await?;
+    s.wait("agentDebug.eyeRotation.pitch > 0.1", 5).await?;
+    s.command(json!({"cmd": "gaze", "x": 0.5, "y": 0.05}))
+        .await?;
+    s.wait("agentDebug.eyeRotation.pitch < -0.1", 5).await?;
+    s.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_3d_head_blinks_every_450_ms_to_4_s_in_close_hold_open_phases() -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("3d", WEBGL).await?;
+    ensure!(s.eval("agentDebug.avatarRenderer").await? == json!("3d"));
+    // The page's own blinks: each begins 450 ms to 4 s after the previous one ended (the page schedules the next
+    // blink at the frame that ends one; it starts at the first frame after its time, hence the upper margin).
+    s.wait(
+        "agentDebug.blinkLog.filter((b) => b[1] !== null).length >= 6",
+        40,
+    )
+    .await?;
+    let log: Vec<(f64, Option<f64>)> =
+        serde_json::from_value(s.eval("agentDebug.blinkLog").await?)?;
+    let done: Vec<(f64, f64)> = log
+        .iter()
+        .filter_map(|&(start, end)| end.map(|e| (start, e)))
+        .collect();
+    ensure!(done.len() >= 6, "only {} blinks: {log:?}", done.len());
+    for w in done.windows(2) {
+        let gap = w[1].0 - w[0].1;
+        ensure!(
+            (449.0..=4300.0).contains(&gap),
+            "{gap:.0} ms between the end of a blink and the next (blinks {done:?})"
+        );
+    }
+    // A server blink with long, distinct phases: every frame drawn during it shows the lid where the close (ease
+    // in), hold and open (ease out) curves put it at that frame's time, whatever the frame rate.
+    let (close, hold, open) = (150.0, 300.0, 450.0);
+    s.command(json!({"cmd": "blink", "close_ms": close, "hold_ms": hold, "open_ms": open}))
+        .await?;
+    s.wait("agentDebug.blinkOwner === 'server'", 5).await?;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let log: Vec<(f64, Option<f64>)> =
+        serde_json::from_value(s.eval("agentDebug.blinkLog").await?)?;
+    let start = log.last().context("no blink logged")?.0;
+    let openness = |t: f64| {
+        let t = t - start;
+        if t < close {
+            let k = (t / close).max(0.0);
+            1.0 - k * k
+        } else if t < close + hold {
+            0.0
+        } else if t < close + hold + open {
+            let k = (t - close - hold) / open;
+            1.0 - (1.0 - k) * (1.0 - k)
+        } else {
+            1.0
+        }
+    };
+    let during: Vec<Frame> = trace(&s)
+        .await?
+        .into_iter()
+        .filter(|f| f.t >= start && f.t <= start + close + hold + open)
+        .collect();
+    ensure!(
+        during.len() >= 4,
+        "only {} frames during a 900 ms blink",
+        during.len()
+    );
+    for f in &during {
+        let want = 1.0 - openness(f.t);
+        // Looking down (idle glances) closes the lids by up to a few hundredths more.
+        ensure!(
+            f.blink >= want - 0.03 && f.blink <= want + 0.06,
+            "{:.0} ms into the blink the lid morph is {:.3}, the phases say {want:.3}",
+            f.t - start,
+            f.blink
+        );
+    }
+    ensure!(
+        during.iter().any(|f| f.blink > 0.95),
+        "the lids never closed during the blink"
+    );
+    println!(
+        "server blink: {} frames on the close/hold/open curve",
+        during.len()
+    );
+    s.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("3d", &["--disable-3d-apis"]).await?;
+    assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("2d"));
+    assert_eq!(
+        s.eval("!!document.createElement('canvas').getContext('webgl2')")
+            .await?,
+        json!(false)
+    );
+    // The 2D face is alive: it blinks and follows the gaze.
+    let before: u64 = serde_json::from_value(s.eval("agentDebug.blinks").await?)?;
+    s.wait(&format!("agentDebug.blinks > {before}"), 10).await?;
+    s.command(json!({"cmd": "gaze", "x": 0.9, "y": 0.5}))
+        .await?;
+    s.wait("agentDebug.eyeOffset.x < -0.6", 5).await?;
+    s.quit().await;
+    Ok(())
+}
+
+/// Screenshots of `renderer` at rest, mid-viseme, blinking and looking either way, as `artifacts/avatar-<r>-*.png`.
+///
+/// The 3D head is shot with the settings it has on a GPU (`avatarquality=full`); on SwiftShader it would lower its
+/// resolution to keep its frame rate, which says nothing about how the model looks.
+async fn screenshots(renderer: &str) -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open(
+        if renderer == "3d" {
+            "3d-full"
+        } else {
+            renderer
+        },
+        WEBGL,
+    )
+    .await?;
+    ensure!(s.eval("agentDebug.avatarRenderer").await? == json!(renderer));
+    let name = |what: &str| format!("avatar-{renderer}-{what}");
+    // The server owns blinking from here, so no page blink spoils a shot.
+    s.command(json!({"cmd": "blink", "close_ms": 10, "hold_ms": 0, "open_ms": 10}))
+        .await?;
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    s.shot(&name("rest")).await?;
+
+    s.speak(
+        3,
+        json!([{"t_ms": 0, "v": "sil"}, {"t_ms": 200, "v": "aa"}, {"t_ms": 4200, "v": "O"},
+               {"t_ms": 8200, "v": "FF"}, {"t_ms": 12200, "v": "sil"}]),
+        12.6,
+    )
+    .await?;
+    for v in ["aa", "O", "FF"] {
+        s.wait(&format!("agentDebug.viseme === '{v}'"), 15).await?;
+        // Past the blend; a screenshot can take a second or two on SwiftShader, the cue lasts 4 s.
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        s.shot(&name(&format!("viseme-{v}"))).await?;
+    }
+    s.wait("agentDebug.viseme === 'sil' && agentDebug.jaw < 0.05", 15)
+        .await?;
+
+    s.command(json!({"cmd": "blink", "close_ms": 60, "hold_ms": 1800, "open_ms": 100}))
+        .await?;
+    s.wait("agentDebug.eyelid < 0.05", 5).await?;
+    s.shot(&name("blink")).await?;
+    s.wait("agentDebug.eyelid > 0.9", 5).await?;
+
+    for (what, x, check) in [
+        ("look-left", 0.95, "agentDebug.eyeOffset.x < -0.6"),
+        ("look-right", 0.05, "agentDebug.eyeOffset.x > 0.6"),
+    ] {
+        s.command(json!({"cmd": "gaze", "x": x, "y": 0.45})).await?;
+        s.wait(check, 5).await?;
+        // Let the head follow the eyes (its time constant is about 0.4 s).
+        tokio::time::sleep(Duration::from_millis(1400)).await;
+        s.shot(&name(what)).await?;
+    }
+    s.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn screenshots_of_the_2d_face_are_saved_as_artifacts() -> anyhow::Result<()> {
+    screenshots("2d").await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn screenshots_of_the_3d_head_are_saved_as_artifacts() -> anyhow::Result<()> {
+    screenshots("3d").await
+}
+
+#[test]
+fn the_committed_model_is_what_the_generator_makes_and_the_javascript_unit_tests_pass()
+-> anyhow::Result<()> {
+    // node --test runs the generator's and the page's pure-module tests (scripts/avatar-gen/tests), including
+    // the check that regenerating assets/avatar.glb gives the committed bytes. The page's .js files are ES
+    // modules without a package.json: --experimental-detect-module lets Node 20 load them as such.
+    let out = std::process::Command::new("node")
+        .args([
+            "--experimental-detect-module",
+            "--test",
+            "scripts/avatar-gen/tests/",
+        ])
+        .current_dir(repo_root())
+        .output()
+        .context("running node (apt-get install nodejs)")?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    ensure!(
+        out.status.success(),
+        "node --test failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    ensure!(text.contains("# fail 0"), "node --test output:\n{text}");
+    Ok(())
+}
