@@ -557,7 +557,8 @@ async fn screenshots(renderer: &str) -> anyhow::Result<()> {
     s.wait("agentDebug.viseme === 'sil' && agentDebug.jaw < 0.05", 15)
         .await?;
 
-    s.command(json!({"cmd": "blink", "close_ms": 60, "hold_ms": 1800, "open_ms": 100}))
+    // The longest hold the page accepts: a software-rendered frame and the capture can take a second or more.
+    s.command(json!({"cmd": "blink", "close_ms": 10, "hold_ms": 2000, "open_ms": 100}))
         .await?;
     s.wait("agentDebug.eyelid < 0.05", 5).await?;
     s.shot(&name("blink")).await?;

@@ -48,8 +48,8 @@ const LIP_UP = linear(0xb9566a);
 const LIP_LOW = linear(0xcf6d7d);
 const LIP_IN = linear(0x9c4257);
 const LIP_LINE = linear(0x7c2f41);
-const HAIR_BASE = linear(0x3a2434);
-const HAIR_MID = linear(0x5e3852);
+const HAIR_BASE = linear(0x3a2634);
+const HAIR_MID = linear(0x5a3b4e);
 const IRIS_IN = linear(0x49b3b0);
 const IRIS_OUT = linear(0x1d5e68);
 const IRIS_RING = linear(0x0f3238);
@@ -300,7 +300,7 @@ function buildFace(base, eyes, zAt) {
       // the face, so no ring shows where they meet) and, inside the eye's opening plus a margin the lids cover,
       // sinks behind it: the grid's jagged edge there stays hidden under the lids.
       eyes.forEach((e, k) => {
-        const hugR = EYE_R * 1.025;
+        const hugR = EYE_R * 1.015;
         const dx = x - e[0];
         const dy = y - e[1];
         const rho = Math.hypot(dx, dy);
@@ -313,7 +313,7 @@ function buildFace(base, eyes, zAt) {
           if (inside) p = [p[0], p[1], e[2] - 0.002];
           else {
             const hug = rho < hugR ? e[2] + Math.sqrt(hugR * hugR - rho * rho) : -Infinity;
-            p = [p[0], p[1], smax(p[2], hug, 0.003)];
+            p = [p[0], p[1], smax(p[2], hug, 0.002)];
           }
         }
       });
@@ -493,7 +493,8 @@ function buildLids(eyes) {
     const g = lidGeometry(e, side);
     lids.hint = (p) => sub(p, e);
     // Upper lid: rows from the rim (inside the edge, closing the lid's thickness) up under the brow.
-    const rows = [-1, 0, 0.04, 0.1, 0.2, 0.33, 0.5, 0.7, 1];
+    // Dense enough that the chords between rows stay outside the skin draped under the lid.
+    const rows = [-1, 0, 0.04, 0.1, 0.16, 0.24, 0.33, 0.43, 0.55, 0.7, 0.85, 1];
     const build = (upper) => {
       const ids = [];
       for (let j = 0; j < rows.length; j++) {
@@ -505,7 +506,7 @@ function buildLids(eyes) {
           const f = Math.max(0, rows[j]);
           const l = lerp(edge, far, f);
           // The lower lid hugs the eye more closely than the upper one, which folds over it.
-          const r = rows[j] < 0 ? EYE_R * 1.01 : (upper ? LID_R : EYE_R * 1.045) * (1 + 0.05 * f);
+          const r = rows[j] < 0 ? EYE_R * 1.01 : (upper ? LID_R : EYE_R * 1.06) * (1 + 0.05 * f);
           const p = g.dir(h, l, r);
           const nearEdge = rows[j] <= 0.04 && Math.abs(h) < g.hc * 1.05;
           let c = mix3(SKIN, SKIN_SHADE, upper ? 0.25 + 0.3 * smoothstep(0.3, 0, Math.abs(rows[j] - 0.2)) : 0.35);
@@ -698,7 +699,7 @@ function buildNeckAndBody() {
   }, true);
 
   const top = 0.042;
-  const W = (d) => 0.036 + 0.128 * (1 - Math.exp(-d / 0.03));
+  const W = (d) => 0.036 + 0.1 * (1 - Math.exp(-d / 0.03));
   const Dp = (d) => 0.036 + 0.058 * (1 - Math.exp(-d / 0.03));
   const section = (a, d) => {
     const c = Math.sin(a);
