@@ -76,7 +76,7 @@ async fn acknowledged_writes_survive_kill9_and_restart() -> anyhow::Result<()> {
         .db_select("scratch")
         .await
         .expect_err("removed database");
-    assert_eq!(gone.code(), Some(ErrorCode::NotFound));
+    assert_eq!(gone.code(), Some(ErrorCode::NoDatabase));
     // flowctl sees the same after the restart.
     let mut cmd = agent.flowctl()?;
     cmd.args(["db", "get", "from.flowctl"]);
@@ -161,9 +161,9 @@ async fn database_commands_refuse_what_they_cannot_do() -> anyhow::Result<()> {
     let again = client.db_create("robot").await.expect_err("exists");
     assert_eq!(again.code(), Some(ErrorCode::Exists));
     let missing = client.db_select("nowhere").await.expect_err("no such db");
-    assert_eq!(missing.code(), Some(ErrorCode::NotFound));
+    assert_eq!(missing.code(), Some(ErrorCode::NoDatabase));
     let missing = client.db_remove("nowhere").await.expect_err("no such db");
-    assert_eq!(missing.code(), Some(ErrorCode::NotFound));
+    assert_eq!(missing.code(), Some(ErrorCode::NoDatabase));
     // Selecting a database tells this connection (and only it) which one is current.
     client.db_select("robot").await?;
     let changed = tokio::time::timeout(PATIENCE, async {
@@ -179,14 +179,19 @@ async fn database_commands_refuse_what_they_cannot_do() -> anyhow::Result<()> {
     client.var_set("k", &json!(1)).await?;
     // Removing the current database removes its variables.
     client.db_remove("robot").await?;
-    // (var_get maps every NotFound to "no such variable", so ask with list and set.)
+    // A missing database is an error for every variable command, var_get
+    // included: only a missing key in an existing database is "no value".
+    let gone = client.var_get("k").await.expect_err("database removed");
+    assert_eq!(gone.code(), Some(ErrorCode::NoDatabase));
     let gone = client.var_list().await.expect_err("database removed");
-    assert_eq!(gone.code(), Some(ErrorCode::NotFound));
+    assert_eq!(gone.code(), Some(ErrorCode::NoDatabase));
     let gone = client
         .var_set("k", &json!(2))
         .await
         .expect_err("database removed");
-    assert_eq!(gone.code(), Some(ErrorCode::NotFound));
+    assert_eq!(gone.code(), Some(ErrorCode::NoDatabase));
+    let gone = client.var_del("k").await.expect_err("database removed");
+    assert_eq!(gone.code(), Some(ErrorCode::NoDatabase));
     client.db_create("robot").await?;
     assert_eq!(client.var_get("k").await?, None);
 

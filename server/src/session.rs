@@ -47,6 +47,11 @@ fn refuse(code: ErrorCode, message: impl Into<String>) -> CmdResult {
     Err(ErrorReply::new(code, message))
 }
 
+/// The reply of a command that has nothing to say but that it worked.
+fn done(_: ()) -> Reply {
+    Reply::Done
+}
+
 impl Session {
     pub fn new(
         conn: ConnId,
@@ -145,15 +150,9 @@ impl Session {
             Command::ListChannels => Ok(Reply::Channels(self.shared.hub.list_channels())),
             Command::GetChannel { chan } => self.shared.hub.channel(&chan).map(Reply::Channel),
             Command::DbSelect { name } => self.db_select(name).await,
-            Command::DbCreate { name } => {
-                self.db_op(move |db| db.create(&name).map(|()| Reply::Done))
-                    .await
-            }
-            Command::DbRemove { name } => {
-                self.db_op(move |db| db.remove(&name).map(|()| Reply::Done))
-                    .await
-            }
-            Command::DbList => self.db_op(|db| db.list().map(Reply::Names)).await,
+            Command::DbCreate { name } => self.db_op(move |db| db.create(&name)).await.map(done),
+            Command::DbRemove { name } => self.db_op(move |db| db.remove(&name)).await.map(done),
+            Command::DbList => self.db_op(|db| db.list()).await.map(Reply::Names),
             Command::VarSet { key, value } => {
                 match serde_json::from_str::<serde_json::Value>(&value) {
                     Err(e) => refuse(
@@ -162,36 +161,33 @@ impl Session {
                     ),
                     Ok(_) => {
                         let current = self.db.clone();
-                        self.db_op(move |db| db.set(&current, &key, &value).map(|()| Reply::Done))
+                        self.db_op(move |db| db.set(&current, &key, &value))
                             .await
+                            .map(done)
                     }
                 }
             }
             Command::VarGet { key } => {
                 let current = self.db.clone();
-                self.db_op(move |db| {
-                    db.get(&current, &key).map(|v| match v {
-                        Some(v) => Reply::Value(v),
-                        None => Reply::Value(String::new()),
-                    })
-                })
-                .await
-                .and_then(|r| match r {
-                    Reply::Value(v) if v.is_empty() => {
-                        refuse(ErrorCode::NotFound, "no such variable")
-                    }
-                    other => Ok(other),
-                })
+                let probe = key.clone();
+                match self.db_op(move |db| db.get(&current, &probe)).await {
+                    Ok(Some(value)) => Ok(Reply::Value(value)),
+                    Ok(None) => refuse(ErrorCode::NotFound, format!("no variable {key}")),
+                    Err(e) => Err(e),
+                }
             }
             Command::VarDel { key } => {
                 let current = self.db.clone();
-                self.db_op(move |db| db.del(&current, &key).map(|_| Reply::Done))
+                // Deleting a variable that is not there is not an error.
+                self.db_op(move |db| db.del(&current, &key))
                     .await
+                    .map(|_existed| Reply::Done)
             }
             Command::VarList => {
                 let current = self.db.clone();
-                self.db_op(move |db| db.keys(&current).map(Reply::Names))
+                self.db_op(move |db| db.keys(&current))
                     .await
+                    .map(Reply::Names)
             }
             Command::Ping => Ok(Reply::Pong),
         };
@@ -247,43 +243,43 @@ impl Session {
 
     async fn db_select(&mut self, name: String) -> CmdResult {
         let probe = name.clone();
-        match self
-            .db_op(move |db| {
-                db.exists(&probe)
-                    .map(|e| if e { Reply::Done } else { Reply::Pong })
-            })
-            .await?
-        {
-            Reply::Done => {
-                self.db = name.clone();
-                if self.is_async {
-                    self.outbox.push_control(Event::DbChanged { name });
-                }
-                Ok(Reply::Done)
-            }
-            _ => refuse(ErrorCode::NotFound, format!("no database named {name}")),
+        if !self.db_op(move |db| db.exists(&probe)).await? {
+            return refuse(ErrorCode::NoDatabase, format!("no database named {name}"));
         }
+        self.db = name.clone();
+        if self.is_async {
+            self.outbox.push_control(Event::DbChanged { name });
+        }
+        Ok(Reply::Done)
     }
 
-    /// Runs a pair-database operation on the blocking pool (writes fsync).
-    async fn db_op<F>(&self, op: F) -> CmdResult
+    /// Runs a pair-database operation on the blocking pool (writes fsync) and
+    /// turns its errors into the protocol's: a missing database is
+    /// `NoDatabase`, never `NotFound`, which means a missing key.
+    async fn db_op<T, F>(&self, op: F) -> Result<T, ErrorReply>
     where
-        F: FnOnce(&crate::pairdb::PairDb) -> Result<Reply, PairDbError> + Send + 'static,
+        T: Send + 'static,
+        F: FnOnce(&crate::pairdb::PairDb) -> Result<T, PairDbError> + Send + 'static,
     {
         let db = self.shared.pairdb.clone();
         match tokio::task::spawn_blocking(move || op(&db)).await {
-            Ok(Ok(reply)) => Ok(reply),
-            Ok(Err(PairDbError::NoDatabase(n))) => {
-                refuse(ErrorCode::NotFound, format!("no database named {n}"))
-            }
-            Ok(Err(PairDbError::Exists(n))) => {
-                refuse(ErrorCode::Exists, format!("database {n} already exists"))
-            }
+            Ok(Ok(value)) => Ok(value),
+            Ok(Err(PairDbError::NoDatabase(n))) => Err(ErrorReply::new(
+                ErrorCode::NoDatabase,
+                format!("no database named {n}"),
+            )),
+            Ok(Err(PairDbError::Exists(n))) => Err(ErrorReply::new(
+                ErrorCode::Exists,
+                format!("database {n} already exists"),
+            )),
             Ok(Err(PairDbError::Storage(e))) => {
                 warn!("pair database error: {e}");
-                refuse(ErrorCode::Database, e)
+                Err(ErrorReply::new(ErrorCode::Database, e))
             }
-            Err(e) => refuse(ErrorCode::Internal, format!("database task failed: {e}")),
+            Err(e) => Err(ErrorReply::new(
+                ErrorCode::Internal,
+                format!("database task failed: {e}"),
+            )),
         }
     }
 

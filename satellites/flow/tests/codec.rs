@@ -684,6 +684,34 @@ fn negative_channel_ids_are_refused() {
 }
 
 #[test]
+fn every_error_code_crosses_the_wire_as_its_number() {
+    for (i, code) in flow::protocol::ErrorCode::ALL.into_iter().enumerate() {
+        let number = u16::try_from(i + 1).expect("few codes");
+        assert_eq!(code as u16, number, "{code:?}");
+        assert_eq!(flow::protocol::ErrorCode::from_u16(number), Some(code));
+        let event = Event::Reply {
+            req: 7,
+            result: Err(flow::protocol::ErrorReply::new(code, "why")),
+        };
+        let back = decode_event(single_frame(encoded_event(&event), "error reply"))
+            .unwrap_or_else(|e| panic!("{code:?}: {e}"));
+        assert_eq!(back, event);
+    }
+    // "No such database" and "no such key" are told apart on the wire.
+    let body = cat(&[&[0xff], &17u16.to_le_bytes(), &str_field(b"no database x")]);
+    assert_eq!(
+        decode_event_bytes(raw_frame(op::REPLY, 1, &body)),
+        Ok(Event::Reply {
+            req: 1,
+            result: Err(flow::protocol::ErrorReply::new(
+                flow::protocol::ErrorCode::NoDatabase,
+                "no database x"
+            )),
+        })
+    );
+}
+
+#[test]
 fn bad_tags_and_enum_values_are_refused() {
     let bad = |field: &'static str, value: i64| DecodeError::BadValue { field, value };
     for tag in (8u8..0xff).step_by(17) {
@@ -691,7 +719,7 @@ fn bad_tags_and_enum_values_are_refused() {
     }
     assert_eq!(event_err(op::REPLY, &[0xfe]), bad("reply tag", 0xfe));
     // Error replies with codes outside the known range.
-    for code in [0u16, 17, 999, u16::MAX] {
+    for code in [0u16, 18, 999, u16::MAX] {
         let body = cat(&[&[0xff], &code.to_le_bytes(), &str_field(b"m")]);
         assert_eq!(event_err(op::REPLY, &body), bad("error code", code.into()));
     }

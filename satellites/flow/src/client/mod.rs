@@ -436,13 +436,16 @@ impl Client {
         .map(drop)
     }
 
-    /// A variable's value, or `None` when it does not exist.
+    /// A variable's value in the current database, or `None` when the database
+    /// has no such key. A current database that no longer exists (removed
+    /// since it was selected) is an error, `ErrorCode::NoDatabase`, not `None`.
     pub async fn var_get(&self, key: &str) -> Result<Option<serde_json::Value>, FlowError> {
         match self.request(Command::VarGet { key: key.into() }).await {
             Ok(Reply::Value(text)) => serde_json::from_str(&text)
                 .map(Some)
                 .map_err(|e| FlowError::Json(e.to_string())),
             Ok(_) => Err(FlowError::UnexpectedReply("get variable")),
+            // Only "no such key": `NoDatabase` and every other refusal stay errors.
             Err(FlowError::Hub(e)) if e.code == ErrorCode::NotFound => Ok(None),
             Err(e) => Err(e),
         }

@@ -223,9 +223,34 @@ pub enum ErrorCode {
     Database = 14,
     ShuttingDown = 15,
     Internal = 16,
+    /// The pair database named by `DbSelect`, or the connection's current one,
+    /// does not exist. Distinct from `NotFound`, which `VarGet` answers for a
+    /// key that is not in an existing database.
+    NoDatabase = 17,
 }
 
 impl ErrorCode {
+    /// Every code, in wire order.
+    pub const ALL: [ErrorCode; 17] = [
+        ErrorCode::BadRequest,
+        ErrorCode::AuthFailed,
+        ErrorCode::NotAuthenticated,
+        ErrorCode::VersionMismatch,
+        ErrorCode::NotFound,
+        ErrorCode::Exists,
+        ErrorCode::NotOwner,
+        ErrorCode::WrongKind,
+        ErrorCode::Limit,
+        ErrorCode::Timeout,
+        ErrorCode::Overloaded,
+        ErrorCode::ServiceGone,
+        ErrorCode::ServiceFailed,
+        ErrorCode::Database,
+        ErrorCode::ShuttingDown,
+        ErrorCode::Internal,
+        ErrorCode::NoDatabase,
+    ];
+
     pub fn from_u16(code: u16) -> Option<Self> {
         use ErrorCode::*;
         Some(match code {
@@ -245,6 +270,7 @@ impl ErrorCode {
             14 => Database,
             15 => ShuttingDown,
             16 => Internal,
+            17 => NoDatabase,
             _ => return None,
         })
     }

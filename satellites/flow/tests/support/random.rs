@@ -18,25 +18,6 @@ pub const COMMAND_VARIANTS: usize = 21;
 /// Number of `Event` variants plus reply kinds, so every reply shape is drawn often.
 pub const EVENT_VARIANTS: usize = 19;
 
-const ERROR_CODES: [ErrorCode; 16] = [
-    ErrorCode::BadRequest,
-    ErrorCode::AuthFailed,
-    ErrorCode::NotAuthenticated,
-    ErrorCode::VersionMismatch,
-    ErrorCode::NotFound,
-    ErrorCode::Exists,
-    ErrorCode::NotOwner,
-    ErrorCode::WrongKind,
-    ErrorCode::Limit,
-    ErrorCode::Timeout,
-    ErrorCode::Overloaded,
-    ErrorCode::ServiceGone,
-    ErrorCode::ServiceFailed,
-    ErrorCode::Database,
-    ErrorCode::ShuttingDown,
-    ErrorCode::Internal,
-];
-
 /// A string of up to `max` characters mixing ASCII, accented letters, CJK and emoji.
 pub fn string(rng: &mut StdRng, max: usize) -> String {
     let len = rng.random_range(0..=max);
@@ -117,7 +98,7 @@ pub fn channel_info(rng: &mut StdRng) -> ChannelInfo {
 
 pub fn error_reply(rng: &mut StdRng) -> ErrorReply {
     ErrorReply::new(
-        ERROR_CODES[rng.random_range(0..ERROR_CODES.len())],
+        ErrorCode::ALL[rng.random_range(0..ErrorCode::ALL.len())],
         string(rng, 60),
     )
 }
