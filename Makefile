@@ -18,8 +18,12 @@ endif
 run: deps model-release build
 	scripts/run.sh $(TARGET_DIR)/release
 
-## Install everything, then run every test of the workspace.
+## Install everything, then check formatting and lints and run every test: the page's JavaScript units (node's test
+## runner, no npm package needed) and the workspace's Rust suites.
 test: deps model build-debug
+	$(CARGO) fmt --all --check
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
 	$(CARGO) test --workspace --no-fail-fast
 
 ## Benchmarks against their baselines, side by side (not part of the tests).

@@ -11,6 +11,7 @@ packages=(
     python3 python3-pip python3-venv         # model download (pip), Python baselines in benchmarks
     chromium chromium-driver                 # headless end-to-end tests
     ffmpeg sox                               # fixture conversion for fake camera / microphone devices
+    flite                                    # spoken questions for the full-pipeline test (a voice not our own)
     redis-server                             # hub benchmark baseline
 )
 

@@ -230,16 +230,19 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
         .await?;
 
     // Detections reach the overlay; mood changes the expression.
-    let boxes = json!({"seq": 1, "frame": {"width": 640, "height": 360}, "items": [
-        {"kind": "face", "box": [300, 80, 90, 90], "label": "face"},
-        {"kind": "code", "polygon": [[40, 40], [140, 40], [140, 140], [40, 140]], "label": "https://example.org"},
-        {"kind": "motion_centre", "point": [420, 200], "label": "motion"}]});
-    detections.publish(boxes.to_string()).await?;
+    // (the contract's shape; tests/pipeline.rs has the real vision module produce them)
+    let frame = json!({"seq": 1, "ts_us": 0, "width": 640, "height": 360});
+    let seen = json!({"frame": frame, "faces": [{"x": 300, "y": 80, "w": 90, "h": 90}],
+        "motion": {"frame": frame, "moving": true, "centre": {"x": 420.0, "y": 200.0}, "regions": []},
+        "codes": [{"kind": "qr", "text": "https://example.org", "hex": "", "appearance": 1, "new": true,
+            "polygon": [{"x": 40.0, "y": 40.0}, {"x": 140.0, "y": 40.0}, {"x": 140.0, "y": 140.0}, {"x": 40.0, "y": 140.0}]}]});
+    let _: agent_contract::detections::DetectionsMsg = serde_json::from_value(seen.clone())?;
+    detections.publish(seen.to_string()).await?;
     avatar.publish(r#"{"cmd":"mood","mood":"happy"}"#).await?;
     browser
         .wait_for(
             &tab,
-            "agentDebug.detections > 0 && agentDebug.mood === 'happy'",
+            "agentDebug.detections > 0 && agentDebug.overlayItems === 3 && agentDebug.mood === 'happy'",
             Duration::from_secs(5),
         )
         .await?;
@@ -309,7 +312,7 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
     assert_eq!(sent, json!({"asr": false}));
 
     // The artifact shows the overlay: detections again, and one more to be sure it is on screen.
-    detections.publish(boxes.to_string()).await?;
+    detections.publish(seen.to_string()).await?;
     browser
         .wait_for(&tab, "agentDebug.detections > 1", Duration::from_secs(5))
         .await?;

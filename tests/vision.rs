@@ -288,7 +288,7 @@ async fn bad_frames_are_counted_and_skipped() -> anyhow::Result<()> {
         msg.frame.seq, good_seq,
         "only the good frame yields detections"
     );
-    assert_eq!(msg.counters.bad, 2);
+    assert_eq!(msg.counters.context("no counters")?.bad, 2);
     rig.agent
         .output
         .wait_for("skipped a bad frame", 2, PATIENCE)
@@ -316,7 +316,7 @@ async fn a_flood_of_frames_is_skipped_not_queued() -> anyhow::Result<()> {
             break msg;
         }
     };
-    let counters = last.counters;
+    let counters = last.counters.context("no counters")?;
     println!(
         "processed {} skipped {} of 300",
         counters.processed, counters.skipped

@@ -318,9 +318,10 @@ mod tests {
     #[test]
     fn unknown_module_sections_are_refused() {
         let c = load_text("[modules.bogus]\nenabled = false\n").expect("load");
-        let e = c.check_module_names(&["tts", "vision"]).expect_err("bogus");
+        let known = ["audio_fft", "brain", "browser", "tts", "video_y", "vision"];
+        let e = c.check_module_names(&known).expect_err("bogus");
         assert_eq!(e.key, "modules.bogus");
-        assert!(e.reason.contains("tts, vision"), "{e}");
+        assert!(e.reason.contains("brain, browser, tts"), "{e}");
         assert!(
             Config::load(None)
                 .expect("defaults")

@@ -179,6 +179,98 @@ pub fn spectrum_peak(payload: &[u8], rate: f64, size: usize) -> (f64, f32) {
     (k as f64 * rate / size as f64, m)
 }
 
+/// The questions the full-pipeline test's microphone asks, and when (seconds into its 20 s loop).
+pub const PIPELINE_QUESTIONS: [(&str, f64); 2] =
+    [("What time is it?", 8.0), ("Please read the code.", 16.0)];
+
+/// Media for the full-pipeline test, converted once into `dir`: a camera that shows a portrait placed on the right
+/// of the frame for 10 s, then a QR code for 10 s (looping), and a microphone that asks [`PIPELINE_QUESTIONS`] in
+/// flite's voice (another engine than the agent's own espeak-ng), with silence around them.
+pub fn prepare_pipeline(dir: &Path) -> anyhow::Result<FakeMedia> {
+    std::fs::create_dir_all(dir)?;
+    let fx = fixtures();
+    let video = dir.join("pipeline.y4m");
+    let audio = dir.join("pipeline.wav");
+    if !video.exists() {
+        let face = fx.join("faces/fr_obama.jpg");
+        let code = fx.join("qr/derived/zxing_qrcode-1_17_640x360.jpg");
+        ffmpeg(&[
+            "-loop",
+            "1",
+            "-framerate",
+            "15",
+            "-t",
+            "10",
+            "-i",
+            path_str(&face)?,
+            "-loop",
+            "1",
+            "-framerate",
+            "15",
+            "-t",
+            "10",
+            "-i",
+            path_str(&code)?,
+            "-filter_complex",
+            "[0]scale=-2:330,pad=640:360:640-iw-20:15:black,setsar=1[a];[1]scale=640:360,setsar=1[b];[a][b]concat=n=2:v=1[v]",
+            "-map",
+            "[v]",
+            "-pix_fmt",
+            "yuv420p",
+            path_str(&video)?,
+        ])?;
+    }
+    if !audio.exists() {
+        let mut parts = Vec::new();
+        for (i, (text, _)) in PIPELINE_QUESTIONS.iter().enumerate() {
+            let wav = dir.join(format!("question-{i}.wav"));
+            let out = Command::new("flite")
+                .args(["-voice", "slt", "-t", text, "-o"])
+                .arg(&wav)
+                .output()
+                .context("running flite (apt-get install flite)")?;
+            if !out.status.success() {
+                bail!("flite failed: {}", String::from_utf8_lossy(&out.stderr));
+            }
+            parts.push(wav);
+        }
+        // Each question is delayed to its start time and the sum padded to 20 s, at the 48 kHz of a sound card.
+        let mut args: Vec<String> = Vec::new();
+        for p in &parts {
+            args.push("-i".into());
+            args.push(path_str(p)?.to_owned());
+        }
+        let mut filter = String::new();
+        for (i, (_, at)) in PIPELINE_QUESTIONS.iter().enumerate() {
+            let ms = (at * 1000.0) as u64;
+            filter.push_str(&format!("[{i}]aresample=48000,adelay={ms}[q{i}];"));
+        }
+        filter.push_str("[q0][q1]amix=inputs=2:normalize=0,apad=whole_dur=20,atrim=0:20[out]");
+        args.extend(
+            [
+                "-filter_complex",
+                &filter,
+                "-map",
+                "[out]",
+                "-ac",
+                "1",
+                "-ar",
+                "48000",
+                "-c:a",
+                "pcm_s16le",
+                path_str(&audio)?,
+            ]
+            .map(str::to_owned),
+        );
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        ffmpeg(&refs)?;
+    }
+    Ok(FakeMedia {
+        audio_wav: audio,
+        video_y4m: video,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,9 +2,10 @@
 //!
 //! Like `video_y`, it subscribes to its source only while someone subscribes to its output.
 
+use super::on_demand;
 use super::spectrum::{BINS, FFT_SIZE, SpectrumAnalyser, to_le_bytes};
-use super::{channels, on_demand};
 use crate::module::{Module, ModuleContext, ModuleFuture};
+use agent_contract::channels;
 
 /// The `audio_fft` module.
 #[derive(Debug)]
@@ -37,7 +38,7 @@ pub async fn run(
     })
     .to_string();
     let Some(publisher) =
-        on_demand::output(&client, channels::AUDIO_FFT, &header, &mut shutdown).await
+        on_demand::output(&client, channels::AUDIO_FFT.name, &header, &mut shutdown).await
     else {
         return;
     };
@@ -46,10 +47,10 @@ pub async fn run(
         if !on_demand::until_listened(&mut listening, &mut shutdown).await {
             return;
         }
-        let source = match client.subscribe(channels::AUDIO).await {
+        let source = match client.subscribe(channels::AUDIO.name).await {
             Ok(s) => s,
             Err(e) => {
-                tracing::warn!(error = %e, "cannot subscribe to {}", channels::AUDIO);
+                tracing::warn!(error = %e, "cannot subscribe to {}", channels::AUDIO.name);
                 return;
             }
         };

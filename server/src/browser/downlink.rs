@@ -13,8 +13,8 @@ use serde::de::IgnoredAny;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
-use super::channels;
 use super::wire::{FrameKind, encode_frame};
+use agent_contract::channels;
 
 /// How one channel's messages reach the page.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -26,11 +26,11 @@ enum Route {
 }
 
 const ROUTES: [(&str, Route); 5] = [
-    (channels::AVATAR, Route::Json("avatar")),
-    (channels::DETECTIONS, Route::Json("detections")),
-    (channels::RULES, Route::Json("rules")),
-    (channels::SPEECH, Route::Speech),
-    (channels::AUDIO_FFT, Route::Spectrum),
+    (channels::AVATAR.name, Route::Json("avatar")),
+    (channels::DETECTIONS.name, Route::Json("detections")),
+    (channels::RULES.name, Route::Json("rules")),
+    (channels::SPEECH.name, Route::Speech),
+    (channels::AUDIO_FFT.name, Route::Spectrum),
 ];
 
 /// The forwarders of one page; dropping it stops them and unsubscribes.

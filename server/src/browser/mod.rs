@@ -37,19 +37,6 @@ use session::SessionLimits;
 use role::{PageId, RoleBoard};
 use session::SessionStore;
 
-/// Channel names this module reads or writes (the contract in the project README).
-pub mod channels {
-    pub const AUDIO: &str = "Agent.audio";
-    pub const VIDEO: &str = "Agent.video";
-    pub const VIDEO_Y: &str = "Agent.video.y";
-    pub const AUDIO_FFT: &str = "Agent.audio.fft";
-    pub const CTRL: &str = "Agent.ctrl";
-    pub const AVATAR: &str = "Agent.avatar";
-    pub const SPEECH: &str = "Agent.speech";
-    pub const DETECTIONS: &str = "Agent.detections";
-    pub const RULES: &str = "Agent.rules";
-}
-
 /// Settings of the browser link, from `[modules.browser]` (and `[modules.video_y]` / `[modules.audio_fft]`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -12,19 +12,13 @@ use bytes::Bytes;
 use flow::queue::DropOldest;
 use tokio::task::JoinHandle;
 
-use super::channels;
+use agent_contract::channels;
 
 /// Frames kept while the hub side catches up (about a quarter second at 15 fps): enough to ride out a scheduling
 /// hiccup on a busy machine; anything older is worthless and dropped.
 const VIDEO_QUEUE: usize = 4;
 /// 50 chunks of 20 ms: a second of audio, enough to ride out a hiccup without losing speech.
 const AUDIO_QUEUE: usize = 50;
-
-pub const AUDIO_HEADER: &str =
-    r#"{"format":"s16le","rate":22050,"channels":1,"chunk_ms":20,"source":"browser"}"#;
-pub const VIDEO_HEADER: &str =
-    r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;
-const CTRL_HEADER: &str = r#"{"format":"json","source":"browser"}"#;
 
 #[derive(Debug)]
 struct Lane {
@@ -89,17 +83,35 @@ impl Uplink {
             self.close_video();
         }
         if audio && self.audio.is_none() {
-            self.audio =
-                Some(Lane::open(client, channels::AUDIO, AUDIO_HEADER, AUDIO_QUEUE).await?);
+            self.audio = Some(
+                Lane::open(
+                    client,
+                    channels::AUDIO.name,
+                    channels::headers::AUDIO,
+                    AUDIO_QUEUE,
+                )
+                .await?,
+            );
         }
         if video && self.video.is_none() {
-            self.video =
-                Some(Lane::open(client, channels::VIDEO, VIDEO_HEADER, VIDEO_QUEUE).await?);
+            self.video = Some(
+                Lane::open(
+                    client,
+                    channels::VIDEO.name,
+                    channels::headers::VIDEO,
+                    VIDEO_QUEUE,
+                )
+                .await?,
+            );
         }
         // Agent.ctrl exists while the holder sends media, so that its readers (ASR, TTS) are subscribed before the
         // first control message: a channel created for one message would lose it to sticky subscribers.
         if (audio || video) && self.ctrl.is_none() {
-            self.ctrl = Some(client.publisher(channels::CTRL, CTRL_HEADER).await?);
+            self.ctrl = Some(
+                client
+                    .publisher(channels::CTRL.name, channels::headers::CTRL)
+                    .await?,
+            );
         }
         Ok(())
     }
@@ -140,7 +152,11 @@ impl Uplink {
         json: String,
     ) -> Result<(), flow::FlowError> {
         if self.ctrl.is_none() {
-            self.ctrl = Some(client.publisher(channels::CTRL, CTRL_HEADER).await?);
+            self.ctrl = Some(
+                client
+                    .publisher(channels::CTRL.name, channels::headers::CTRL)
+                    .await?,
+            );
         }
         match &self.ctrl {
             Some(p) => p.publish(json).await,

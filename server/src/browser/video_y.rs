@@ -10,11 +10,9 @@ use serde_json::json;
 use tokio::sync::watch;
 
 use super::luma::grey_jpeg;
-use super::{channels, on_demand};
+use super::on_demand;
 use crate::module::{Module, ModuleContext, ModuleFuture};
-
-const HEADER: &str =
-    r#"{"format":"jpeg","colour":"grey","width":640,"height":360,"source":"Agent.video"}"#;
+use agent_contract::channels;
 
 /// The `video_y` module.
 #[derive(Debug)]
@@ -49,8 +47,13 @@ pub async fn run(
     mut shutdown: watch::Receiver<bool>,
     report: impl Fn(serde_json::Value),
 ) {
-    let Some(publisher) =
-        on_demand::output(&client, channels::VIDEO_Y, HEADER, &mut shutdown).await
+    let Some(publisher) = on_demand::output(
+        &client,
+        channels::VIDEO_Y.name,
+        channels::headers::VIDEO_Y,
+        &mut shutdown,
+    )
+    .await
     else {
         return;
     };
@@ -64,14 +67,14 @@ pub async fn run(
         if !on_demand::until_listened(&mut listening, &mut shutdown).await {
             return;
         }
-        let source = match client.subscribe(channels::VIDEO).await {
+        let source = match client.subscribe(channels::VIDEO.name).await {
             Ok(s) => s,
             Err(e) => {
-                tracing::warn!(error = %e, "cannot subscribe to {}", channels::VIDEO);
+                tracing::warn!(error = %e, "cannot subscribe to {}", channels::VIDEO.name);
                 return;
             }
         };
-        tracing::info!("{} has subscribers: converting", channels::VIDEO_Y);
+        tracing::info!("{} has subscribers: converting", channels::VIDEO_Y.name);
         loop {
             tokio::select! {
                 _ = shutdown.changed() => return,
@@ -106,7 +109,11 @@ pub async fn run(
                 }
             }
         }
-        tracing::info!(skipped, "{} has no subscribers: idle", channels::VIDEO_Y);
+        tracing::info!(
+            skipped,
+            "{} has no subscribers: idle",
+            channels::VIDEO_Y.name
+        );
         // `source` drops here: the Agent.video subscription ends.
     }
 }

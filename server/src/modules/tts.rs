@@ -19,6 +19,7 @@ use tracing::{debug, info, warn};
 
 use crate::module::{Module, ModuleContext, ModuleFuture};
 use crate::modules::behaviour::{self, Event};
+use agent_contract::channels;
 use params::TtsParams;
 use speaker::{AvatarOut, Counters, Outputs, Speaker};
 use wire::{AvatarCommand, CancelTarget, Hearing, SayRequest, VoiceChoice};
@@ -68,20 +69,22 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
     let client = ctx.client.clone();
     let speech = client
         .publisher(
-            wire::SPEECH,
-            &wire::speech_header(synth.sample_rate(), params.chunk_ms),
+            channels::SPEECH.name,
+            &channels::headers::speech(synth.sample_rate(), params.chunk_ms),
         )
         .await?;
     // The visemes, captions and behaviour commands all need this channel; another owner (a module started
     // earlier) would leave the avatar without lip-sync, so that is an error naming the cause.
-    let avatar = client.publisher(wire::AVATAR, wire::AVATAR_HEADER).await.with_context(|| {
-        format!("[modules.tts] cannot own {}: start the tts module before any other publisher of it", wire::AVATAR)
+    let avatar = client.publisher(channels::AVATAR.name, channels::headers::AVATAR).await.with_context(|| {
+        format!("[modules.tts] cannot own {}: start the tts module before any other publisher of it", channels::AVATAR.name)
     })?;
     let avatar = AvatarOut(Arc::new(avatar));
-    let mut service = client.serve(wire::SAY_SERVICE, wire::SAY_HEADER).await?;
-    let ctrl = client.subscribe(wire::CTRL).await?;
-    let transcripts = client.subscribe(wire::TRANSCRIPT).await?;
-    let detections = client.subscribe(wire::DETECTIONS).await?;
+    let mut service = client
+        .serve(channels::SAY.name, channels::headers::SAY)
+        .await?;
+    let ctrl = client.subscribe(channels::CTRL.name).await?;
+    let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
+    let detections = client.subscribe(channels::DETECTIONS.name).await?;
 
     let (behaviour, events) = behaviour::channel();
     if params.behaviour.enabled {
@@ -109,7 +112,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
         barge_in: params.barge_in,
         counters,
     };
-    info!(voice = %tts.voice.voice, rate = tts.voice.rate_wpm, "tts: speaking on {} and {}", wire::SPEECH, wire::AVATAR);
+    info!(voice = %tts.voice.voice, rate = tts.voice.rate_wpm, "tts: speaking on {} and {}", channels::SPEECH.name, channels::AVATAR.name);
 
     let mut ticks = ctx.ticks();
     let mut shutdown = ctx.shutdown.clone();
@@ -124,7 +127,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
                 let Some(call) = call else { break };
                 let answer = match wire::say_request(&call.payload) {
                     Ok(request) => tts.request(request).await,
-                    Err(reason) => Err(format!("bad {} request: {reason}", wire::SAY_SERVICE)),
+                    Err(reason) => Err(format!("bad {} request: {reason}", channels::SAY.name)),
                 };
                 if let Err(e) = call.respond(answer).await {
                     debug!("tts: answer not delivered: {e}");
@@ -135,7 +138,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
                 if let Some(request) = wire::ctrl_request(&data.payload)
                     && let Err(reason) = tts.request(request).await
                 {
-                    warn!("tts: {} request failed: {reason}", wire::CTRL);
+                    warn!("tts: {} request failed: {reason}", channels::CTRL.name);
                 }
             }
             data = transcripts.recv() => {

@@ -22,11 +22,7 @@ use tracing::{debug, info, warn};
 
 use crate::module::{Module, ModuleContext, ModuleFuture};
 
-const FACES: &str = "Agent.faces";
-const MOTION: &str = "Agent.motion";
-const CODES: &str = "Agent.codes";
-const DETECTIONS: &str = "Agent.detections";
-const AVATAR: &str = "Agent.avatar";
+use agent_contract::channels::{self, AVATAR, CODES, DETECTIONS, FACES, MOTION};
 
 /// How many recent frame times the status report summarises.
 const RECENT_FRAMES: usize = 64;
@@ -81,20 +77,23 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
         .context("[modules.vision]")?;
 
     let client = ctx.client.clone();
-    let header = |what: &str| {
-        format!(
-            r#"{{"format":"json","source":"vision","content":"{what}","doc":"docs/vision.md"}}"#
-        )
-    };
     let outputs = Outputs {
-        faces: client.publisher(FACES, &header("faces")).await?,
-        motion: client.publisher(MOTION, &header("motion")).await?,
-        codes: client.publisher(CODES, &header("codes")).await?,
-        detections: client.publisher(DETECTIONS, &header("detections")).await?,
+        faces: client
+            .publisher(FACES.name, &channels::headers::vision("faces"))
+            .await?,
+        motion: client
+            .publisher(MOTION.name, &channels::headers::vision("motion"))
+            .await?,
+        codes: client
+            .publisher(CODES.name, &channels::headers::vision("codes"))
+            .await?,
+        detections: client
+            .publisher(DETECTIONS.name, &channels::headers::vision("detections"))
+            .await?,
         avatar: if settings.avatar_gaze {
             match client
                 .publisher(
-                    AVATAR,
+                    AVATAR.name,
                     r#"{"format":"json","commands":["gaze"],"source":"vision"}"#,
                 )
                 .await
@@ -102,7 +101,8 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
                 Ok(publisher) => Some(publisher),
                 Err(e) => {
                     warn!(
-                        "vision: not publishing gaze on {AVATAR} ({e}); it stays in {DETECTIONS}"
+                        "vision: not publishing gaze on {} ({e}); it stays in {}",
+                        AVATAR.name, DETECTIONS.name
                     );
                     None
                 }

@@ -1,9 +1,11 @@
-//! The detection overlay on the camera preview: boxes, polygons and points with labels, in frame coordinates.
+//! The detection overlay on the camera preview: the faces, motion and codes of each `Agent.detections` message.
 //
 // Detections arrive in the camera frame's pixels (640x360); the preview is mirrored (like a mirror, so moving
-// right moves right on screen) and scaled to the card's size, so each point is mapped through the same transform.
+// right moves right on screen) and scaled to the card's size, so each point is mapped through the same transform
+// (overlay-items.js, which also turns a message into the geometries drawn).
 
 import { trackCanvasSize } from "./hidpi-canvas.js";
+import { detectionItems, frameToCanvas } from "./overlay-items.js";
 
 const FADE_MS = 500;
 const COLOURS = { face: "#5fd4c4", motion: "#f2b86b", motion_centre: "#f2b86b", code: "#7aa2ff" };
@@ -15,6 +17,7 @@ export class Overlay {
     this.last = null;
     this.lastAt = 0;
     this.count = 0;
+    this.items = 0;
     this.dirty = false;
     this.w = 0;
     this.h = 0;
@@ -27,9 +30,12 @@ export class Overlay {
     requestAnimationFrame(this.draw);
   }
 
-  show(data) {
-    if (!data || !Array.isArray(data.items)) return;
+  /** Takes one `Agent.detections` message (the contract's shape); anything else is ignored. */
+  show(message) {
+    const data = detectionItems(message);
+    if (!data) return;
     this.last = data;
+    this.items = data.items.length;
     this.lastAt = performance.now();
     this.count += 1;
     this.dirty = true;
@@ -45,13 +51,7 @@ export class Overlay {
     ctx.clearRect(0, 0, this.w, this.h);
     if (!this.last || age > FADE_MS * 2) return;
     ctx.globalAlpha = age < FADE_MS ? 1 : 1 - (age - FADE_MS) / FADE_MS;
-    const fw = this.last.frame?.width || 640;
-    const fh = this.last.frame?.height || 360;
-    // object-fit: cover, mirrored horizontally.
-    const s = Math.max(this.w / fw, this.h / fh);
-    const ox = (this.w - fw * s) / 2;
-    const oy = (this.h - fh * s) / 2;
-    const map = (x, y) => [this.w - (ox + x * s), oy + y * s];
+    const map = frameToCanvas(this.last.frame, this.w, this.h);
     ctx.lineWidth = 2;
     ctx.font = "600 12px Inter, Segoe UI, Arial, sans-serif";
     for (const item of this.last.items) {

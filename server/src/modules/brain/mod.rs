@@ -15,6 +15,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use agent_brain::{
     Action, Brain, Capabilities, EchoFilter, Effect, Now, PerceptError, Value, WallClock,
 };
+use agent_contract::channels;
 use flow::tick::Tick;
 use flow::{Client, Data, Publisher, Subscription};
 use tokio::sync::mpsc;
@@ -90,11 +91,13 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
     info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
 
     let client = ctx.client.clone();
-    let transcripts = client.subscribe("Agent.transcript").await?;
-    let detections = client.subscribe("Agent.detections").await?;
-    let speech_out = client.subscribe("Agent.speech").await?;
-    let avatar = client.subscribe("Agent.avatar").await?;
-    let rules = client.publisher("Agent.rules", wire::RULES_HEADER).await?;
+    let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
+    let detections = client.subscribe(channels::DETECTIONS.name).await?;
+    let speech_out = client.subscribe(channels::SPEECH.name).await?;
+    let avatar = client.subscribe(channels::AVATAR.name).await?;
+    let rules = client
+        .publisher(channels::RULES.name, channels::headers::RULES)
+        .await?;
     let (outcome_tx, mut outcomes) = mpsc::channel(OUTCOME_QUEUE);
     let mut mind = Mind {
         brain: Brain::new(program),

@@ -2,6 +2,7 @@
 //! `face(count, dir)`, `motion(dir)` and `code(text)` facts for the rule engine.
 
 use agent_brain::Value;
+use agent_contract::detections::DetectionsMsg;
 use serde::Deserialize;
 
 /// A percept to assert: `name(args...)`, or the whole current set of a predicate.
@@ -79,75 +80,29 @@ pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
     }
 }
 
-#[derive(Debug, Deserialize)]
-struct Detections {
-    frame: Frame,
-    #[serde(default)]
-    faces: Option<Vec<FaceBox>>,
-    #[serde(default)]
-    motion: Option<Motion>,
-    #[serde(default)]
-    codes: Option<Vec<Code>>,
-}
-
-#[derive(Debug, Deserialize)]
-struct Frame {
-    width: u32,
-}
-
-/// A face box in frame pixels (its vertical extent does not matter to the brain).
-#[derive(Debug, Deserialize)]
-struct FaceBox {
-    x: f64,
-    w: f64,
-    h: f64,
-}
-
-#[derive(Debug, Deserialize)]
-struct Point {
-    x: f64,
-}
-
-#[derive(Debug, Deserialize)]
-struct Motion {
-    moving: bool,
-    #[serde(default)]
-    centre: Option<Point>,
-}
-
-#[derive(Debug, Deserialize)]
-struct Code {
-    #[serde(default)]
-    text: Option<String>,
-}
-
 /// The percepts in one `Agent.detections` message (faces, motion and visible codes of a video frame).
 ///
 /// Absence is not asserted: a frame without faces simply does not refresh `face`, which goes stale after its
 /// freshness window, so that a detector missing a few frames does not end a person's visit.
 pub fn detections(payload: &[u8]) -> Result<Vec<Percept>, String> {
-    let message: Detections =
+    let message: DetectionsMsg =
         serde_json::from_slice(payload).map_err(|e| format!("detections JSON: {e}"))?;
     let width = f64::from(message.frame.width.max(1));
     let mut percepts = Vec::new();
     if let Some(faces) = message.faces.filter(|faces| !faces.is_empty()) {
-        let largest = faces
-            .iter()
-            .max_by(|a, b| (a.w * a.h).total_cmp(&(b.w * b.h)));
-        let dir = largest.map_or("centre", |face| direction((face.x + face.w / 2.0) / width));
+        let largest = faces.iter().max_by_key(|f| i64::from(f.w) * i64::from(f.h));
+        let dir = largest.map_or("centre", |face| {
+            direction((f64::from(face.x) + f64::from(face.w) / 2.0) / width)
+        });
         percepts.push(Percept::One {
             name: "face",
             args: vec![Value::Num(faces.len() as f64), Value::from(dir)],
         });
     }
-    if let Some(Motion {
-        moving: true,
-        centre: Some(centre),
-    }) = message.motion
-    {
+    if let Some(centre) = message.motion.filter(|m| m.moving).and_then(|m| m.centre) {
         percepts.push(Percept::One {
             name: "motion",
-            args: vec![Value::from(direction(centre.x / width))],
+            args: vec![Value::from(direction(f64::from(centre.x) / width))],
         });
     }
     if let Some(codes) = message.codes {
@@ -227,7 +182,7 @@ mod tests {
     fn detections_become_percepts() {
         let message = br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},
             "faces":[{"x":10,"y":10,"w":40,"h":40},{"x":500,"y":100,"w":100,"h":100}],
-            "motion":{"moving":true,"centre":{"x":320,"y":100},"regions":[],"changed_fraction":0.1,"held":false},
+            "motion":{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"moving":true,"centre":{"x":320,"y":100},"regions":[],"changed_fraction":0.1,"held":false},
             "codes":[{"kind":"qr","text":"HELLO","hex":"","polygon":[],"appearance":1,"new":true},
                      {"kind":"ean13","text":null,"hex":"ff","polygon":[],"appearance":2,"new":false}]}"#;
         let percepts = detections(message);
@@ -252,7 +207,7 @@ mod tests {
 
     #[test]
     fn absence_asserts_nothing() {
-        let message = br#"{"frame":{"width":640},"faces":[],"motion":{"moving":false,"centre":null},"codes":[]}"#;
+        let message = br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"faces":[],"motion":{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"moving":false,"centre":null},"codes":[]}"#;
         assert_eq!(detections(message), Ok(vec![]));
         assert!(detections(b"{\"faces\":[]}").is_err());
     }

@@ -11,7 +11,7 @@ use tracing::{debug, warn};
 
 /// The TTS module's service: `{"text": "..."}` queues an utterance and answers `{"utterance": N}`;
 /// `{"cancel": "all"}` or `{"cancel": N}` stops speech (see docs/voice.md).
-pub const SAY_SERVICE: &str = "Agent.say";
+use agent_contract::channels::SAY;
 
 /// Requests waiting for the speech task; when it is this far behind (the TTS module is not answering), new
 /// requests are dropped and logged rather than queued without bound.
@@ -85,7 +85,7 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
             }
         };
         let body = serde_json::to_vec(&body).unwrap_or_default();
-        match client.call(SAY_SERVICE, body, REQUEST_TIMEOUT).await {
+        match client.call(SAY.name, body, REQUEST_TIMEOUT).await {
             Ok(answer) => {
                 if let Request::Say {
                     text,
@@ -102,7 +102,7 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
                     }
                 }
             }
-            Err(e) => warn!("brain: {SAY_SERVICE} failed: {e}"),
+            Err(e) => warn!("brain: {} failed: {e}", SAY.name),
         }
     }
     debug!("brain: speech task ended");

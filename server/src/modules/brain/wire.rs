@@ -4,9 +4,6 @@
 use agent_brain::{Trace, Value};
 use serde_json::json;
 
-/// The header of `Agent.rules`.
-pub const RULES_HEADER: &str = r#"{"format":"json","content":"rule trace","doc":"docs/brain.md"}"#;
-
 /// The `Agent.rules` message for one rule change: the fields the page shows (`ts_ms`, `program`, `rule`,
 /// `action`, `because`) and the full trace for tools.
 pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {

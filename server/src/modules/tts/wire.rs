@@ -2,32 +2,11 @@
 //! detections it follows, and the `Agent.speech` / `Agent.avatar` messages it publishes (docs/voice.md,
 //! docs/browser-link.md). Everything inside the module works on the plain types defined here.
 
+use agent_contract::detections::DetectionsMsg;
 use agent_voice::Viseme;
 use bytes::{BufMut, Bytes, BytesMut};
 use serde::Deserialize;
 use serde_json::json;
-
-pub const SPEECH: &str = "Agent.speech";
-pub const AVATAR: &str = "Agent.avatar";
-pub const SAY_SERVICE: &str = "Agent.say";
-pub const CTRL: &str = "Agent.ctrl";
-pub const TRANSCRIPT: &str = "Agent.transcript";
-pub const DETECTIONS: &str = "Agent.detections";
-
-/// The JSON header of `Agent.speech`: PCM framed per utterance (docs/browser-link.md).
-pub fn speech_header(rate: u32, chunk_ms: u32) -> String {
-    json!({
-        "format": "s16le", "rate": rate, "channels": 1, "chunk_ms": chunk_ms,
-        "framing": "utterance-offset", "source": "tts",
-    })
-    .to_string()
-}
-
-/// The JSON header of `Agent.avatar`.
-pub const AVATAR_HEADER: &str = r#"{"format":"json","commands":["blink","gaze","mood","visemes","speech_stop","say"],"source":"tts"}"#;
-
-/// The JSON header of the `Agent.say` service: what it takes and answers.
-pub const SAY_HEADER: &str = r#"{"request":{"text":"string","voice":"optional espeak-ng voice","rate_wpm":"optional","pitch":"optional"},"cancel":{"cancel":"all | utterance number"},"answer":{"utterance":"number","cancelled":"[numbers]"}}"#;
 
 /// An `Agent.speech` payload: `[utterance u32 LE][offset u32 LE][s16le PCM]`, `offset` being the index of the
 /// first sample inside the utterance.
@@ -180,56 +159,21 @@ pub struct Sighting {
 /// it (`source` `face`/`motion`; `idle` means nothing seen), else the largest face, else the moving centre.
 /// `None` when nothing is seen (or the message is not understood).
 pub fn sighting(payload: &[u8]) -> Option<Sighting> {
-    #[derive(Deserialize)]
-    struct Frame {
-        width: f64,
-        height: f64,
-    }
-    #[derive(Deserialize)]
-    struct Face {
-        x: f64,
-        y: f64,
-        w: f64,
-        h: f64,
-    }
-    #[derive(Deserialize)]
-    struct Point {
-        x: f64,
-        y: f64,
-    }
-    #[derive(Deserialize)]
-    struct Motion {
-        moving: bool,
-        centre: Option<Point>,
-    }
-    #[derive(Deserialize)]
-    struct Gaze {
-        x: f64,
-        y: f64,
-        source: String,
-    }
-    #[derive(Deserialize)]
-    struct Detections {
-        frame: Frame,
-        faces: Option<Vec<Face>>,
-        motion: Option<Motion>,
-        gaze: Option<Gaze>,
-    }
-    let message: Detections = serde_json::from_slice(payload).ok()?;
+    let message: DetectionsMsg = serde_json::from_slice(payload).ok()?;
     let inside = |x: f64, y: f64| (0.0..=1.0).contains(&x) && (0.0..=1.0).contains(&y);
     if let Some(gaze) = message.gaze {
+        let (x, y) = (f64::from(gaze.x), f64::from(gaze.y));
         let source = match gaze.source.as_str() {
             "face" => "face",
             "motion" => "motion",
             _ => return None,
         };
-        return inside(gaze.x, gaze.y).then_some(Sighting {
-            x: gaze.x,
-            y: gaze.y,
-            source,
-        });
+        return inside(x, y).then_some(Sighting { x, y, source });
     }
-    let (width, height) = (message.frame.width, message.frame.height);
+    let (width, height) = (
+        f64::from(message.frame.width),
+        f64::from(message.frame.height),
+    );
     if width <= 0.0 || height <= 0.0 {
         return None;
     }
@@ -237,20 +181,17 @@ pub fn sighting(payload: &[u8]) -> Option<Sighting> {
         .faces
         .unwrap_or_default()
         .into_iter()
-        .max_by(|a, b| (a.w * a.h).total_cmp(&(b.w * b.h)));
+        .max_by_key(|f| i64::from(f.w) * i64::from(f.h));
     let (x, y, source) = match (largest, message.motion) {
         (Some(face), _) => (
-            (face.x + face.w / 2.0) / width,
-            (face.y + face.h / 2.0) / height,
+            (f64::from(face.x) + f64::from(face.w) / 2.0) / width,
+            (f64::from(face.y) + f64::from(face.h) / 2.0) / height,
             "face",
         ),
-        (
-            None,
-            Some(Motion {
-                moving: true,
-                centre: Some(centre),
-            }),
-        ) => (centre.x / width, centre.y / height, "motion"),
+        (None, Some(motion)) if motion.moving => match motion.centre {
+            Some(c) => (f64::from(c.x) / width, f64::from(c.y) / height, "motion"),
+            None => return None,
+        },
         _ => return None,
     };
     inside(x, y).then_some(Sighting { x, y, source })
@@ -394,9 +335,9 @@ mod tests {
             })
         );
         let idle =
-            br#"{"frame":{"width":640,"height":360},"gaze":{"x":0.5,"y":0.5,"source":"idle"}}"#;
+            br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"gaze":{"x":0.5,"y":0.5,"source":"idle"}}"#;
         assert_eq!(sighting(idle), None);
-        let faces = br#"{"frame":{"width":640,"height":360},"faces":[{"x":0,"y":0,"w":10,"h":10},{"x":300,"y":100,"w":40,"h":40}]}"#;
+        let faces = br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"faces":[{"x":0,"y":0,"w":10,"h":10},{"x":300,"y":100,"w":40,"h":40}]}"#;
         assert_eq!(
             sighting(faces),
             Some(Sighting {
@@ -405,7 +346,7 @@ mod tests {
                 source: "face"
             })
         );
-        let motion = br#"{"frame":{"width":640,"height":360},"motion":{"moving":true,"centre":{"x":64,"y":36}}}"#;
+        let motion = br#"{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"motion":{"frame":{"seq":1,"ts_us":0,"width":640,"height":360},"moving":true,"centre":{"x":64,"y":36}}}"#;
         assert_eq!(
             sighting(motion),
             Some(Sighting {

@@ -1,0 +1,158 @@
+//! The JSON test vectors in `contract/vectors/`: messages built from the contract's types, which the page's
+//! `node --test` suites read, so that neither side can drift. A Rust test checks each file against the types;
+//! `AGENT_UPDATE_VECTORS=1 cargo test` rewrites them after an intended change.
+
+use std::path::PathBuf;
+
+use crate::detections::{
+    BoxMsg, CodeMsg, CountersMsg, DetectionsMsg, FrameRef, GazeCommand, GazeMsg, MotionMsg,
+    PointMsg, TimingMsg,
+};
+
+/// The folder of the vectors.
+pub fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("vectors")
+}
+
+/// Compares `contract/vectors/NAME.json` with `value`, or writes it when `AGENT_UPDATE_VECTORS` is set.
+pub fn check_or_write(name: &str, value: &serde_json::Value) -> Result<(), String> {
+    let path = dir().join(format!("{name}.json"));
+    let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())? + "\n";
+    if std::env::var_os("AGENT_UPDATE_VECTORS").is_some() {
+        return std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()));
+    }
+    let on_disk = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let parsed: serde_json::Value =
+        serde_json::from_str(&on_disk).map_err(|e| format!("{}: {e}", path.display()))?;
+    if &parsed != value {
+        return Err(format!(
+            "{} differs from the contract's types; if the change is intended, run AGENT_UPDATE_VECTORS=1 cargo test -p agent-contract and the page's tests",
+            path.display()
+        ));
+    }
+    Ok(())
+}
+
+fn frame(seq: u64) -> FrameRef {
+    FrameRef {
+        seq,
+        ts_us: 1_700_000_000_000_000 + seq * 66_667,
+        width: 640,
+        height: 360,
+    }
+}
+
+/// `Agent.detections` as the vision module publishes it: two faces, motion, a QR code, gaze and figures; a frame
+/// with nothing in it; and one from another detector without gaze or figures.
+pub fn detections() -> serde_json::Value {
+    let full = DetectionsMsg {
+        frame: frame(41),
+        faces: Some(vec![
+            BoxMsg {
+                x: 412,
+                y: 96,
+                w: 120,
+                h: 120,
+            },
+            BoxMsg {
+                x: 60,
+                y: 140,
+                w: 64,
+                h: 64,
+            },
+        ]),
+        face_scan_cycles: 12,
+        motion: Some(MotionMsg {
+            frame: frame(41),
+            moving: true,
+            centre: Some(PointMsg { x: 470.5, y: 160.0 }),
+            regions: vec![BoxMsg {
+                x: 400,
+                y: 90,
+                w: 150,
+                h: 140,
+            }],
+            changed_fraction: 0.0625,
+            held: false,
+        }),
+        codes: Some(vec![CodeMsg {
+            kind: "qr".into(),
+            text: Some("https://example.org/robot".into()),
+            hex: "68747470733a2f2f6578616d706c652e6f72672f726f626f74".into(),
+            polygon: vec![
+                PointMsg { x: 200.0, y: 200.0 },
+                PointMsg { x: 280.0, y: 202.0 },
+                PointMsg { x: 278.0, y: 282.0 },
+                PointMsg { x: 198.0, y: 280.0 },
+            ],
+            appearance: 3,
+            new: true,
+        }]),
+        gaze: Some(GazeMsg {
+            x: 0.7375,
+            y: 0.4333,
+            source: "face".into(),
+        }),
+        timing: Some(TimingMsg {
+            decode_ms: 2.5,
+            faces_ms: Some(9.25),
+            motion_ms: Some(1.5),
+            codes_ms: None,
+            total_ms: 13.5,
+        }),
+        counters: Some(CountersMsg {
+            processed: 41,
+            skipped: 2,
+            bad: 0,
+        }),
+    };
+    let empty = DetectionsMsg {
+        frame: frame(42),
+        faces: Some(vec![]),
+        face_scan_cycles: 12,
+        motion: Some(MotionMsg {
+            frame: frame(42),
+            moving: false,
+            centre: None,
+            regions: vec![],
+            changed_fraction: 0.0,
+            held: false,
+        }),
+        codes: Some(vec![]),
+        gaze: Some(GazeMsg {
+            x: 0.5,
+            y: 0.5,
+            source: "idle".into(),
+        }),
+        timing: None,
+        counters: None,
+    };
+    let other_detector = serde_json::json!({
+        "frame": { "seq": 7, "ts_us": 0, "width": 1280, "height": 720 },
+        "faces": [{ "x": 100, "y": 50, "w": 200, "h": 220 }],
+    });
+    // The third message must parse as the contract type too.
+    let parsed: Result<DetectionsMsg, _> = serde_json::from_value(other_detector.clone());
+    debug_assert!(parsed.is_ok());
+    serde_json::json!({
+        "channel": crate::channels::DETECTIONS.name,
+        "messages": [full, empty, other_detector],
+        "gaze_command": GazeCommand { cmd: "gaze".into(), x: 0.7375, y: 0.4333, source: "face".into(), seq: 41 },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detection_vectors_match_the_types() {
+        let v = detections();
+        for m in v["messages"].as_array().expect("messages") {
+            let parsed: DetectionsMsg =
+                serde_json::from_value(m.clone()).expect("a contract message");
+            assert!(parsed.frame.width > 0);
+        }
+        check_or_write("detections", &v).expect("vectors");
+    }
+}
