@@ -16,7 +16,7 @@ use tracing::{debug, info, warn};
 
 use crate::hub::Outbox;
 use crate::server::Shared;
-use crate::session::{Outcome, Session};
+use crate::session::{Outcome, Session, SessionContext};
 
 /// Payload bytes taken from the outbox per write.
 const WRITE_BATCH: usize = 512 * 1024;
@@ -132,7 +132,12 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
     // Set once the writer task has finished and been awaited: a finished
     // JoinHandle must not be polled again.
     let mut writer_done = false;
-    let mut session = Session::new(conn, peer.clone(), outbox.clone(), shared.clone(), internal);
+    let context = SessionContext {
+        hub: shared.hub.clone(),
+        pairdb: shared.pairdb.clone(),
+        tokens: shared.tokens.clone(),
+    };
+    let mut session = Session::new(conn, peer.clone(), outbox.clone(), context, internal);
     let login_deadline =
         tokio::time::sleep(Duration::from_millis(shared.config.hub.login_timeout_ms));
     tokio::pin!(login_deadline);
