@@ -13,7 +13,9 @@ pub mod pairdb;
 pub mod pulse;
 pub mod server;
 pub mod session;
+pub mod shared;
 pub mod tokens;
 
 pub use config::Config;
-pub use server::{RunningServer, Shared, start};
+pub use server::{RunningServer, start};
+pub use shared::Shared;

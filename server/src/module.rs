@@ -17,7 +17,7 @@ use tokio::task::JoinHandle;
 use tracing::{error, info};
 
 use crate::net::serve_connection;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 /// A boxed future returned by [`Module::run`].
 pub type ModuleFuture = Pin<Box<dyn Future<Output = anyhow::Result<()>> + Send>>;

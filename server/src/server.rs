@@ -1,4 +1,4 @@
-//! Wiring: shared state, listeners, modules and the shutdown sequence.
+//! Wiring: listeners, modules and the shutdown sequence around the shared state (`shared.rs`).
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -19,39 +19,8 @@ use crate::module::Module;
 use crate::net::{Admission, IoRuntime};
 use crate::pairdb::PairDb;
 use crate::pulse::PulseHub;
+pub use crate::shared::Shared;
 use crate::tokens::Tokens;
-
-/// State shared by every connection, module and HTTP handler.
-#[derive(Debug)]
-pub struct Shared {
-    pub config: Config,
-    pub hub: Arc<Hub>,
-    pub pairdb: Arc<PairDb>,
-    pub tokens: Tokens,
-    pub pulses: Arc<PulseHub>,
-    /// Connections that have not logged in yet, against `hub.max_unauthenticated`.
-    pub admission: Arc<Admission>,
-    /// Flips to true once at shutdown; every task watches it.
-    pub shutdown: watch::Sender<bool>,
-    reports: Mutex<BTreeMap<String, serde_json::Value>>,
-}
-
-impl Shared {
-    /// Records a module's latest self-report (timings, counters), shown at `/api/status`.
-    pub fn report(&self, module: &str, status: serde_json::Value) {
-        self.reports
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .insert(module.to_string(), status);
-    }
-
-    pub fn module_reports(&self) -> BTreeMap<String, serde_json::Value> {
-        self.reports
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .clone()
-    }
-}
 
 /// A started server: its bound addresses and a handle to stop it.
 #[derive(Debug)]
@@ -75,7 +44,7 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
     let modules: Vec<Box<dyn Module>> = crate::modules::builtin()
         .into_iter()
-        .chain(browser.modules())
+        .chain(std::iter::once(browser.module()))
         .collect();
     let names: Vec<&str> = modules.iter().map(|m| m.name()).collect();
     config.check_module_names(&names)?;

@@ -1,23 +1,19 @@
-//! The browser link: serves the embedded page, accepts its WebSocket, runs the microphone/camera role, moves media
-//! into hub channels and hub channels to the page, and runs the `Agent.video.y` and `Agent.audio.fft` modules.
+//! The browser link: serves the embedded page, accepts its WebSocket, runs the microphone/camera role, and moves
+//! media into hub channels and hub channels to the page. (The `Agent.video.y` and `Agent.audio.fft` modules that
+//! derive channels from the page's media are modules like the others, in `crate::modules`.)
 //!
 //! The protocol is documented in `docs/browser-link.md`. Everything here talks to the hub through one
 //! `flow::Client`, like any satellite, so a robot body or a test can stand in for the browser.
 
 mod assets;
-pub mod audio_fft;
 mod downlink;
 mod links;
-mod luma;
-mod on_demand;
 mod pacing;
 mod role;
 mod routes;
 mod session;
 mod socket;
-mod spectrum;
 mod uplink;
-pub mod video_y;
 mod wire;
 
 use std::collections::HashMap;
@@ -30,6 +26,7 @@ use tokio::sync::{mpsc, watch};
 
 use crate::config::Config;
 use crate::module::{Module, ModuleContext, ModuleFuture};
+use crate::modules::audio_fft::AudioFftParams;
 
 use links::LinkBoard;
 use session::SessionLimits;
@@ -58,42 +55,6 @@ impl Default for BrowserConfig {
             session_ttl_s: 60,
             max_links: 16,
             max_links_per_session: 4,
-        }
-    }
-}
-
-/// `[modules.video_y]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-struct VideoYConfig {
-    enabled: bool,
-    /// JPEG quality of the grey frames, 1..=100.
-    quality: u8,
-}
-
-impl Default for VideoYConfig {
-    fn default() -> Self {
-        VideoYConfig {
-            enabled: true,
-            quality: 80,
-        }
-    }
-}
-
-/// `[modules.audio_fft]`.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-struct AudioFftConfig {
-    enabled: bool,
-    /// Samples between two spectra (1024 = no overlap), 1..=1024.
-    hop: usize,
-}
-
-impl Default for AudioFftConfig {
-    fn default() -> Self {
-        AudioFftConfig {
-            enabled: true,
-            hop: spectrum::FFT_SIZE,
         }
     }
 }
@@ -137,30 +98,15 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 #[derive(Debug, Clone)]
 pub struct BrowserLink {
     shared: Arc<Shared>,
-    video_y: VideoYConfig,
-    audio_fft: AudioFftConfig,
 }
 
 impl BrowserLink {
-    /// Reads `[modules.browser]`, `[modules.video_y]` and `[modules.audio_fft]`; `shutdown` turning true closes
+    /// Reads `[modules.browser]` (and the spectra's hop from `[modules.audio_fft]`); `shutdown` turning true closes
     /// every page socket.
     pub fn from_config(config: &Config, shutdown: watch::Receiver<bool>) -> anyhow::Result<Self> {
         let browser: BrowserConfig = section(config, "browser")?;
-        let video_y: VideoYConfig = section(config, "video_y")?;
-        let audio_fft: AudioFftConfig = section(config, "audio_fft")?;
-        if !(1..=100).contains(&video_y.quality) {
-            anyhow::bail!(
-                "[modules.video_y] quality: {} is outside 1..=100",
-                video_y.quality
-            );
-        }
-        if !(1..=spectrum::FFT_SIZE).contains(&audio_fft.hop) {
-            anyhow::bail!(
-                "[modules.audio_fft] hop: {} is outside 1..={}",
-                audio_fft.hop,
-                spectrum::FFT_SIZE
-            );
-        }
+        // The page is told the spectra's hop in its welcome.
+        let fft_hop = AudioFftParams::from_json(&config.module("audio_fft"))?.hop;
         if browser.session_ttl_s == 0 {
             anyhow::bail!("[modules.browser] session_ttl_s: must be at least 1");
         }
@@ -183,11 +129,9 @@ impl BrowserLink {
                 roles: Mutex::new(RoleBoard::default()),
                 pages: Mutex::new(HashMap::new()),
                 next_page: AtomicU64::new(1),
-                fft_hop: audio_fft.hop,
+                fft_hop,
                 shutdown,
             }),
-            video_y,
-            audio_fft,
         })
     }
 
@@ -202,20 +146,12 @@ impl BrowserLink {
         self.shared.client.set(client).is_ok()
     }
 
-    /// The modules to start: `browser` (the link's hub connection), `video_y` and `audio_fft`. Each can be turned
-    /// off with `enabled = false` in its section.
-    pub fn modules(&self) -> Vec<Box<dyn Module>> {
-        vec![
-            Box::new(LinkModule {
-                shared: self.shared.clone(),
-            }),
-            Box::new(video_y::VideoY {
-                quality: self.video_y.quality,
-            }),
-            Box::new(audio_fft::AudioFft {
-                hop: self.audio_fft.hop,
-            }),
-        ]
+    /// The module to start: `browser`, which gives the link its hub connection (`enabled = false` in
+    /// `[modules.browser]` turns it off).
+    pub fn module(&self) -> Box<dyn Module> {
+        Box::new(LinkModule {
+            shared: self.shared.clone(),
+        })
     }
 }
 

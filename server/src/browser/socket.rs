@@ -17,7 +17,8 @@ use super::pacing::FpsAdvice;
 use super::role::{Claim, PageId};
 use super::uplink::Uplink;
 use super::wire::{self, Dropped, FrameKind, PageMessage, PageText, RoleState};
-use super::{Notice, Shared, lock, spectrum};
+use super::{Notice, Shared, lock};
+use crate::modules::spectrum;
 
 /// Messages waiting for the page's socket; producers wait for room (see `downlink`), so this bounds memory.
 const OUT_QUEUE: usize = 64;

@@ -14,7 +14,7 @@ use serde_json::{Value, json};
 
 use crate::net::serve_connection;
 use crate::net::ws::WsServerTransport;
-use crate::server::Shared;
+use crate::shared::Shared;
 use access::{PeerInfo, header_str, same_origin};
 
 /// Errors at HTTP handlers, turned into a status and a JSON body.

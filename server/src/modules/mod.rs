@@ -2,12 +2,16 @@
 
 use crate::module::Module;
 
-pub mod behaviour;
+pub mod audio_fft;
 pub mod brain;
+mod luma;
+mod on_demand;
+pub mod spectrum;
 pub mod tts;
+pub mod video_y;
 pub mod vision;
 
-/// The built-in modules, in start order (the server starts those enabled). The
+/// The built-in modules besides the browser link, in start order (the server starts those enabled). The
 /// TTS module starts before any other publisher of avatar commands: it owns
 /// `Agent.avatar` (the behaviour controllers publish through it).
 pub fn builtin() -> Vec<Box<dyn Module>> {
@@ -15,5 +19,7 @@ pub fn builtin() -> Vec<Box<dyn Module>> {
         Box::new(tts::TtsModule),
         Box::new(brain::BrainModule),
         Box::new(vision::VisionModule),
+        Box::new(video_y::VideoY),
+        Box::new(audio_fft::AudioFft),
     ]
 }

@@ -4,6 +4,8 @@
 //! the user starts to (barge-in). It also owns the behaviour controllers (blink, gaze, listening), which share
 //! its `Agent.avatar` publisher. See docs/voice.md.
 
+mod avatar_out;
+pub mod behaviour;
 pub mod params;
 pub mod speaker;
 pub mod wire;
@@ -18,10 +20,11 @@ use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
 use crate::module::{Module, ModuleContext, ModuleFuture};
-use crate::modules::behaviour::{self, Event};
 use agent_contract::channels;
+use avatar_out::AvatarOut;
+use behaviour::Event;
 use params::TtsParams;
-use speaker::{AvatarOut, Counters, Outputs, Speaker};
+use speaker::{Counters, Outputs, Speaker};
 use wire::{AvatarCommand, CancelTarget, Hearing, SayRequest, VoiceChoice};
 
 /// The built-in TTS module (`[modules.tts]`).

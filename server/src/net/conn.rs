@@ -3,10 +3,9 @@
 //!
 //! Before login a connection is a stranger: it may send only a small frame,
 //! must log in within the login timeout, and counts against the cap on
-//! unauthenticated connections (see [`Admission`]).
+//! unauthenticated connections (see `admission.rs`).
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use flow::connection::{ConnError, Connection, FrameWriter};
@@ -14,9 +13,10 @@ use flow::protocol::decode_command;
 use flow::transport::{Transport, TransportWrite};
 use tracing::{debug, info, warn};
 
+use super::admission::Stranger;
 use crate::hub::Outbox;
-use crate::server::Shared;
 use crate::session::{Outcome, Session, SessionContext};
+use crate::shared::Shared;
 
 /// Payload bytes taken from the outbox per write.
 const WRITE_BATCH: usize = 512 * 1024;
@@ -51,57 +51,6 @@ enum WriterEnd {
     Failed(String),
 }
 
-/// The count of connections that have not logged in yet, against a cap.
-#[derive(Debug)]
-pub struct Admission {
-    waiting: AtomicUsize,
-    cap: usize,
-}
-
-impl Admission {
-    pub fn new(cap: usize) -> Self {
-        Admission {
-            waiting: AtomicUsize::new(0),
-            cap,
-        }
-    }
-
-    /// Admits one more unauthenticated connection, or refuses it when the cap
-    /// is reached.
-    fn admit(self: &Arc<Self>) -> Option<Stranger> {
-        let admitted = self
-            .waiting
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
-                (n < self.cap).then_some(n + 1)
-            })
-            .is_ok();
-        admitted.then(|| Stranger(Some(self.clone())))
-    }
-
-    /// Connections waiting to log in now.
-    pub fn waiting(&self) -> usize {
-        self.waiting.load(Ordering::Acquire)
-    }
-}
-
-/// One place among the unauthenticated connections, given back on login or close.
-#[derive(Debug)]
-struct Stranger(Option<Arc<Admission>>);
-
-impl Stranger {
-    fn logged_in(&mut self) {
-        if let Some(a) = self.0.take() {
-            a.waiting.fetch_sub(1, Ordering::AcqRel);
-        }
-    }
-}
-
-impl Drop for Stranger {
-    fn drop(&mut self) {
-        self.logged_in();
-    }
-}
-
 /// Serves one connection until it closes, misbehaves or the server shuts down.
 /// `internal` connections are the server's own modules: trusted, never capped.
 pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, internal: bool) {
@@ -112,7 +61,7 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
         writer,
     } = Connection::new(transport, PRE_LOGIN_MAX_FRAME);
     let mut stranger = if internal {
-        Stranger(None)
+        Stranger::trusted()
     } else {
         match shared.admission.admit() {
             Some(s) => s,

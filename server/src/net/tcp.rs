@@ -8,7 +8,7 @@ use tokio::task::JoinSet;
 use tracing::warn;
 
 use super::serve_connection;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 /// Accepts connections until shutdown, then waits for them to close.
 pub async fn accept_loop(listener: TcpListener, shared: Arc<Shared>) {

@@ -9,7 +9,7 @@ use tokio::task::JoinSet;
 use tracing::warn;
 
 use super::serve_connection;
-use crate::server::Shared;
+use crate::shared::Shared;
 
 /// Binds `path`, replacing a stale socket file left by a killed server.
 pub fn bind(path: &Path) -> std::io::Result<UnixListener> {

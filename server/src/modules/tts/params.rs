@@ -6,7 +6,7 @@ use std::time::Duration;
 use agent_voice::VoiceSettings;
 use serde::Deserialize;
 
-use crate::modules::behaviour::BehaviourParams;
+use super::behaviour::BehaviourParams;
 
 /// `[modules.tts]`.
 #[derive(Debug, Clone, Deserialize)]

@@ -14,10 +14,11 @@ use agent_voice::{CancelToken, SpeechEvent, Synthesizer, Utterance, Viseme, Voic
 use flow::Publisher;
 use tokio::sync::{Notify, mpsc};
 use tokio::time::Instant;
-use tracing::{debug, warn};
+use tracing::warn;
 
+use super::avatar_out::AvatarOut;
+use super::behaviour::{self, Event};
 use super::wire::{self, AvatarCommand, CancelTarget};
-use crate::modules::behaviour::{self, Event};
 
 /// Utterances accepted but not yet finished; a caller asking for more gets an error instead of a growing queue.
 const JOB_QUEUE: usize = 16;
@@ -61,23 +62,6 @@ pub struct Outputs {
     pub sample_rate: u32,
     pub lead: Duration,
     pub counters: Arc<Counters>,
-}
-
-/// The `Agent.avatar` publisher, shared by the speaker and the behaviour controllers (a channel has one owner).
-#[derive(Debug, Clone)]
-pub struct AvatarOut(pub Arc<Publisher>);
-
-impl AvatarOut {
-    pub async fn send(&self, command: &AvatarCommand) {
-        if let Err(e) = self.0.publish(command.to_json()).await {
-            debug!("tts: avatar command not sent: {e}");
-        }
-    }
-
-    /// Whether a page (or anyone) listens; the behaviour controllers rest while nobody does.
-    pub fn watched(&self) -> tokio::sync::watch::Receiver<bool> {
-        self.0.subscribers()
-    }
 }
 
 /// An utterance and its text, for the caption.

@@ -7,7 +7,7 @@ use rand::Rng;
 use rand::rngs::StdRng;
 use tokio::time::Instant;
 
-use super::BehaviourParams;
+use super::params::BehaviourParams;
 use crate::modules::tts::wire::AvatarCommand;
 
 /// Two blinks closer than this look like a twitch; an extra blink that soon after another is skipped.

@@ -8,7 +8,7 @@ use rand::Rng;
 use rand::rngs::StdRng;
 use tokio::time::Instant;
 
-use super::{BehaviourParams, Event};
+use super::params::{BehaviourParams, Event};
 use crate::modules::tts::wire::{AvatarCommand, Sighting};
 
 /// Where the eyes rest when nothing is in view (normalised camera coordinates: a little above the middle,

@@ -2,15 +2,48 @@
 //!
 //! Like `video_y`, it subscribes to its source only while someone subscribes to its output.
 
+use serde::Deserialize;
+
 use super::on_demand;
 use super::spectrum::{BINS, FFT_SIZE, SpectrumAnalyser, to_le_bytes};
 use crate::module::{Module, ModuleContext, ModuleFuture};
 use agent_contract::channels;
 
 /// The `audio_fft` module.
-#[derive(Debug)]
-pub struct AudioFft {
+#[derive(Debug, Default)]
+pub struct AudioFft;
+
+/// `[modules.audio_fft]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AudioFftParams {
+    pub enabled: bool,
+    /// Samples between two spectra (1024 = no overlap), 1..=1024.
     pub hop: usize,
+}
+
+impl Default for AudioFftParams {
+    fn default() -> Self {
+        AudioFftParams {
+            enabled: true,
+            hop: FFT_SIZE,
+        }
+    }
+}
+
+impl AudioFftParams {
+    /// Reads and checks `[modules.audio_fft]`; errors say `[modules.audio_fft] KEY: REASON`.
+    pub fn from_json(params: &serde_json::Value) -> anyhow::Result<Self> {
+        let p: AudioFftParams = serde_path_to_error::deserialize(params)
+            .map_err(|e| anyhow::anyhow!("[modules.audio_fft] {}: {}", e.path(), e.inner()))?;
+        if !(1..=FFT_SIZE).contains(&p.hop) {
+            anyhow::bail!(
+                "[modules.audio_fft] hop: {} is outside 1..={FFT_SIZE}",
+                p.hop
+            );
+        }
+        Ok(p)
+    }
 }
 
 impl Module for AudioFft {
@@ -18,9 +51,14 @@ impl Module for AudioFft {
         "audio_fft"
     }
 
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        AudioFftParams::from_json(params).map(drop)
+    }
+
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
-            run(ctx.client.clone(), self.hop, ctx.shutdown.clone()).await;
+            let hop = AudioFftParams::from_json(&ctx.params)?.hop;
+            run(ctx.client.clone(), hop, ctx.shutdown.clone()).await;
             Ok(())
         })
     }

@@ -6,6 +6,7 @@
 
 use std::time::Instant;
 
+use serde::Deserialize;
 use serde_json::json;
 use tokio::sync::watch;
 
@@ -15,9 +16,40 @@ use crate::module::{Module, ModuleContext, ModuleFuture};
 use agent_contract::channels;
 
 /// The `video_y` module.
-#[derive(Debug)]
-pub struct VideoY {
+#[derive(Debug, Default)]
+pub struct VideoY;
+
+/// `[modules.video_y]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VideoYParams {
+    pub enabled: bool,
+    /// JPEG quality of the grey frames, 1..=100.
     pub quality: u8,
+}
+
+impl Default for VideoYParams {
+    fn default() -> Self {
+        VideoYParams {
+            enabled: true,
+            quality: 80,
+        }
+    }
+}
+
+impl VideoYParams {
+    /// Reads and checks `[modules.video_y]`; errors say `[modules.video_y] KEY: REASON`.
+    pub fn from_json(params: &serde_json::Value) -> anyhow::Result<Self> {
+        let p: VideoYParams = serde_path_to_error::deserialize(params)
+            .map_err(|e| anyhow::anyhow!("[modules.video_y] {}: {}", e.path(), e.inner()))?;
+        if !(1..=100).contains(&p.quality) {
+            anyhow::bail!(
+                "[modules.video_y] quality: {} is outside 1..=100",
+                p.quality
+            );
+        }
+        Ok(p)
+    }
 }
 
 impl Module for VideoY {
@@ -25,10 +57,15 @@ impl Module for VideoY {
         "video_y"
     }
 
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        VideoYParams::from_json(params).map(drop)
+    }
+
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
+            let quality = VideoYParams::from_json(&ctx.params)?.quality;
             let (client, shutdown) = (ctx.client.clone(), ctx.shutdown.clone());
-            run(client, self.quality, shutdown, move |figures| {
+            run(client, quality, shutdown, move |figures| {
                 ctx.report(figures)
             })
             .await;
