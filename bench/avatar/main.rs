@@ -3,10 +3,10 @@
 //! Chromium with the avatar's canvas at 800x600.
 //!
 //! Each renderer gets its own tab (the other closed), speaking all the time (visemes on a tone, so every frame is
-//! drawn: the page only drops to 30 fps when idle) with blinks and gaze changes. Per frame the page records its
-//! avatar's cost: animation plus drawing, made synchronous (`?avatarsync=1`: `gl.finish` for WebGL, a one-pixel
-//! read for the canvas) so the GPU process's software rasterisation is counted, not only the command
-//! submission. The frame interval (the rAF loop's period) is reported beside it. Rounds alternate the
+//! drawn: the page only drops to 30 fps when idle) with blinks and gaze changes. The frame time is the period of
+//! the page's rAF loop (p95), which includes whatever the browser does to show a frame; beside it, the cost of
+//! the avatar's own frame callback (`?avatarsync=1` makes it wait for the drawing where the browser lets it:
+//! `gl.finish`, a one-pixel read of the 2D canvas) and the frames drawn per second. Rounds alternate the
 //! renderers; the median round is reported.
 //!
 //! Options: `--seconds N` per renderer and round (default 10), `--rounds N` (default 3). Needs a built
@@ -89,27 +89,36 @@ async fn main() -> anyhow::Result<()> {
         let two = pair.pop().context("2d stats")?;
         results.push((two, three));
     }
-    // The median round by the 3D head's p95.
-    results.sort_by(|a, b| a.1.cost_p95.total_cmp(&b.1.cost_p95));
+    // The median round by the 3D head's frame time.
+    results.sort_by(|a, b| a.1.interval_p95.total_cmp(&b.1.interval_p95));
     let (two, three) = &results[results.len() / 2];
     println!();
+    // The frame time is the rAF loop's period: with software WebGL the drawing happens in the GPU process, after
+    // the page's frame callback has returned, so what it costs shows as a longer period (and fewer frames), not
+    // in the callback's own time, which is reported second.
     println!(
-        "SUMMARY avatar_frame_cost_p95_2d: {:.2} ms (median of {rounds} rounds of {seconds} s; {} frames, interval p95 {:.1} ms)",
-        two.cost_p95, two.frames, two.interval_p95
+        "SUMMARY avatar_frame_time_p95_2d: {:.1} ms (rAF period, median of {rounds} rounds of {seconds} s; {:.1} fps drawn)",
+        two.interval_p95, two.fps
     );
-    let ratio = three.cost_p95 / two.cost_p95.max(1e-9);
-    let met = ratio <= 2.0 && three.cost_p95 <= 8.0;
+    let ratio = three.interval_p95 / two.interval_p95.max(1e-9);
+    let met = ratio <= 2.0 && three.interval_p95 <= 8.0;
     println!(
-        "SUMMARY avatar_frame_cost_p95_3d: {:.2} ms (baseline 2D {:.2} ms, ratio {ratio:.2}; target <= 2x 2D and <= 8 ms: {}; {} frames, interval p95 {:.1} ms)",
-        three.cost_p95,
-        two.cost_p95,
+        "SUMMARY avatar_frame_time_p95_3d: {:.1} ms (baseline 2D {:.1} ms, ratio {ratio:.2}; target <= 2x 2D and <= 8 ms: {}; {:.1} fps drawn, at pixel ratio {:.2})",
+        three.interval_p95,
+        two.interval_p95,
         if met { "met" } else { "not met" },
-        three.frames,
-        three.interval_p95
+        three.fps,
+        three.pixel_ratio
     );
     println!(
-        "SUMMARY avatar_fps_3d: {:.1} fps drawn (2D {:.1} fps; target: at least 30 fps without a GPU)",
-        three.fps, two.fps
+        "SUMMARY avatar_frame_callback_p95: 3D {:.2} ms, 2D {:.2} ms (the page's own work per frame: animation, draw calls; 2D includes its rasterisation)",
+        three.cost_p95, two.cost_p95
+    );
+    println!(
+        "SUMMARY avatar_fps_3d: {:.1} fps (2D {:.1} fps; target: at least 30 fps without a GPU: {})",
+        three.fps,
+        two.fps,
+        if three.fps >= 30.0 { "met" } else { "not met" }
     );
     browser.quit().await;
     Ok(())
@@ -123,6 +132,8 @@ struct Stats {
     interval_p50: f64,
     interval_p95: f64,
     fps: f64,
+    /// The 3D head's resolution scale at the end (it lowers it when frames come late); 1 for the 2D face.
+    pixel_ratio: f64,
 }
 
 async fn measure(
@@ -156,7 +167,7 @@ async fn measure(
         .eval(
             &tab,
             "(() => { const s = document.querySelector('.stage'); \
-             s.style.cssText = 'position:fixed;left:0;top:0;width:800px;height:600px;z-index:50;border-radius:0'; \
+             s.style.cssText = 'position:fixed;left:0;top:0;width:800px;height:600px;z-index:50;border:0;border-radius:0;box-sizing:content-box'; \
              return true; })()",
         )
         .await?;
@@ -219,6 +230,11 @@ async fn measure(
     let intervals: Vec<f64> =
         serde_json::from_value(browser.eval(&tab, "window.__intervals").await?)?;
     let window_end: f64 = serde_json::from_value(browser.eval(&tab, "performance.now()").await?)?;
+    let pixel_ratio = browser
+        .eval(&tab, "agentDebug.avatarQuality?.pixelRatio ?? 1")
+        .await?
+        .as_f64()
+        .unwrap_or(1.0);
     browser.close(&tab).await?;
     let costs: Vec<f64> = log
         .iter()
@@ -237,6 +253,7 @@ async fn measure(
         interval_p50: percentile(&intervals, 0.5),
         interval_p95: percentile(&intervals, 0.95),
         fps: costs.len() as f64 / ((window_end - window_start) / 1000.0),
+        pixel_ratio,
     })
 }
 
