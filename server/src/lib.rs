@@ -1,21 +1,30 @@
-//! The robot-agent server: the flow hub (channels, services, pair database,
-//! pulses), its transports (TCP, Unix socket, WebSocket), the HTTP edge and
-//! the internal modules. See ARCHITECTURE.md for the map.
+//! The robot agent: the flow hub (crate `flow-hub`) with the agent's in-server modules (vision, TTS and behaviour,
+//! the rule brain, the grey-video and spectrum modules) and the browser link that serves the avatar page. See
+//! ARCHITECTURE.md for the map.
 
 pub mod browser;
-pub mod config;
-pub mod http;
-pub mod hub;
-pub mod module;
 pub mod modules;
-pub mod net;
-pub mod pairdb;
-pub mod pulse;
-pub mod server;
-pub mod session;
-pub mod shared;
-pub mod tokens;
 
-pub use config::Config;
-pub use server::{RunningServer, start};
-pub use shared::Shared;
+// The hub's parts the modules build on, under the paths they have always used.
+pub use flow_hub::{Config, RunningServer, Shared, config, http, module};
+
+use flow_hub::Application;
+use flow_hub::module::Module;
+use tokio::sync::watch;
+
+/// Starts the hub with every agent module and the page link, as `make run` does.
+pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
+    let shutdown = watch::channel(false).0;
+    let browser = browser::BrowserLink::from_config(&config, shutdown.subscribe())
+        .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
+    let modules: Vec<Box<dyn Module>> = modules::builtin()
+        .into_iter()
+        .chain(std::iter::once(browser.module()))
+        .collect();
+    let app = Application {
+        modules,
+        routes: browser.router(),
+        shutdown,
+    };
+    flow_hub::start(config, app).await
+}

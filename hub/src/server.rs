@@ -35,17 +35,44 @@ pub struct RunningServer {
     io: IoRuntime,
 }
 
-/// Opens the data directory, binds every listener and starts the modules.
-pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
+/// What an application brings to the hub: its in-server modules (in start order, each switched by its
+/// `[modules.NAME]` section) and its HTTP routes, served behind the same access gate as the hub's own. The
+/// shutdown signal is the caller's, so that parts it built before the start (a page link) see it too.
+pub struct Application {
+    pub modules: Vec<Box<dyn Module>>,
+    pub routes: axum::Router,
+    pub shutdown: watch::Sender<bool>,
+}
+
+impl std::fmt::Debug for Application {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let names: Vec<&str> = self.modules.iter().map(|m| m.name()).collect();
+        f.debug_struct("Application")
+            .field("modules", &names)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Default for Application {
+    /// The bare hub: no modules, no routes of its own.
+    fn default() -> Self {
+        Application {
+            modules: Vec::new(),
+            routes: axum::Router::new(),
+            shutdown: watch::channel(false).0,
+        }
+    }
+}
+
+/// Opens the data directory, binds every listener and starts the application's modules.
+pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningServer> {
+    let Application {
+        modules,
+        routes,
+        shutdown,
+    } = app;
     // Every module's section is checked before anything is bound or created, so a bad value stops the server at
     // start with the file, the key and the reason (a `ConfigError` the binary reports as such).
-    let (shutdown, _) = watch::channel(false);
-    let browser = crate::browser::BrowserLink::from_config(&config, shutdown.subscribe())
-        .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
-    let modules: Vec<Box<dyn Module>> = crate::modules::builtin()
-        .into_iter()
-        .chain(std::iter::once(browser.module()))
-        .collect();
     let names: Vec<&str> = modules.iter().map(|m| m.name()).collect();
     config.check_module_names(&names)?;
     let modules: Vec<Box<dyn Module>> = modules
@@ -152,7 +179,7 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
         format!("http://{http}/?token={}", shared.tokens.page())
     };
     let app = crate::http::app(shared.clone())
-        .merge(browser.router())
+        .merge(routes)
         .layer(axum::middleware::from_fn_with_state(access, access::gate))
         .into_make_service_with_connect_info::<PeerInfo>();
     let mut stop = shared.shutdown.subscribe();
