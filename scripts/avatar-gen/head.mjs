@@ -44,8 +44,8 @@ const JAW_HINGE = /** @type {V3} */ ([0, C[1] - 0.012, C[2] - 0.025]);
 const SKIN = linear(0xf5cdb0);
 const SKIN_SHADE = linear(0xe2a888);
 const BLUSH = linear(0xeb6e78);
-const LIP_UP = linear(0xb9566a);
-const LIP_LOW = linear(0xcf6d7d);
+const LIP_UP = linear(0xc4647a);
+const LIP_LOW = linear(0xd7798a);
 const LIP_IN = linear(0x9c4257);
 const LIP_LINE = linear(0x7c2f41);
 const HAIR_BASE = linear(0x3a2634);
@@ -433,7 +433,7 @@ function buildMouth(zAt) {
   for (const row of [{ top: MOUTH_Y + 0.0036, bottom: MOUTH_Y - 0.0013, jaw: 0, z: -0.0078 },
     { top: MOUTH_Y - 0.0018, bottom: MOUTH_Y - 0.006, jaw: 1, z: -0.0088 }]) {
     teeth.grid(32, 3, (s, t) => {
-      const x = (s - 0.5) * 0.032;
+      const x = (s - 0.5) * 0.027;
       const tooth = Math.abs(Math.sin((x / 0.0042) * Math.PI));
       const shade = 0.86 + 0.14 * Math.pow(tooth, 0.3);
       const y = lerp(row.top, row.bottom, t) + (row.jaw ? 0.0004 : -0.0004) * (1 - tooth) * (t === 1 ? 1 : 0);

@@ -7,7 +7,12 @@
 
 import { Avatar } from "./avatar.js";
 
-/** The renderer a page gets without `?avatar=`. */
+/**
+ * The renderer a page gets without `?avatar=`. The 2D face stays the default: side by side (tests/avatar3d.rs's
+ * screenshots) the generated 3D head does not yet look as good (puffy lower lids, a harder, less finished face),
+ * and on software WebGL it draws ~20 fps where the 2D face draws 60 (bench_avatar), short of the 30 fps a
+ * GPU-less machine must keep.
+ */
 export const DEFAULT_RENDERER = "2d";
 
 /** Whether this browser can give the 3D head a WebGL 2 context (three.js needs WebGL 2). */
