@@ -592,14 +592,10 @@ async fn screenshots_of_the_3d_head_are_saved_as_artifacts() -> anyhow::Result<(
 fn the_committed_model_is_what_the_generator_makes_and_the_javascript_unit_tests_pass()
 -> anyhow::Result<()> {
     // node --test runs the generator's and the page's pure-module tests (scripts/avatar-gen/tests), including
-    // the check that regenerating assets/avatar.glb gives the committed bytes. The page's .js files are ES
-    // modules without a package.json: --experimental-detect-module lets Node 20 load them as such.
+    // the check that regenerating assets/avatar.glb gives the committed bytes (web/js/package.json tells Node
+    // that the page's .js files are ES modules).
     let out = std::process::Command::new("node")
-        .args([
-            "--experimental-detect-module",
-            "--test",
-            "scripts/avatar-gen/tests/",
-        ])
+        .args(["--test", "scripts/avatar-gen/tests/"])
         .current_dir(repo_root())
         .output()
         .context("running node (apt-get install nodejs)")?;

@@ -1,4 +1,3 @@
-#!/usr/bin/env node
 //! Writes the avatar's model, assets/avatar.glb, from the design in head.mjs; `--check` only compares.
 // @ts-check
 //

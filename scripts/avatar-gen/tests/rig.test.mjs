@@ -1,6 +1,6 @@
 //! Unit tests of the 3D head's pure modules: viseme blending on the audio clock and the rig's mapping.
 // @ts-check
-// Run: node --experimental-detect-module --test scripts/avatar-gen/tests/ (the page's .js files are ES modules).
+// Run: node --test scripts/avatar-gen/tests/ (web/js/package.json marks the page's .js files as ES modules).
 
 import { test } from "node:test";
 import assert from "node:assert/strict";
