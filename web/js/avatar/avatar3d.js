@@ -105,6 +105,14 @@ export class Avatar3D {
       if (o.isMesh && o.morphTargetDictionary) this.morphMeshes.push(o);
       if (o.isMesh) o.frustumCulled = false; // morphs move vertices outside the rest bounds
     });
+    // Draw the face first, then hair and body: their hidden parts (the hair's inside behind the head, the
+    // shoulders behind the hair) then fail the depth test before they are shaded, which is most of the saving
+    // on software WebGL, where every shaded pixel costs CPU time.
+    for (const [name, order] of [["Hair", 1], ["Body", 2], ["Neck", 2]]) {
+      this.root.getObjectByName(name)?.traverse((o) => {
+        if (o.isMesh) o.renderOrder = order;
+      });
+    }
     this.mouthMesh = this.morphMeshes.find((o) => o.morphTargetDictionary.viseme_aa !== undefined);
     this.lidMesh = this.morphMeshes.find((o) => o.morphTargetDictionary.eyeBlinkLeft !== undefined);
 
