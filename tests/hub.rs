@@ -1,9 +1,9 @@
-//! Multi-process tests of the flow hub: a real `robot-agent` with satellites
+//! Multi-process tests of the flow hub: a real `flow-hub` (the hub crate's binary, no agent modules) with satellites
 //! over TCP, WebSocket and the Unix socket exchanging streams and service
 //! calls; malformed frames and unauthenticated peers; slow subscribers; the
 //! SDK's reconnection after the server is killed; the example satellites.
 //!
-//! Build the binaries first: `cargo build -p robot-agent -p flowctl -p flow-examples`.
+//! Build the binaries first: `cargo build -p flow-hub -p flowctl -p flow-examples`.
 
 use std::time::Duration;
 
@@ -55,7 +55,7 @@ async fn serve_upper(client: &Client, name: &str) -> anyhow::Result<tokio::task:
 async fn satellites_over_tcp_and_websocket_exchange_streams_and_calls() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
     // Deep queues: this test is about transports; thinning under bursts is tested below.
-    let agent = Agent::with_config(&dir, "[hub]\nsubscriber_queue = 4096\n").await?;
+    let agent = Agent::hub_with_config(&dir, "[hub]\nsubscriber_queue = 4096\n").await?;
     let a = agent.client("sat-a").await?;
     let b = agent.client("sat-b").await?;
     let c = Client::connect(&agent.ws(), agent.options("sat-c")).await?;
@@ -188,7 +188,7 @@ async fn satellites_over_tcp_and_websocket_exchange_streams_and_calls() -> anyho
 #[tokio::test]
 async fn a_satellite_on_the_unix_socket_talks_with_one_on_tcp() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let local = Client::connect(&agent.unix(), agent.options("unix-sat")).await?;
     let remote = agent.client("tcp-sat").await?;
     let publisher = local.publisher("Unix.data", "{}").await?;
@@ -219,7 +219,7 @@ async fn a_satellite_on_the_unix_socket_talks_with_one_on_tcp() -> anyhow::Resul
 #[tokio::test]
 async fn calls_to_a_silent_or_vanished_service_fail_clearly() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let owner = agent.client("owner").await?;
     let caller = agent.client("caller").await?;
     let mut service = owner.serve("Silent.svc", "{}").await?;
@@ -276,7 +276,7 @@ async fn calls_to_a_silent_or_vanished_service_fail_clearly() -> anyhow::Result<
 #[tokio::test]
 async fn a_sticky_subscription_follows_a_channel_that_comes_and_goes() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let listener = agent.client("listener").await?;
     // Subscribing to a channel that does not exist yet is not an error.
     let sub = listener.subscribe("Late.data").await?;
@@ -309,7 +309,7 @@ async fn a_sticky_subscription_follows_a_channel_that_comes_and_goes() -> anyhow
 async fn a_subscriber_that_stops_reading_loses_old_data_while_another_gets_everything()
 -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::with_config(&dir, "[hub]\nsubscriber_queue = 16\n").await?;
+    let agent = Agent::hub_with_config(&dir, "[hub]\nsubscriber_queue = 16\n").await?;
     let producer = agent.client("producer").await?;
     let publisher = producer.publisher("Big.frames", "{}").await?;
     // The slow subscriber is a raw socket that is never read after subscribing.
@@ -368,7 +368,7 @@ async fn a_publisher_that_leaves_loses_none_of_what_subscribers_have_queued() ->
 {
     let dir = DataDir::new()?;
     // Queues deep enough that nothing is dropped: only the removal could lose messages.
-    let agent = Agent::with_config(
+    let agent = Agent::hub_with_config(
         &dir,
         "[hub]\nsubscriber_queue = 64\nsubscriber_queue_bytes = 67108864\n",
     )
@@ -432,7 +432,7 @@ fn frame(op: u8, req: u32, body: &[u8]) -> Vec<u8> {
 #[tokio::test]
 async fn malformed_frames_close_only_their_own_connection() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let producer = agent.client("producer").await?;
     let publisher = producer.publisher("Steady.stream", "{}").await?;
     let consumer = Client::connect(&agent.ws(), agent.options("consumer")).await?;
@@ -571,7 +571,7 @@ async fn malformed_frames_close_only_their_own_connection() -> anyhow::Result<()
 #[tokio::test]
 async fn unauthenticated_peers_are_refused_and_disconnected() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let token = agent.token().to_string();
 
     // Any command before login: refused, then closed.
@@ -675,7 +675,7 @@ async fn unauthenticated_peers_are_refused_and_disconnected() -> anyhow::Result<
 async fn the_sdk_restores_channels_and_subscriptions_after_the_server_is_killed()
 -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let (http_addr, tcp_addr) = (agent.http, agent.flow_tcp);
     let mut opts = agent.options("producer");
     opts.reconnect = true;
@@ -712,6 +712,7 @@ async fn the_sdk_restores_channels_and_subscriptions_after_the_server_is_killed(
         AgentOptions {
             http: Some(http_addr),
             flow_tcp: Some(tcp_addr),
+            program: Some("flow-hub"),
             ..AgentOptions::default()
         },
     )
@@ -743,7 +744,7 @@ async fn the_sdk_restores_channels_and_subscriptions_after_the_server_is_killed(
 #[tokio::test]
 async fn sigterm_says_goodbye_to_clients_and_exits_cleanly() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let mut agent = Agent::start(&dir).await?;
+    let mut agent = Agent::hub(&dir).await?;
     let client = agent.client("watcher").await?;
     let mut events = client.events();
     let pid = agent.pid().context("no pid")?;
@@ -769,7 +770,7 @@ async fn sigterm_says_goodbye_to_clients_and_exits_cleanly() -> anyhow::Result<(
 #[tokio::test]
 async fn the_example_publisher_and_subscriber_talk_through_the_hub() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    let agent = Agent::hub(&dir).await?;
     let addr = agent.tcp().to_string();
     let mut publisher = command("publisher")?;
     publisher

@@ -33,6 +33,10 @@ pub struct Config {
     /// Where the configuration came from (the user file, or the embedded defaults), for error messages.
     #[serde(skip)]
     pub source: String,
+    /// The `[modules.NAME]` sections the user's file names (the embedded defaults configure every module of
+    /// robot-agent; a binary with fewer modules ignores those, but not a section the user wrote).
+    #[serde(skip)]
+    pub file_modules: Vec<String>,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -82,6 +86,7 @@ impl Config {
     /// The embedded defaults, optionally overlaid with the file at `path`.
     pub fn load(path: Option<&Path>) -> Result<Config, ConfigError> {
         let mut merged: toml::Table = parse_table("<embedded default.toml>", DEFAULT_TOML)?;
+        let mut file_modules = Vec::new();
         let file = match path {
             Some(p) => {
                 let name = p.display().to_string();
@@ -90,7 +95,13 @@ impl Config {
                     key: "-".into(),
                     reason: format!("cannot read: {e}"),
                 })?;
-                overlay(&mut merged, parse_table(&name, &text)?);
+                let table = parse_table(&name, &text)?;
+                file_modules = table
+                    .get("modules")
+                    .and_then(toml::Value::as_table)
+                    .map(|t| t.keys().cloned().collect())
+                    .unwrap_or_default();
+                overlay(&mut merged, table);
                 name
             }
             None => "<embedded default.toml>".to_string(),
@@ -107,6 +118,7 @@ impl Config {
             reason,
         })?;
         config.source = file;
+        config.file_modules = file_modules;
         Ok(config)
     }
 
@@ -136,10 +148,14 @@ impl Config {
         }
     }
 
-    /// Refuses `[modules.X]` sections that name no module in `known`: a misspelt section would otherwise switch
-    /// nothing off, silently.
+    /// Refuses `[modules.X]` sections of the user's file that name no module in `known`: a misspelt section would
+    /// otherwise switch nothing off, silently.
     pub fn check_module_names(&self, known: &[&str]) -> Result<(), ConfigError> {
-        match self.modules.keys().find(|k| !known.contains(&k.as_str())) {
+        match self
+            .file_modules
+            .iter()
+            .find(|k| !known.contains(&k.as_str()))
+        {
             None => Ok(()),
             Some(unknown) => Err(self.error(
                 format!("modules.{unknown}"),
@@ -322,6 +338,10 @@ mod tests {
         let e = c.check_module_names(&known).expect_err("bogus");
         assert_eq!(e.key, "modules.bogus");
         assert!(e.reason.contains("brain, browser, tts"), "{e}");
+        assert!(
+            c.check_module_names(&["bogus"]).is_ok(),
+            "the defaults' sections are not the user's"
+        );
         assert!(
             Config::load(None)
                 .expect("defaults")

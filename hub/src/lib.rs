@@ -3,6 +3,7 @@
 //! access gate, and the host of in-server modules. It links none of OpenCV, espeak-ng or Whisper: an application
 //! (`robot-agent`) brings its modules and routes through [`server::Application`]. See ARCHITECTURE.md.
 
+pub mod cli;
 pub mod config;
 pub mod http;
 pub mod hub;

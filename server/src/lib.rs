@@ -14,17 +14,22 @@ use tokio::sync::watch;
 
 /// Starts the hub with every agent module and the page link, as `make run` does.
 pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
+    let app = application(&config)?;
+    flow_hub::start(config, app).await
+}
+
+/// The agent as an application of the hub: its modules and the page link.
+pub fn application(config: &Config) -> anyhow::Result<Application> {
     let shutdown = watch::channel(false).0;
-    let browser = browser::BrowserLink::from_config(&config, shutdown.subscribe())
+    let browser = browser::BrowserLink::from_config(config, shutdown.subscribe())
         .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
     let modules: Vec<Box<dyn Module>> = modules::builtin()
         .into_iter()
         .chain(std::iter::once(browser.module()))
         .collect();
-    let app = Application {
+    Ok(Application {
         modules,
         routes: browser.router(),
         shutdown,
-    };
-    flow_hub::start(config, app).await
+    })
 }

@@ -1,110 +1,12 @@
-//! The robot-agent server binary: parse options, load the configuration, run
-//! until Ctrl-C or SIGTERM, shut down cleanly.
-
-use std::io::IsTerminal;
-use std::path::PathBuf;
-
-use anyhow::Context;
-use clap::Parser;
-use robot_agent::Config;
-use tracing_subscriber::EnvFilter;
-
-/// The robot agent: flow hub, avatar web UI and internal modules.
-#[derive(Debug, Parser)]
-#[command(version)]
-struct Args {
-    /// Configuration file layered over the embedded defaults.
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// HTTP address (UI, /api, /flow WebSocket).
-    #[arg(long)]
-    http: Option<String>,
-    /// FlowProtocol TCP address ("" disables).
-    #[arg(long)]
-    flow_tcp: Option<String>,
-    /// FlowProtocol Unix socket path ("" disables).
-    #[arg(long)]
-    flow_unix: Option<String>,
-    /// Directory for tokens, the pair database and the socket.
-    #[arg(long)]
-    data_dir: Option<PathBuf>,
-}
+//! The robot-agent server binary: the flow hub with the agent's modules and page (`robot_agent::application`),
+//! run until Ctrl-C or SIGTERM by the hub's command line.
 
 #[tokio::main]
 async fn main() {
-    if let Err(e) = run(Args::parse()).await {
-        // A module's section is checked at start: report it like any other configuration error.
-        if let Some(config) = e.downcast_ref::<robot_agent::config::ConfigError>() {
-            eprintln!("robot-agent: invalid configuration: {config}");
-            std::process::exit(2);
-        }
-        eprintln!("robot-agent: {e:#}");
-        std::process::exit(1);
-    }
-}
-
-async fn run(args: Args) -> anyhow::Result<()> {
-    let mut config = match Config::load(args.config.as_deref()) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("robot-agent: invalid configuration: {e}");
-            std::process::exit(2);
-        }
-    };
-    if let Some(v) = args.http {
-        config.server.http = v;
-    }
-    if let Some(v) = args.flow_tcp {
-        config.server.flow_tcp = v;
-    }
-    if let Some(v) = args.flow_unix {
-        config.server.flow_unix = v;
-    }
-    if let Some(v) = args.data_dir {
-        config.server.data_dir = v;
-    }
-    let filter =
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
-    tracing_subscriber::fmt()
-        .with_env_filter(quiet_frames(filter))
-        .with_ansi(std::io::stdout().is_terminal())
-        .init();
-
-    let server = robot_agent::start(config)
-        .await
-        .context("starting robot-agent")?;
-    println!("robot-agent ready: open {}", server.page_url);
-    if server.http.ip().is_unspecified() {
-        println!(
-            "  (from another machine, put this machine's address in place of {})",
-            server.http.ip()
-        );
-    }
-    if let Some(tcp) = server.flow_tcp {
-        println!("flow hub: tcp://{tcp}  ws://{}/flow", server.http);
-    }
-    if let Some(unix) = &server.flow_unix {
-        println!("flow hub: unix:{}", unix.display());
-    }
-    wait_for_signal().await?;
-    server.shutdown().await;
-    Ok(())
-}
-
-/// Caps the WebSocket libraries at debug level whatever the filter asks: at trace they print every frame's bytes,
-/// the login frame with its token included.
-fn quiet_frames(filter: EnvFilter) -> EnvFilter {
-    ["tungstenite=debug", "tokio_tungstenite=debug"]
-        .into_iter()
-        .filter_map(|d| d.parse().ok())
-        .fold(filter, EnvFilter::add_directive)
-}
-
-async fn wait_for_signal() -> anyhow::Result<()> {
-    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-    tokio::select! {
-        r = tokio::signal::ctrl_c() => r?,
-        _ = term.recv() => {}
-    }
-    Ok(())
+    flow_hub::cli::main(
+        "robot-agent",
+        "The robot agent: flow hub, avatar web UI and internal modules.",
+        robot_agent::application,
+    )
+    .await;
 }

@@ -71,6 +71,8 @@ pub struct AgentOptions {
     pub config: Option<String>,
     /// `RUST_LOG` for the server (default: `$AGENT_TEST_LOG`, else `info`).
     pub log: Option<String>,
+    /// The binary: `robot-agent` (default) or `flow-hub` (the hub alone).
+    pub program: Option<&'static str>,
 }
 
 /// Everything a process printed, line by line, with a wake-up for waiters.
@@ -154,6 +156,21 @@ impl Agent {
         Self::start_with(dir, AgentOptions::default()).await
     }
 
+    /// Starts the hub alone (`flow-hub`: no agent modules, no page) on free ports in `dir`.
+    pub async fn hub(dir: &DataDir) -> anyhow::Result<Agent> {
+        Self::hub_with_config(dir, "").await
+    }
+
+    /// Starts the hub alone with extra configuration (TOML).
+    pub async fn hub_with_config(dir: &DataDir, toml: &str) -> anyhow::Result<Agent> {
+        let opts = AgentOptions {
+            config: (!toml.is_empty()).then(|| toml.to_string()),
+            program: Some("flow-hub"),
+            ..AgentOptions::default()
+        };
+        Self::start_with(dir, opts).await
+    }
+
     /// Starts a server on free ports with extra configuration (TOML).
     pub async fn with_config(dir: &DataDir, toml: &str) -> anyhow::Result<Agent> {
         let opts = AgentOptions {
@@ -184,7 +201,8 @@ impl Agent {
 
     pub async fn start_with(dir: &DataDir, opts: AgentOptions) -> anyhow::Result<Agent> {
         let any = "127.0.0.1:0".to_string();
-        let mut cmd = Command::new(binary("robot-agent")?);
+        let program = opts.program.unwrap_or("robot-agent");
+        let mut cmd = Command::new(binary(program)?);
         // From the repository root, as `make run` starts it: the default configuration's relative paths (the rule
         // program) resolve there.
         cmd.current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
@@ -226,7 +244,7 @@ impl Agent {
         };
         ready?;
         let lines = output.lines();
-        let http = after(&lines, "robot-agent ready: open http://")
+        let http = after(&lines, &format!("{program} ready: open http://"))
             .and_then(|s| s.split('/').next())
             .context("no HTTP address printed")?
             .parse()?;

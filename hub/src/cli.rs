@@ -1,0 +1,122 @@
+//! The command line of the hub's binaries (`flow-hub`, `robot-agent`): options, the configuration, logging, the
+//! application's modules and routes, and a clean shutdown on Ctrl-C or SIGTERM. Configuration errors exit with
+//! status 2 and name the file, the key and the reason.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{CommandFactory, FromArgMatches, Parser};
+use tracing_subscriber::EnvFilter;
+
+use crate::config::{Config, ConfigError};
+use crate::server::Application;
+
+/// Options common to every hub binary.
+#[derive(Debug, Parser)]
+#[command(version)]
+pub struct Args {
+    /// Configuration file layered over the embedded defaults.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// HTTP address (UI, /api, /flow WebSocket).
+    #[arg(long)]
+    http: Option<String>,
+    /// FlowProtocol TCP address ("" disables).
+    #[arg(long)]
+    flow_tcp: Option<String>,
+    /// FlowProtocol Unix socket path ("" disables).
+    #[arg(long)]
+    flow_unix: Option<String>,
+    /// Directory for tokens, the pair database and the socket.
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+}
+
+/// Runs the binary `name` (described by `about`) with the application `build` makes from the configuration, until
+/// Ctrl-C or SIGTERM; exits the process on error.
+pub async fn main(
+    name: &'static str,
+    about: &'static str,
+    build: fn(&Config) -> anyhow::Result<Application>,
+) {
+    let matches = Args::command().name(name).about(about).get_matches();
+    let args = match Args::from_arg_matches(&matches) {
+        Ok(a) => a,
+        Err(e) => e.exit(),
+    };
+    if let Err(e) = run(name, args, build).await {
+        // A module's section is checked at start: report it like any other configuration error.
+        if let Some(config) = e.downcast_ref::<ConfigError>() {
+            eprintln!("{name}: invalid configuration: {config}");
+            std::process::exit(2);
+        }
+        eprintln!("{name}: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+async fn run(
+    name: &str,
+    args: Args,
+    build: fn(&Config) -> anyhow::Result<Application>,
+) -> anyhow::Result<()> {
+    let mut config = Config::load(args.config.as_deref())?;
+    if let Some(v) = args.http {
+        config.server.http = v;
+    }
+    if let Some(v) = args.flow_tcp {
+        config.server.flow_tcp = v;
+    }
+    if let Some(v) = args.flow_unix {
+        config.server.flow_unix = v;
+    }
+    if let Some(v) = args.data_dir {
+        config.server.data_dir = v;
+    }
+    let filter =
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
+    tracing_subscriber::fmt()
+        .with_env_filter(quiet_frames(filter))
+        .with_ansi(std::io::stdout().is_terminal())
+        .init();
+
+    let app = build(&config)?;
+    let server = crate::start(config, app)
+        .await
+        .with_context(|| format!("starting {name}"))?;
+    println!("{name} ready: open {}", server.page_url);
+    if server.http.ip().is_unspecified() {
+        println!(
+            "  (from another machine, put this machine's address in place of {})",
+            server.http.ip()
+        );
+    }
+    if let Some(tcp) = server.flow_tcp {
+        println!("flow hub: tcp://{tcp}  ws://{}/flow", server.http);
+    }
+    if let Some(unix) = &server.flow_unix {
+        println!("flow hub: unix:{}", unix.display());
+    }
+    wait_for_signal().await?;
+    server.shutdown().await;
+    Ok(())
+}
+
+/// Caps the WebSocket libraries at debug level whatever the filter asks: at trace they print every frame's bytes,
+/// the login frame with its token included.
+fn quiet_frames(filter: EnvFilter) -> EnvFilter {
+    ["tungstenite=debug", "tokio_tungstenite=debug"]
+        .into_iter()
+        .filter_map(|d| d.parse().ok())
+        .fold(filter, EnvFilter::add_directive)
+}
+
+async fn wait_for_signal() -> anyhow::Result<()> {
+    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    tokio::select! {
+        r = tokio::signal::ctrl_c() => r?,
+        _ = term.recv() => {}
+    }
+    Ok(())
+}
