@@ -5,6 +5,7 @@
 //! Needs the binaries (`cargo build -p robot-agent -p flowctl -p whisper-sat`) and the model (`make model`);
 //! `make test` provides both.
 
+use agent_contract::channels as ch;
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -41,7 +42,7 @@ struct Transcripts(Arc<Mutex<Vec<Value>>>, Arc<Mutex<Vec<(Value, u64)>>>);
 impl Transcripts {
     async fn collect(agent: &Agent) -> anyhow::Result<Transcripts> {
         let client = agent.client("asr-test-transcripts").await?;
-        let sub = client.subscribe("Agent.transcript").await?;
+        let sub = client.subscribe(ch::TRANSCRIPT.name).await?;
         let all = Transcripts::default();
         let sink = all.clone();
         tokio::spawn(async move {
@@ -107,7 +108,7 @@ impl Transcripts {
                 .channels()
                 .await?
                 .into_iter()
-                .filter(|c| c.name.starts_with("Agent.asr.claim."))
+                .filter(|c| c.name.starts_with(ch::ASR_CLAIM_PREFIX))
                 .map(|c| c.header)
                 .collect();
             let all_done = claims.iter().all(|h| h.contains("\"done\":true"));
@@ -140,7 +141,7 @@ fn now_us() -> u64 {
 async fn pub_wav(agent: &Agent, wav: &Path) -> anyhow::Result<()> {
     let mut cmd = agent.flowctl()?;
     cmd.arg("pub-wav")
-        .arg("Agent.audio")
+        .arg(ch::AUDIO.name)
         .arg(wav)
         .arg("--realtime")
         .arg("--tail-ms")
@@ -399,7 +400,7 @@ async fn kill_the_first_claim_holder(
     let publishing = {
         let mut cmd = agent.flowctl()?;
         cmd.arg("pub-wav")
-            .arg("Agent.audio")
+            .arg(ch::AUDIO.name)
             .arg(wav)
             .arg("--realtime")
             .arg("--tail-ms")
@@ -410,7 +411,7 @@ async fn kill_the_first_claim_holder(
     let (utterance, owner) = tokio::time::timeout(TRANSCRIPT_PATIENCE, async {
         loop {
             if let Ok(ClientEvent::ChannelAdded(info)) = events.recv().await
-                && let Some(id) = info.name.strip_prefix("Agent.asr.claim.")
+                && let Some(id) = info.name.strip_prefix(ch::ASR_CLAIM_PREFIX)
                 && (!speculative || info.header.contains("\"speculative\":true"))
             {
                 return (id.to_owned(), info.owner);
@@ -615,7 +616,7 @@ async fn switching_recognition_off_mid_utterance_abandons_it_and_on_again_hears_
     let transcripts = Transcripts::collect(&agent).await?;
     let control = agent.client("asr-test-ctrl").await?;
     let ctrl = control
-        .publisher("Agent.ctrl", r#"{"format":"json"}"#)
+        .publisher(ch::CTRL.name, r#"{"format":"json"}"#)
         .await?;
     let _sat = start_satellite(&agent, "asr-ctrl").await?;
     // LJ001-0001's first utterance runs about 4 s and pauses after its first word ("Printing,") for longer than the
@@ -624,7 +625,7 @@ async fn switching_recognition_off_mid_utterance_abandons_it_and_on_again_hears_
     let publishing = {
         let mut cmd = agent.flowctl()?;
         cmd.arg("pub-wav")
-            .arg("Agent.audio")
+            .arg(ch::AUDIO.name)
             .arg(fixture("audio/LJ001-0001.wav")?)
             .arg("--realtime")
             .arg("--tail-ms")

@@ -6,6 +6,7 @@
 //!
 //! Needs `chromium`, `ffmpeg`, `node` and a built `robot-agent`, like tests/browser.rs.
 
+use agent_contract::channels as ch;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::Duration;
@@ -78,11 +79,11 @@ impl Stage {
         let agent = start_link_only(&data).await?;
         let hub = agent.client("avatar3d-test").await?;
         let avatar = hub
-            .publisher("Agent.avatar", r#"{"format":"json"}"#)
+            .publisher(ch::AVATAR.name, r#"{"format":"json"}"#)
             .await?;
         let speech = hub
             .publisher(
-                "Agent.speech",
+                ch::SPEECH.name,
                 r#"{"format":"s16le","rate":22050,"channels":1,"framing":"utterance-offset"}"#,
             )
             .await?;

@@ -5,6 +5,7 @@
 //!
 //! Build the binaries first: `cargo build -p robot-agent` (`make test` does).
 
+use agent_contract::channels as ch;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -45,14 +46,14 @@ impl Rig {
         );
         let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
         let satellite = agent.client("brain-test").await?;
-        let avatar = satellite.subscribe("Agent.avatar").await?;
-        let speech = satellite.subscribe("Agent.speech").await?;
-        let rules = satellite.subscribe("Agent.rules").await?;
+        let avatar = satellite.subscribe(ch::AVATAR.name).await?;
+        let speech = satellite.subscribe(ch::SPEECH.name).await?;
+        let rules = satellite.subscribe(ch::RULES.name).await?;
         let transcript = satellite
-            .publisher("Agent.transcript", r#"{"format":"json"}"#)
+            .publisher(ch::TRANSCRIPT.name, r#"{"format":"json"}"#)
             .await?;
         let detections = satellite
-            .publisher("Agent.detections", r#"{"format":"json"}"#)
+            .publisher(ch::DETECTIONS.name, r#"{"format":"json"}"#)
             .await?;
         let rig = Rig {
             _dir: dir,
@@ -66,8 +67,8 @@ impl Rig {
             rules,
         };
         // Both the brain and the TTS module follow transcripts; the brain follows detections.
-        rig.until_subscribers("Agent.transcript", 2).await?;
-        rig.until_subscribers("Agent.detections", 1).await?;
+        rig.until_subscribers(ch::TRANSCRIPT.name, 2).await?;
+        rig.until_subscribers(ch::DETECTIONS.name, 1).await?;
         Ok(rig)
     }
 

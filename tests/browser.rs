@@ -3,6 +3,7 @@
 //!
 //! Needs `chromium` and `ffmpeg` (Debian packages) and a built `robot-agent` (`cargo build -p robot-agent`).
 
+use agent_contract::channels as ch;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
@@ -79,22 +80,22 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
     let agent = start_link_only(&data).await?;
     let hub = agent.client("browser-test").await?;
     // Sticky subscriptions: they start delivering when the page's role creates the channels.
-    let audio = hub.subscribe("Agent.audio").await?;
-    let video = hub.subscribe("Agent.video").await?;
-    let grey = hub.subscribe("Agent.video.y").await?;
-    let ctrl = hub.subscribe("Agent.ctrl").await?;
+    let audio = hub.subscribe(ch::AUDIO.name).await?;
+    let video = hub.subscribe(ch::VIDEO.name).await?;
+    let grey = hub.subscribe(ch::VIDEO_Y.name).await?;
+    let ctrl = hub.subscribe(ch::CTRL.name).await?;
     let avatar = hub
-        .publisher("Agent.avatar", r#"{"format":"json"}"#)
+        .publisher(ch::AVATAR.name, r#"{"format":"json"}"#)
         .await?;
     let detections = hub
-        .publisher("Agent.detections", r#"{"format":"json"}"#)
+        .publisher(ch::DETECTIONS.name, r#"{"format":"json"}"#)
         .await?;
 
     let browser = Chromium::launch(speech).await?;
     let tab = browser.open(&kiosk_url(&agent)).await?;
     wait_streaming(&browser, &tab).await?;
     // The channel headers say what flows.
-    let info = hub.channel("Agent.audio").await?;
+    let info = hub.channel(ch::AUDIO.name).await?;
     let header: serde_json::Value = serde_json::from_str(&info.header)?;
     assert_eq!(
         (header["format"].as_str(), header["rate"].as_u64()),
@@ -250,7 +251,7 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
     // Speech: framed PCM of one utterance plays through WebAudio, and its visemes follow the audio clock.
     let speech = hub
         .publisher(
-            "Agent.speech",
+            ch::SPEECH.name,
             r#"{"format":"s16le","rate":22050,"channels":1,"framing":"utterance-offset"}"#,
         )
         .await?;
@@ -332,7 +333,7 @@ async fn spectrum_peaks_at_the_test_tone() -> anyhow::Result<()> {
     let data = DataDir::new()?;
     let agent = start_link_only(&data).await?;
     let hub = agent.client("fft-test").await?;
-    let fft = hub.subscribe("Agent.audio.fft").await?;
+    let fft = hub.subscribe(ch::AUDIO_FFT.name).await?;
     let browser = Chromium::launch(tone).await?;
     let tab = browser.open(&kiosk_url(&agent)).await?;
     wait_streaming(&browser, &tab).await?;
@@ -372,13 +373,13 @@ async fn spectrum_peaks_at_the_test_tone() -> anyhow::Result<()> {
         "median tone magnitude {median:.3}"
     );
     // Nobody subscribes to Agent.video.y in this test: the Y module stays idle while the camera streams.
-    let y = hub.channel("Agent.video.y").await?;
+    let y = hub.channel(ch::VIDEO_Y.name).await?;
     ensure!(
         y.stats.msgs == 0,
         "Agent.video.y produced {} frames with no subscriber",
         y.stats.msgs
     );
-    let video = hub.channel("Agent.video").await?;
+    let video = hub.channel(ch::VIDEO.name).await?;
     ensure!(video.stats.msgs > 0, "the camera was not streaming");
     // The page draws it: its own peak readout agrees.
     browser
@@ -400,7 +401,7 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
     let data = DataDir::new()?;
     let agent = start_link_only(&data).await?;
     let hub = agent.client("role-test").await?;
-    let audio = hub.subscribe("Agent.audio").await?;
+    let audio = hub.subscribe(ch::AUDIO.name).await?;
     let browser = Chromium::launch(speech).await?;
     let first = browser.open(&kiosk_url(&agent)).await?;
     wait_streaming(&browser, &first).await?;
@@ -452,7 +453,7 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
         .await
         .context("no audio after takeover")?;
     ensure!(got.is_some(), "Agent.audio subscription ended");
-    let owner = hub.channel("Agent.audio").await?.owner;
+    let owner = hub.channel(ch::AUDIO.name).await?.owner;
     println!(
         "takeover: audio flowing again {:?} after the check, channel owner {owner}",
         started.elapsed()

@@ -5,6 +5,7 @@
 //!
 //! Needs the binaries (`cargo build -p robot-agent -p flowctl -p whisper-sat`) and the model (`make model`).
 
+use agent_contract::channels as ch;
 use std::time::Duration;
 
 use agent_tests::{Agent, DataDir, Satellite, fixture, run};
@@ -93,17 +94,17 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
     );
     let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
     let watcher = agent.client("conversation-test").await?;
-    let transcript = watcher.subscribe("Agent.transcript").await?;
-    let rules = watcher.subscribe("Agent.rules").await?;
-    let speech = watcher.subscribe("Agent.speech").await?;
-    let avatar = watcher.subscribe("Agent.avatar").await?;
+    let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
+    let rules = watcher.subscribe(ch::RULES.name).await?;
+    let speech = watcher.subscribe(ch::SPEECH.name).await?;
+    let avatar = watcher.subscribe(ch::AVATAR.name).await?;
     let _satellite = Satellite::start(&agent, "conversation-asr").await?;
 
     // A real human recording, 20 ms chunks paced in real time, then silence so the utterance ends.
     let mut publish = agent.flowctl()?;
     publish
         .arg("pub-wav")
-        .arg("Agent.audio")
+        .arg(ch::AUDIO.name)
         .arg(fixture("audio/LJ001-0002.wav")?)
         .arg("--realtime")
         .arg("--tail-ms")

@@ -6,6 +6,7 @@
 //!
 //! Build the binaries first: `cargo build -p robot-agent` (`make test` does).
 
+use agent_contract::channels as ch;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
@@ -44,7 +45,7 @@ impl Rig {
         );
         let agent = Agent::start_configured(&dir, &config, "vision: watching").await?;
         let camera = agent.client("vision-test").await?;
-        let video = camera.publisher("Agent.video", VIDEO_HEADER).await?;
+        let video = camera.publisher(ch::VIDEO.name, VIDEO_HEADER).await?;
         until_subscribed(&video).await?;
         Ok(Rig {
             _dir: dir,
@@ -70,7 +71,7 @@ impl Rig {
     async fn replug_camera(&mut self) -> anyhow::Result<()> {
         self.video = None;
         tokio::time::sleep(Duration::from_millis(300)).await;
-        let video = self.camera.publisher("Agent.video", VIDEO_HEADER).await?;
+        let video = self.camera.publisher(ch::VIDEO.name, VIDEO_HEADER).await?;
         until_subscribed(&video).await?;
         self.video = Some(video);
         self.published = 0;
@@ -119,7 +120,7 @@ fn boxes(msg: &FacesMsg) -> Vec<BoxPx> {
 #[tokio::test]
 async fn faces_on_annotated_photos_reach_recall_with_few_false_positives() -> anyhow::Result<()> {
     let mut rig = Rig::start("").await?;
-    let faces = rig.camera.subscribe("Agent.faces").await?;
+    let faces = rig.camera.subscribe(ch::FACES.name).await?;
     let truth = GroundTruth::load(&agent_tests::fixtures::fixtures())?;
     let mut totals = FaceTotals::default();
     println!(
@@ -174,8 +175,8 @@ fn frame_size(path: &Path) -> anyhow::Result<(u32, u32)> {
 #[tokio::test]
 async fn qr_codes_decode_exactly_and_are_reported_once_per_appearance() -> anyhow::Result<()> {
     let mut rig = Rig::start("").await?;
-    let codes = rig.camera.subscribe("Agent.codes").await?;
-    let detections = rig.camera.subscribe("Agent.detections").await?;
+    let codes = rig.camera.subscribe(ch::CODES.name).await?;
+    let detections = rig.camera.subscribe(ch::DETECTIONS.name).await?;
     let truth = GroundTruth::load(&agent_tests::fixtures::fixtures())?;
     // A frame without codes between images, long enough (> forget_after_ms) for a code to count as gone.
     let blank = std::fs::read(fixture(
@@ -234,7 +235,7 @@ async fn qr_codes_decode_exactly_and_are_reported_once_per_appearance() -> anyho
 #[tokio::test]
 async fn motion_sequence_is_still_then_moving_without_flicker() -> anyhow::Result<()> {
     let mut rig = Rig::start("").await?;
-    let motion = rig.camera.subscribe("Agent.motion").await?;
+    let motion = rig.camera.subscribe(ch::MOTION.name).await?;
     let mut moving: BTreeMap<u64, bool> = BTreeMap::new();
     for index in 1..=120 {
         let path =
@@ -276,7 +277,7 @@ async fn motion_sequence_is_still_then_moving_without_flicker() -> anyhow::Resul
 #[tokio::test]
 async fn bad_frames_are_counted_and_skipped() -> anyhow::Result<()> {
     let mut rig = Rig::start("").await?;
-    let detections = rig.camera.subscribe("Agent.detections").await?;
+    let detections = rig.camera.subscribe(ch::DETECTIONS.name).await?;
     let good = std::fs::read(fixture("faces/derived/fr_two_people_640x360.jpg")?)?;
     rig.publish(b"this is not a JPEG").await?;
     tokio::time::sleep(FRAME).await;
@@ -304,7 +305,7 @@ async fn bad_frames_are_counted_and_skipped() -> anyhow::Result<()> {
 #[tokio::test]
 async fn a_flood_of_frames_is_skipped_not_queued() -> anyhow::Result<()> {
     let mut rig = Rig::start("").await?;
-    let detections = rig.camera.subscribe("Agent.detections").await?;
+    let detections = rig.camera.subscribe(ch::DETECTIONS.name).await?;
     let frame = std::fs::read(fixture("faces/derived/fr_two_people_640x360.jpg")?)?;
     for _ in 0..300 {
         rig.publish(&frame).await?;
@@ -330,8 +331,8 @@ async fn a_flood_of_frames_is_skipped_not_queued() -> anyhow::Result<()> {
 async fn detections_resume_when_the_camera_channel_comes_back_and_gaze_follows_a_face()
 -> anyhow::Result<()> {
     let mut rig = Rig::start("avatar_gaze = true").await?;
-    let detections = rig.camera.subscribe("Agent.detections").await?;
-    let avatar = rig.camera.subscribe("Agent.avatar").await?;
+    let detections = rig.camera.subscribe(ch::DETECTIONS.name).await?;
+    let avatar = rig.camera.subscribe(ch::AVATAR.name).await?;
     let frame = std::fs::read(fixture("faces/derived/fr_two_people_640x360.jpg")?)?;
     rig.publish(&frame).await?;
     let first: DetectionsMsg = next(&detections).await?;

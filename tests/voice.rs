@@ -4,6 +4,7 @@
 //!
 //! Build the binaries first: `cargo build -p robot-agent` (`make test` does).
 
+use agent_contract::channels as ch;
 use std::time::Duration;
 
 use agent_tests::{Agent, DataDir, PATIENCE};
@@ -35,8 +36,8 @@ impl Rig {
             "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n".to_owned();
         let agent = Agent::start_configured(&dir, &config, "tts: speaking on").await?;
         let satellite = agent.client("voice-test").await?;
-        let speech = satellite.subscribe("Agent.speech").await?;
-        let avatar = satellite.subscribe("Agent.avatar").await?;
+        let speech = satellite.subscribe(ch::SPEECH.name).await?;
+        let avatar = satellite.subscribe(ch::AVATAR.name).await?;
         Ok(Rig {
             _dir: dir,
             agent,
@@ -50,7 +51,7 @@ impl Rig {
     async fn say(&self, request: Value) -> anyhow::Result<Value> {
         let answer = self
             .satellite
-            .call("Agent.say", request.to_string().into_bytes(), PATIENCE)
+            .call(ch::SAY.name, request.to_string().into_bytes(), PATIENCE)
             .await?;
         Ok(serde_json::from_slice(&answer)?)
     }
@@ -167,7 +168,7 @@ async fn half_a_second_of_speech(speech: &Subscription) -> anyhow::Result<u64> {
 #[tokio::test]
 async fn say_streams_framed_speech_with_visemes_and_a_caption() -> anyhow::Result<()> {
     let rig = Rig::start().await?;
-    let header = rig.satellite.channel("Agent.speech").await?.header;
+    let header = rig.satellite.channel(ch::SPEECH.name).await?.header;
     let header: Value = serde_json::from_str(&header)?;
     assert_eq!(
         (header["rate"].as_u64(), header["framing"].as_str()),
@@ -298,9 +299,9 @@ async fn the_user_speaking_barges_in() -> anyhow::Result<()> {
     // This satellite plays the ASR: its voice activity goes on Agent.transcript.
     let transcript = rig
         .satellite
-        .publisher("Agent.transcript", r#"{"format":"json"}"#)
+        .publisher(ch::TRANSCRIPT.name, r#"{"format":"json"}"#)
         .await?;
-    rig.until_subscribed("Agent.transcript").await?;
+    rig.until_subscribed(ch::TRANSCRIPT.name).await?;
     let utterance = rig.speak(LONG_REPLY).await?;
     let samples = half_a_second_of_speech(&rig.speech).await?;
     transcript
@@ -325,9 +326,9 @@ async fn ctrl_say_and_stop() -> anyhow::Result<()> {
     let rig = Rig::start().await?;
     let ctrl = rig
         .satellite
-        .publisher("Agent.ctrl", r#"{"format":"json"}"#)
+        .publisher(ch::CTRL.name, r#"{"format":"json"}"#)
         .await?;
-    rig.until_subscribed("Agent.ctrl").await?;
+    rig.until_subscribed(ch::CTRL.name).await?;
     ctrl.publish(
         json!({ "say": "Spoken from the control channel." })
             .to_string()
@@ -371,9 +372,9 @@ async fn blinks_gaze_at_a_face_and_thinking() -> anyhow::Result<()> {
     // A face right of centre, as the vision module reports it.
     let detections = rig
         .satellite
-        .publisher("Agent.detections", r#"{"format":"json"}"#)
+        .publisher(ch::DETECTIONS.name, r#"{"format":"json"}"#)
         .await?;
-    rig.until_subscribed("Agent.detections").await?;
+    rig.until_subscribed(ch::DETECTIONS.name).await?;
     let frame = json!({
         "frame": { "seq": 1, "ts_us": 0, "width": 640, "height": 360 },
         "faces": [{ "x": 448, "y": 90, "w": 64, "h": 64 }],
@@ -396,9 +397,9 @@ async fn blinks_gaze_at_a_face_and_thinking() -> anyhow::Result<()> {
     // The user said something: the avatar looks away to think.
     let transcript = rig
         .satellite
-        .publisher("Agent.transcript", r#"{"format":"json"}"#)
+        .publisher(ch::TRANSCRIPT.name, r#"{"format":"json"}"#)
         .await?;
-    rig.until_subscribed("Agent.transcript").await?;
+    rig.until_subscribed(ch::TRANSCRIPT.name).await?;
     transcript
         .publish(
             json!({ "text": "what time is it", "final": true })

@@ -12,6 +12,7 @@
 //! Options: `--seconds N` per renderer and round (default 10), `--rounds N` (default 3). Needs a built
 //! `robot-agent` (found like the integration tests find it) and chromium.
 
+use agent_contract::channels as ch;
 use std::time::Duration;
 
 use agent_tests::Agent;
@@ -40,11 +41,11 @@ async fn main() -> anyhow::Result<()> {
     let agent = start_link_only(&data).await?;
     let hub = agent.client("bench-avatar").await?;
     let avatar = hub
-        .publisher("Agent.avatar", r#"{"format":"json"}"#)
+        .publisher(ch::AVATAR.name, r#"{"format":"json"}"#)
         .await?;
     let speech = hub
         .publisher(
-            "Agent.speech",
+            ch::SPEECH.name,
             r#"{"format":"s16le","rate":22050,"channels":1,"framing":"utterance-offset"}"#,
         )
         .await?;

@@ -9,6 +9,7 @@
 //! Options: `--seconds N` (streaming window per CPU phase, default 60), `--chunks N` (latency samples per path,
 //! default 1500). Needs a built `robot-agent` (found like the integration tests find it), chromium and ffmpeg.
 
+use agent_contract::channels as ch;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -118,10 +119,10 @@ async fn count_channels(
     let (stop, stopped) = tokio::sync::watch::channel(false);
     let mut set = tokio::task::JoinSet::new();
     for (i, name) in [
-        "Agent.audio",
-        "Agent.video",
-        "Agent.video.y",
-        "Agent.audio.fft",
+        ch::AUDIO.name,
+        ch::VIDEO.name,
+        ch::VIDEO_Y.name,
+        ch::AUDIO_FFT.name,
     ]
     .into_iter()
     .enumerate()
@@ -215,13 +216,13 @@ async fn satellite_phase(window: Duration) -> anyhow::Result<Phase> {
     let pcm: Vec<u8> = pcm.iter().flat_map(|s| s.to_le_bytes()).collect();
     let audio = sat
         .publisher(
-            "Agent.audio",
+            ch::AUDIO.name,
             r#"{"format":"s16le","rate":22050,"channels":1,"chunk_ms":20}"#,
         )
         .await?;
     let video = sat
         .publisher(
-            "Agent.video",
+            ch::VIDEO.name,
             r#"{"format":"jpeg","width":640,"height":360,"fps":15}"#,
         )
         .await?;
@@ -270,7 +271,7 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     let data = DataDir::new()?;
     let agent = start_link_only(&data).await?;
     let hub = agent.client("bench").await?;
-    let link_sub = hub.subscribe("Agent.audio").await?;
+    let link_sub = hub.subscribe(ch::AUDIO.name).await?;
     let direct_sub = hub.subscribe("Bench.direct").await?;
     let sat = agent.client("satellite").await?;
     let direct = sat
@@ -297,7 +298,7 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     ))
     .await?;
     let deadline = Instant::now() + Duration::from_secs(10);
-    while hub.channel("Agent.audio").await.is_err() {
+    while hub.channel(ch::AUDIO.name).await.is_err() {
         if Instant::now() > deadline {
             bail!("the link did not create Agent.audio");
         }

@@ -151,14 +151,14 @@ fn channel_events_reach_async_connections_only() {
         .add_channel(
             owner,
             ChannelKind::Stream,
-            "Agent.audio",
+            "Robot.audio",
             r#"{"rate":22050}"#,
         )
         .expect("add");
     assert_eq!(info.owner, "owner#1");
     hub.set_header(owner, info.id, r#"{"rate":16000}"#)
         .expect("header");
-    hub.remove_channel(owner, &by_name("Agent.audio"))
+    hub.remove_channel(owner, &by_name("Robot.audio"))
         .expect("remove");
     for ob in [&owner_ob, &other_ob] {
         let events = drain(ob);
@@ -168,12 +168,12 @@ fn channel_events_reach_async_connections_only() {
                 Event::ChannelAdded(info.clone()),
                 Event::HeaderChanged {
                     id: info.id,
-                    name: "Agent.audio".into(),
+                    name: "Robot.audio".into(),
                     header: r#"{"rate":16000}"#.into()
                 },
                 Event::ChannelRemoved {
                     id: info.id,
-                    name: "Agent.audio".into()
+                    name: "Robot.audio".into()
                 },
             ]
         );
@@ -433,11 +433,11 @@ fn ids_are_not_reused_and_names_follow_the_current_channel() {
 fn a_subscriber_that_never_reads_loses_its_oldest_while_another_gets_everything() {
     let hub = Hub::new(limits(8));
     let (p, _) = async_conn(&hub, "pub");
-    let id = stream(&hub, p, "Agent.video");
+    let id = stream(&hub, p, "Robot.video");
     let (slow, slow_ob) = async_conn(&hub, "slow");
     let (fast, fast_ob) = async_conn(&hub, "fast");
-    hub.subscribe(slow, &by_name("Agent.video")).expect("slow");
-    hub.subscribe(fast, &by_name("Agent.video")).expect("fast");
+    hub.subscribe(slow, &by_name("Robot.video")).expect("slow");
+    hub.subscribe(fast, &by_name("Robot.video")).expect("fast");
     drain(&slow_ob);
     drain(&fast_ob);
     let mut fast_seqs = Vec::new();
@@ -453,7 +453,7 @@ fn a_subscriber_that_never_reads_loses_its_oldest_while_another_gets_everything(
         data_seqs(&drain(&slow_ob)),
         (993..=1000).collect::<Vec<_>>()
     );
-    let stats = hub.channel(&by_name("Agent.video")).expect("info").stats;
+    let stats = hub.channel(&by_name("Robot.video")).expect("info").stats;
     assert_eq!(stats.dropped, 992);
     assert_eq!(stats.msgs, 1000);
     assert!(

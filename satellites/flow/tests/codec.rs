@@ -751,7 +751,7 @@ fn request_ids_survive_the_full_range() {
         let env = Envelope {
             req,
             command: Command::GetChannel {
-                chan: ChanRef::Name("Agent.audio".into()),
+                chan: ChanRef::Name("Robot.audio".into()),
             },
         };
         let back = decode_command(single_frame(encoded_command(&env), "req")).expect("decode");

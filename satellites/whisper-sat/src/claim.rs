@@ -7,9 +7,9 @@
 use serde::{Deserialize, Serialize};
 
 /// Prefix of claim channels.
-pub const CLAIM_PREFIX: &str = "Agent.asr.claim.";
+pub const CLAIM_PREFIX: &str = agent_contract::channels::ASR_CLAIM_PREFIX;
 /// Prefix of the presence channels satellites keep while they run.
-pub const PRESENCE_PREFIX: &str = "Agent.asr.sat.";
+pub const PRESENCE_PREFIX: &str = agent_contract::channels::ASR_PRESENCE_PREFIX;
 
 /// The claim channel of an utterance.
 pub fn claim_channel(utterance_id: &str) -> String {
@@ -87,7 +87,10 @@ mod tests {
     fn names_and_headers_round_trip() {
         let name = claim_channel("u1700000000123");
         assert_eq!(claimed_utterance(&name), Some("u1700000000123"));
-        assert_eq!(claimed_utterance("Agent.audio"), None);
+        assert_eq!(
+            claimed_utterance(agent_contract::channels::AUDIO.name),
+            None
+        );
         let plain = ClaimHeader::new(5, 9, "s1", false);
         assert_eq!(ClaimHeader::parse(&plain.to_json()), Some(plain.clone()));
         assert_eq!(plain.interval(), (5, 9));

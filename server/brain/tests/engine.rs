@@ -50,7 +50,7 @@ fn expiry_of_a_percept_re_evaluates_without_new_input() {
     let program = r#"
         percept face(num, dir) fresh 1s
         procedure main {
-            watch: face(N, _) ~> publish("Agent.avatar", {watch: N})
+            watch: face(N, _) ~> publish("Robot.face", {watch: N})
             idle:  true ~> ()
         }
     "#;
@@ -70,13 +70,13 @@ fn durative_actions_run_while_active_and_discrete_fire_once_on_entry() {
     let program = r#"
         percept listening, ping
         procedure main {
-            attend: listening ~> publish("Agent.avatar", {attend: true}) ++ say("mm-hm")
+            attend: listening ~> publish("Robot.face", {attend: true}) ++ say("mm-hm")
             idle:   true ~> ()
         }
     "#;
     let mut sim = Sim::new(load(program));
     let attend = Action::Publish {
-        channel: "Agent.avatar".into(),
+        channel: "Robot.face".into(),
         payload: Value::Map(vec![("attend".into(), Value::Bool(true))]),
     };
     let entry = sim.perceive("listening", vec![]);
@@ -122,13 +122,13 @@ fn changed_bindings_restart_durative_actions_without_re_entering() {
     let program = r#"
         percept face(num, dir) fresh 2s
         procedure main {
-            look: face(_, D) ~> publish("Agent.avatar", {gaze: D}) ++ say("I see you")
+            look: face(_, D) ~> publish("Robot.face", {gaze: D}) ++ say("I see you")
             idle: true ~> ()
         }
     "#;
     let mut sim = Sim::new(load(program));
     let gaze = |d: &str| Action::Publish {
-        channel: "Agent.avatar".into(),
+        channel: "Robot.face".into(),
         payload: Value::Map(vec![("gaze".into(), Value::from(d))]),
     };
     let entry = sim.perceive("face", vec![Value::Num(1.0), Value::from("left")]);

@@ -2,6 +2,7 @@
 //! from the module's JSON parameters and checked before anything starts. Unknown keys are errors, so a typo
 //! fails at start instead of being silently ignored.
 
+use agent_contract::channels;
 use std::path::PathBuf;
 
 use serde::Deserialize;
@@ -91,7 +92,7 @@ impl Default for VisionSettings {
     fn default() -> Self {
         Self {
             enabled: true,
-            source: "Agent.video".to_owned(),
+            source: channels::VIDEO.name.to_owned(),
             avatar_gaze: false,
             max_frame_pixels: DEFAULT_MAX_PIXELS,
             threads: 1,
@@ -186,9 +187,9 @@ impl VisionSettings {
     /// Checks ranges and names and builds the detector parameters.
     pub fn pipeline_params(&self) -> Result<PipelineParams, VisionError> {
         check(
-            matches!(self.source.as_str(), "Agent.video" | "Agent.video.y"),
+            [channels::VIDEO.name, channels::VIDEO_Y.name].contains(&self.source.as_str()),
             "source",
-            "must be \"Agent.video\" or \"Agent.video.y\"",
+            "must be the camera or its grey version (Agent.video or Agent.video.y)",
         )?;
         check(
             self.max_frame_pixels >= 64 * 64,
@@ -333,7 +334,7 @@ mod tests {
         let settings = VisionSettings::from_json(&json!({})).expect("defaults");
         let params = settings.pipeline_params().expect("valid");
         assert!(params.faces.is_some() && params.motion.is_some() && params.codes.is_some());
-        assert_eq!(settings.source, "Agent.video");
+        assert_eq!(settings.source, channels::VIDEO.name);
     }
 
     #[test]

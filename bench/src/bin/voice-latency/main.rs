@@ -16,6 +16,7 @@ mod rig;
 mod speech_clip;
 mod watch;
 
+use agent_contract::channels as ch;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -130,14 +131,14 @@ async fn main() -> anyhow::Result<()> {
         .await?;
     watch::wait_channel(
         &watcher_client,
-        "Agent.asr.sat.bench-asr",
+        &format!("{}bench-asr", ch::ASR_PRESENCE_PREFIX),
         Duration::from_secs(120),
     )
     .await
     .context("the satellite did not join (is the model there? `make model`)")?;
     let publisher = mic_client
         .publisher(
-            "Agent.audio",
+            ch::AUDIO.name,
             r#"{"mime":"audio/pcm","rate":22050,"channels":1,"format":"s16le"}"#,
         )
         .await?;

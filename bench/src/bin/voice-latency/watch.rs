@@ -1,6 +1,7 @@
 //! The observer: one hub client subscribed to `Agent.transcript`, `Agent.rules` and `Agent.speech`, stamping each
 //! message with the wall time it arrived, and the measurement of a single hub hop.
 
+use agent_contract::channels as ch;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
@@ -28,9 +29,9 @@ enum Seen {
 impl Watcher {
     pub async fn start(client: &Client) -> anyhow::Result<Watcher> {
         Ok(Watcher {
-            transcript: client.subscribe("Agent.transcript").await?,
-            rules: client.subscribe("Agent.rules").await?,
-            speech: client.subscribe("Agent.speech").await?,
+            transcript: client.subscribe(ch::TRANSCRIPT.name).await?,
+            rules: client.subscribe(ch::RULES.name).await?,
+            speech: client.subscribe(ch::SPEECH.name).await?,
             last_speech: None,
         })
     }

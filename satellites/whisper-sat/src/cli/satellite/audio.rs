@@ -10,6 +10,7 @@
 //! Besides utterances the thread reports voice activity (start and end of speech) on a broadcast channel; only
 //! the transcript relay listens to it, so with several satellites each change is published once.
 
+use agent_contract::channels;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc as std_mpsc;
@@ -200,7 +201,7 @@ pub async fn follow_audio(
         while !*enabled.borrow_and_update() {
             enabled.changed().await?;
         }
-        let sub = client.subscribe("Agent.audio").await?;
+        let sub = client.subscribe(channels::AUDIO.name).await?;
         tracing::info!("ASR enabled: listening to Agent.audio");
         loop {
             tokio::select! {
@@ -225,7 +226,7 @@ pub async fn follow_audio(
 
 /// Follows `Agent.ctrl` for `{"asr": true|false}`.
 pub async fn follow_ctrl(client: Client, enabled: watch::Sender<bool>) -> anyhow::Result<()> {
-    let sub = client.subscribe("Agent.ctrl").await?;
+    let sub = client.subscribe(channels::CTRL.name).await?;
     while let Some(d) = sub.recv().await {
         match serde_json::from_slice::<serde_json::Value>(&d.payload) {
             Ok(v) => {

@@ -310,7 +310,7 @@ impl Satellite {
             }
             Ok(ClientEvent::ChannelRemoved { name, .. }) => {
                 self.peers.remove(&name);
-                if name == "Agent.audio" {
+                if name == agent_contract::channels::AUDIO.name {
                     self.listener.send(audio::Feed::Flush);
                 }
                 if let Some(id) = claim::claimed_utterance(&name) {

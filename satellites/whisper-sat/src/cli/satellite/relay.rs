@@ -19,8 +19,8 @@ use whisper_sat::ledger::SAME_SPEECH_US;
 use whisper_sat::transcript::{TranscriptMessage, VadMessage};
 
 /// The service that accepts transcripts for publication.
-pub const SUBMIT: &str = "Agent.asr.submit";
-pub const TRANSCRIPT: &str = "Agent.transcript";
+pub const SUBMIT: &str = agent_contract::channels::ASR_SUBMIT.name;
+pub const TRANSCRIPT: &str = agent_contract::channels::TRANSCRIPT.name;
 
 /// Takes the relay role whenever it is free, until the client shuts down.
 pub async fn relay(
@@ -31,7 +31,7 @@ pub async fn relay(
     let mut events = client.events();
     loop {
         match client
-            .publisher(TRANSCRIPT, r#"{"mime":"application/json"}"#)
+            .publisher(TRANSCRIPT, agent_contract::channels::headers::TRANSCRIPT)
             .await
         {
             Ok(publisher) => {
