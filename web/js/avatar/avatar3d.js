@@ -21,7 +21,7 @@ const CALM_FRAME_MS = 32;
 const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
 const FRAME_LOG = 1200; // frames whose cost the debug hook keeps, as avatar.js does
 const MIN_PIXEL_RATIO = 0.45; // below this the head turns visibly blurry; slower machines get fewer frames
-const VIEW_HEIGHT_M = 0.42; // what the stage shows of the avatar: hair to upper chest, like the 2D face
+const VIEW_HEIGHT_M = 0.36; // what the stage shows of the avatar: hair to upper chest, like the 2D face
 
 export class Avatar3D {
   /** Loads the model from `url`; rejects when WebGL or the model is unavailable (the caller falls back to 2D). */
@@ -129,7 +129,7 @@ export class Avatar3D {
 
     this.camera = new THREE.PerspectiveCamera(22, 1, 0.05, 5);
     const c = this.extras.eyeCentre ?? [0, 0.16, 0.08];
-    this.lookY = c[1] - 0.04;
+    this.lookY = c[1] - 0.012; // centred just below the eyes, as the 2D face's 1000-unit box is
     this.size = { w: 0, h: 0 };
     const fit = () => {
       const w = canvas.clientWidth;
