@@ -195,7 +195,10 @@ impl Agent {
             },
         )
         .await?;
-        agent.output.wait_for(ready, 1, crate::PATIENCE).await?;
+        agent
+            .output
+            .wait_for(ready, 1, crate::wait::PATIENCE)
+            .await?;
         Ok(agent)
     }
 

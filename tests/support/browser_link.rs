@@ -55,10 +55,10 @@ enabled = false
 ";
 
 /// Starts a robot-agent with [`LINK_ONLY_CONFIG`] in `data`.
-pub async fn start_link_only(data: &crate::DataDir) -> anyhow::Result<crate::Agent> {
-    let opts = crate::AgentOptions {
+pub async fn start_link_only(data: &crate::agent::DataDir) -> anyhow::Result<crate::agent::Agent> {
+    let opts = crate::agent::AgentOptions {
         config: Some(LINK_ONLY_CONFIG.into()),
         ..Default::default()
     };
-    crate::Agent::start_with(data, opts).await
+    crate::agent::Agent::start_with(data, opts).await
 }

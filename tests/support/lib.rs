@@ -18,8 +18,5 @@ pub use binaries::{binary, command, run};
 pub use fixtures::fixture;
 pub use raw::RawConn;
 pub use satellite::Satellite;
+pub use wait::PATIENCE;
 pub use wait::{recv, until_subscribed, until_unsubscribed};
-
-/// A generous bound for anything a test waits on: the machine may be busy
-/// building other crates, and tests never assert on durations.
-pub const PATIENCE: std::time::Duration = std::time::Duration::from_secs(30);

@@ -6,7 +6,8 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::process::Child;
 
-use crate::{Agent, command};
+use crate::agent::Agent;
+use crate::binaries::command;
 
 /// Loading the model and joining may take long on a machine busy building.
 pub const SATELLITE_PATIENCE: Duration = Duration::from_secs(120);

@@ -7,7 +7,8 @@
 //! less.
 //!
 //! The task holds the state only weakly and is aborted when the hub is dropped; it is started again by the next
-//! call if the runtime it ran on has gone.
+//! call if the runtime it ran on has gone. It knows the hub's state only as a type and a function that fails what
+//! is due, so that this file does not import the hub that uses it.
 
 use std::collections::BTreeSet;
 use std::sync::{Arc, Mutex, Weak};
@@ -16,8 +17,6 @@ use std::time::{Duration, Instant};
 use flow::protocol::CallId;
 use tokio::sync::Notify;
 use tokio::task::JoinHandle;
-
-use super::{State, lock_state};
 
 /// The longest a caller may ask to wait; longer requests are cut to this. Also keeps `Instant` arithmetic far from
 /// overflow.
@@ -44,13 +43,13 @@ impl CallTimer {
     /// Tells the timer that the earliest deadline moved earlier, starting the timer task if none runs. Outside a
     /// Tokio runtime (the hub's synchronous unit tests) nothing is started: deadlines are then met only by
     /// explicit `Hub::expire_due` calls.
-    pub(super) fn earlier(&self, state: &Arc<Mutex<State>>) {
+    pub(super) fn earlier<S: Send + 'static>(&self, state: &Arc<Mutex<S>>, expire: Expire<S>) {
         let mut task = self.task.lock().unwrap_or_else(|p| p.into_inner());
         // A task whose runtime shut down reports itself finished; the hub outlived it, so start another.
         if task.as_ref().is_none_or(JoinHandle::is_finished)
             && let Ok(runtime) = tokio::runtime::Handle::try_current()
         {
-            *task = Some(runtime.spawn(run(Arc::downgrade(state), self.bell.clone())));
+            *task = Some(runtime.spawn(run(Arc::downgrade(state), self.bell.clone(), expire)));
         }
         // A permit is stored if the task is not waiting right now, so this wake-up is never lost.
         self.bell.notify_one();
@@ -72,15 +71,19 @@ impl CallTimer {
     }
 }
 
+/// Fails the calls of state `S` that are due at the given instant; returns the next deadline, if any.
+pub(super) type Expire<S> = fn(&mut S, Instant) -> Option<Instant>;
+
 /// The timer task: fail what is due, then sleep until the next deadline or until told of an earlier one.
-async fn run(state: Weak<Mutex<State>>, bell: Arc<Notify>) {
+async fn run<S>(state: Weak<Mutex<S>>, bell: Arc<Notify>, expire: Expire<S>) {
     loop {
         let next = {
             let Some(state) = state.upgrade() else {
                 return;
             };
-            let mut st = lock_state(&state);
-            super::expire_due_locked(&mut st, Instant::now())
+            // The state's own mutations keep it consistent across a panic, as the hub's lock helper assumes.
+            let mut st = state.lock().unwrap_or_else(|p| p.into_inner());
+            expire(&mut st, Instant::now())
         };
         match next {
             Some(at) => {

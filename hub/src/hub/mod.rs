@@ -471,7 +471,7 @@ impl Hub {
         drop(st);
         if earliest {
             // The timer sleeps until a later deadline, or not at all: wake it.
-            self.timer.earlier(&self.state);
+            self.timer.earlier(&self.state, expire_due_locked);
         }
         Ok(call)
     }

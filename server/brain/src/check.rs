@@ -4,11 +4,11 @@
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
 
+use crate::capabilities::{Capabilities, SAID, said_decl};
 use crate::clock;
 use crate::error::Diagnostic;
 use crate::expr::{FUNCTIONS, function_arity};
 use crate::parser::Parsed;
-use crate::program::{Capabilities, SAID, said_decl};
 use crate::syntax::{
     ActionExpr, CompareOp, Decl, DeclKind, Expr, Guard, Pos, Primitive, Procedure, Rule,
     TemplatePart,

@@ -8,6 +8,7 @@
 //! never reads a clock: time comes in with each call, which keeps it deterministic and testable.
 
 mod action;
+mod capabilities;
 mod check;
 mod clock;
 mod echo;

@@ -7,25 +7,9 @@ use std::time::Duration;
 use crate::check::Checker;
 use crate::error::LoadError;
 use crate::parser::parse;
-use crate::syntax::{ArgType, Decl, DeclKind, Expr, Guard, Pos, Procedure, Temporal};
+use crate::syntax::{Decl, Expr, Guard, Procedure, Temporal};
 
-/// What the host lets programs do beyond speaking and publishing: the names of the commands it may `run`.
-#[derive(Debug, Clone, Default)]
-pub struct Capabilities {
-    /// Whitelisted command names; the host maps each to a fixed command line.
-    pub commands: BTreeSet<String>,
-}
-
-impl Capabilities {
-    pub fn with_commands<I: IntoIterator<Item = S>, S: Into<String>>(commands: I) -> Self {
-        Capabilities {
-            commands: commands.into_iter().map(Into::into).collect(),
-        }
-    }
-}
-
-/// The belief the engine keeps by itself: the text of the last `say`, for "repeat that".
-pub const SAID: &str = "said";
+pub use crate::capabilities::{Capabilities, SAID};
 
 /// A checked program, ready to run.
 #[derive(Debug, Clone)]
@@ -125,18 +109,6 @@ impl Program {
         self.windows = windows;
         self.holds = holds;
         self.reads_clock = reads_clock;
-    }
-}
-
-/// The implicit declaration of `said(text)`, added unless the program declares it itself.
-pub(crate) fn said_decl() -> Decl {
-    Decl {
-        name: SAID.to_owned(),
-        kind: DeclKind::Belief,
-        args: vec![ArgType::Text],
-        event: false,
-        fresh: None,
-        pos: Pos::default(),
     }
 }
 

@@ -13,26 +13,26 @@ mod role;
 mod routes;
 mod session;
 mod socket;
+mod state;
 mod uplink;
 mod wire;
 
 use std::collections::HashMap;
 use std::sync::atomic::AtomicU64;
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
 use serde::Deserialize;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::watch;
 
 use crate::config::Config;
 use crate::module::{Module, ModuleContext, ModuleFuture};
 use crate::modules::audio_fft::AudioFftParams;
 
 use links::LinkBoard;
-use session::SessionLimits;
-
-use role::{PageId, RoleBoard};
-use session::SessionStore;
+use role::RoleBoard;
+use session::{SessionLimits, SessionStore};
+use state::Shared;
 
 /// Settings of the browser link, from `[modules.browser]` (and `[modules.video_y]` / `[modules.audio_fft]`).
 #[derive(Debug, Clone, Deserialize)]
@@ -64,34 +64,6 @@ fn section<T: serde::de::DeserializeOwned>(config: &Config, name: &str) -> anyho
     let value = config.module(name);
     serde_path_to_error::deserialize(value)
         .map_err(|e| anyhow::anyhow!("[modules.{name}] {}: {}", e.path(), e.inner()))
-}
-
-/// What one page's socket task is told by others.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Notice {
-    /// The holder left and this page, next in line, now holds the role.
-    Granted,
-}
-
-/// State shared by the HTTP handlers and every page's socket task.
-#[derive(Debug)]
-struct Shared {
-    /// The link's hub connection, set when the `browser` module starts.
-    client: OnceLock<flow::Client>,
-    links: Arc<Mutex<LinkBoard>>,
-    sessions: Mutex<SessionStore>,
-    session_ttl_s: u64,
-    roles: Mutex<RoleBoard>,
-    pages: Mutex<HashMap<PageId, mpsc::Sender<Notice>>>,
-    next_page: AtomicU64,
-    fft_hop: usize,
-    shutdown: watch::Receiver<bool>,
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    // A panic while holding one of these locks leaves plain data behind (no invariants span a panic), so the
-    // poisoned state is still usable.
-    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// The browser link, ready to be mounted into the HTTP app and started as modules.

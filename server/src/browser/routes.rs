@@ -14,7 +14,8 @@ use axum::routing::{get, post};
 use serde::Deserialize;
 
 use super::links::{LinkBoard, LinkSlot};
-use super::{Shared, assets, lock, socket, wire};
+use super::state::{Shared, lock};
+use super::{assets, socket, wire};
 use crate::http::access::{Credential, header_str as header, same_origin};
 
 pub fn router(shared: Arc<Shared>) -> Router {

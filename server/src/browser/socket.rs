@@ -15,9 +15,9 @@ use tracing::Instrument;
 use super::downlink::Downlink;
 use super::pacing::FpsAdvice;
 use super::role::{Claim, PageId};
+use super::state::{Notice, Shared, lock};
 use super::uplink::Uplink;
 use super::wire::{self, Dropped, FrameKind, PageMessage, PageText, RoleState};
-use super::{Notice, Shared, lock};
 use crate::modules::spectrum;
 
 /// Messages waiting for the page's socket; producers wait for room (see `downlink`), so this bounds memory.
