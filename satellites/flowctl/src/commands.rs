@@ -1,5 +1,6 @@
 //! The flowctl subcommands.
 
+use clap::Subcommand;
 use std::io::Write;
 use std::path::Path;
 use std::time::Duration;
@@ -10,8 +11,32 @@ use flow::{Client, ErrorCode, FlowError, Publisher};
 use tokio::io::AsyncBufReadExt;
 use tokio::time::Instant;
 
-use crate::DbOp;
 use crate::wav::RATE;
+
+/// `flowctl db`: the pair-database operations.
+#[derive(Debug, Subcommand)]
+pub enum DbOp {
+    /// List the variables of the database.
+    List,
+    Get {
+        key: String,
+    },
+    Set {
+        key: String,
+        json: String,
+    },
+    Del {
+        key: String,
+    },
+    /// List the databases.
+    Dbs,
+    Create {
+        name: String,
+    },
+    Drop {
+        name: String,
+    },
+}
 
 pub async fn channels(client: &Client, json: bool) -> anyhow::Result<()> {
     let list = client.channels().await?;

@@ -108,31 +108,7 @@ enum Cmd {
         #[arg(long)]
         db: Option<String>,
         #[command(subcommand)]
-        op: DbOp,
-    },
-}
-
-#[derive(Debug, Subcommand)]
-enum DbOp {
-    /// List the variables of the database.
-    List,
-    Get {
-        key: String,
-    },
-    Set {
-        key: String,
-        json: String,
-    },
-    Del {
-        key: String,
-    },
-    /// List the databases.
-    Dbs,
-    Create {
-        name: String,
-    },
-    Drop {
-        name: String,
+        op: commands::DbOp,
     },
 }
 

@@ -42,13 +42,14 @@ impl VoiceSettings {
     }
 
     /// Checks every field against the range espeak-ng accepts, naming the first bad one.
-    pub fn validate(&self) -> Result<(), crate::VoiceError> {
-        let invalid =
-            |name: &'static str, value: String, reason: &str| crate::VoiceError::InvalidSetting {
+    pub fn validate(&self) -> Result<(), crate::error::VoiceError> {
+        let invalid = |name: &'static str, value: String, reason: &str| {
+            crate::error::VoiceError::InvalidSetting {
                 name,
                 value,
                 reason: reason.to_owned(),
-            };
+            }
+        };
         let name_ok = !self.voice.is_empty()
             && self.voice.len() <= 40
             && self

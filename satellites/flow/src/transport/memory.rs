@@ -3,8 +3,8 @@
 
 use tokio::io::{DuplexStream, ReadHalf, WriteHalf};
 
-use super::Transport;
 use super::stream::{StreamReader, StreamWriter};
+use super::traits::Transport;
 
 /// Bytes buffered in each direction before the writer waits (back-pressure).
 const PIPE_BYTES: usize = 4 * 1024 * 1024;

@@ -6,7 +6,6 @@
 //! WebSocket transport hands over each binary message's bytes in order, so one
 //! message may hold several frames or part of one.
 
-use std::future::Future;
 use std::io;
 
 use bytes::{Bytes, BytesMut};
@@ -15,58 +14,12 @@ pub mod addr;
 pub mod memory;
 pub mod stream;
 pub mod tcp;
+mod traits;
 pub mod unix;
 pub mod ws;
 
 pub use addr::FlowAddr;
-
-/// The largest WebSocket message either side of a `/flow` link sends or accepts. FlowProtocol over WebSocket is a
-/// byte stream cut into binary messages, so a large frame travels as several messages; the cap keeps what a peer
-/// can make the other side buffer before a single frame is checked small (WebSocket libraries collect a whole
-/// message before handing it over).
-pub const WS_MESSAGE_MAX: usize = 256 * 1024;
-
-/// A bidirectional link that can be split into independent halves, so that
-/// reading and writing run in separate tasks.
-pub trait Transport: Send + 'static {
-    type Reader: TransportRead;
-    type Writer: TransportWrite;
-    /// Who is on the other side, for logs.
-    fn peer(&self) -> String;
-    fn split(self) -> (Self::Reader, Self::Writer);
-}
-
-/// The receiving half.
-pub trait TransportRead: Send + 'static {
-    /// Appends the next received bytes to `buf`; `Ok(0)` means the peer closed.
-    fn read_into(&mut self, buf: &mut BytesMut) -> impl Future<Output = io::Result<usize>> + Send;
-}
-
-/// The sending half.
-pub trait TransportWrite: Send + 'static {
-    /// Sends all of `data` (one or more whole frames).
-    fn write_all(&mut self, data: &[u8]) -> impl Future<Output = io::Result<()>> + Send;
-    /// Sends `chunks` in order as if they were one buffer (together one or
-    /// more whole frames). This default joins them and makes one
-    /// [`TransportWrite::write_all`], so a message-based transport still sends
-    /// one message per flush; byte streams override it with vectored writes,
-    /// so that large payloads go out from their shared buffers uncopied.
-    /// The chunks may be left partly consumed.
-    fn write_all_chunks(
-        &mut self,
-        chunks: &mut [Bytes],
-    ) -> impl Future<Output = io::Result<()>> + Send {
-        async move {
-            match chunks {
-                [] => Ok(()),
-                [one] => self.write_all(one).await,
-                many => self.write_all(&many.concat()).await,
-            }
-        }
-    }
-    /// Closes the sending direction after flushing.
-    fn shutdown(&mut self) -> impl Future<Output = io::Result<()>> + Send;
-}
+pub use traits::{Transport, TransportRead, TransportWrite, WS_MESSAGE_MAX};
 
 /// Any client-side transport, chosen at run time from a [`FlowAddr`].
 #[derive(Debug)]

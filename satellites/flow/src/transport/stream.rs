@@ -5,7 +5,7 @@ use std::io::{self, IoSlice};
 use bytes::{Buf, Bytes, BytesMut};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 
-use super::{TransportRead, TransportWrite};
+use super::traits::{TransportRead, TransportWrite};
 
 /// Read size hint: big enough to take several video frames per system call.
 const READ_CHUNK: usize = 64 * 1024;

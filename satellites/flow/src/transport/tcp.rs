@@ -5,8 +5,8 @@ use std::io;
 use tokio::net::TcpStream;
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 
-use super::Transport;
 use super::stream::{StreamReader, StreamWriter};
+use super::traits::Transport;
 
 /// A TCP connection carrying FlowProtocol frames.
 #[derive(Debug)]

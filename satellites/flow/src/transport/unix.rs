@@ -6,8 +6,8 @@ use std::path::Path;
 use tokio::net::UnixStream;
 use tokio::net::unix::{OwnedReadHalf, OwnedWriteHalf};
 
-use super::Transport;
 use super::stream::{StreamReader, StreamWriter};
+use super::traits::Transport;
 
 /// A Unix-socket connection carrying FlowProtocol frames.
 #[derive(Debug)]

@@ -10,7 +10,7 @@ use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::protocol::WebSocketConfig;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
 
-use super::{Transport, TransportRead, TransportWrite, WS_MESSAGE_MAX};
+use super::traits::{Transport, TransportRead, TransportWrite, WS_MESSAGE_MAX};
 
 type Ws = WebSocketStream<MaybeTlsStream<TcpStream>>;
 
