@@ -1,8 +1,9 @@
 //! The agent's contract: every `Agent.*` channel's name, kind and header ([`channels`]) and the messages they carry
-//! ([`detections`]), in one place that every producer and consumer uses. The page is held to the same shapes by the
+//! ([`detections`], [`avatar`]), in one place that every producer and consumer uses. The page is held to the same shapes by the
 //! JSON test vectors in `contract/vectors/`, which a test here writes from these types and the page's `node --test`
 //! suites read (`web/test/`).
 
+pub mod avatar;
 pub mod channels;
 pub mod detections;
 pub mod vectors;

@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use crate::avatar::{AvatarCommand, VISEMES, VisemeCue};
 use crate::detections::{
     BoxMsg, CodeMsg, CountersMsg, DetectionsMsg, FrameRef, GazeCommand, GazeMsg, MotionMsg,
     PointMsg, TimingMsg,
@@ -141,6 +142,52 @@ pub fn detections() -> serde_json::Value {
     })
 }
 
+/// `Agent.avatar`: one command of each kind, as the TTS module and the behaviour controllers send them.
+pub fn avatar() -> serde_json::Value {
+    let cue = |t_ms: f64, v: &str| VisemeCue {
+        t_ms,
+        v: v.to_owned(),
+    };
+    let commands = vec![
+        AvatarCommand::Blink {
+            close_ms: 70,
+            hold_ms: 40,
+            open_ms: 150,
+        },
+        AvatarCommand::Gaze {
+            x: 0.9,
+            y: 0.3,
+            source: Some("face".into()),
+            seq: None,
+        },
+        AvatarCommand::Mood {
+            mood: "happy".into(),
+            intensity: 0.8,
+        },
+        AvatarCommand::Visemes {
+            utterance: 7,
+            items: vec![
+                cue(0.0, "sil"),
+                cue(62.5, "PP"),
+                cue(180.0, "aa"),
+                cue(420.0, "O"),
+                cue(610.0, "FF"),
+                cue(800.0, "sil"),
+            ],
+        },
+        AvatarCommand::SpeechStop { utterance: Some(7) },
+        AvatarCommand::SpeechStop { utterance: None },
+        AvatarCommand::Say {
+            text: "Hello! Nice to see you.".into(),
+        },
+    ];
+    serde_json::json!({
+        "channel": crate::channels::AVATAR.name,
+        "commands": commands,
+        "visemes": VISEMES,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,5 +201,20 @@ mod tests {
             assert!(parsed.frame.width > 0);
         }
         check_or_write("detections", &v).expect("vectors");
+    }
+
+    #[test]
+    fn avatar_vectors_match_the_types() {
+        let v = avatar();
+        for c in v["commands"].as_array().expect("commands") {
+            let parsed: AvatarCommand =
+                serde_json::from_value(c.clone()).expect("a contract command");
+            assert_eq!(
+                &serde_json::to_value(&parsed).expect("json"),
+                c,
+                "round trip"
+            );
+        }
+        check_or_write("avatar", &v).expect("vectors");
     }
 }

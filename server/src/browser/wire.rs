@@ -189,6 +189,47 @@ pub struct Dropped {
 mod tests {
     use super::*;
 
+    fn hex(bytes: &[u8]) -> String {
+        bytes.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The binary frame layouts as hex, for the page's `frames.js` tests (contract/vectors/frames.json): what the
+    /// page sends is parsed here, what the server sends is encoded here.
+    #[test]
+    fn frame_vectors_match_the_link_codec() {
+        let pcm: Vec<u8> = [0i16, 1000, -1000, i16::MAX]
+            .iter()
+            .flat_map(|s| s.to_le_bytes())
+            .collect();
+        let audio = encode_frame(FrameKind::Audio, 5, &[&pcm]);
+        let parsed = parse_media(audio.clone()).expect("an audio frame");
+        assert_eq!((parsed.kind, parsed.seq), (FrameKind::Audio, 5));
+        let jpeg = [0xFFu8, 0xD8, 0xFF, 0xE0, 0x00, 0x10];
+        let video = encode_frame(FrameKind::Video, 70_000, &[&jpeg]);
+        assert_eq!(
+            parse_media(video.clone()).expect("a video frame").seq,
+            70_000
+        );
+        let speech_head: Vec<u8> = [7u32, 441].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let speech = encode_frame(FrameKind::Speech, 9, &[&speech_head, &pcm]);
+        let bins: Vec<u8> = [0.0f32, 0.5, 1.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let spectrum = encode_frame(FrameKind::Spectrum, 3, &[&bins]);
+        let v = serde_json::json!({
+            "header_bytes": HEADER_BYTES,
+            "version": VERSION,
+            "frames": [
+                {"name": "audio", "kind": FrameKind::Audio as u8, "seq": 5, "hex": hex(&audio), "pcm": [0, 1000, -1000, 32767]},
+                {"name": "video", "kind": FrameKind::Video as u8, "seq": 70000, "hex": hex(&video), "payload_hex": hex(&jpeg)},
+                {"name": "speech", "kind": FrameKind::Speech as u8, "seq": 9, "hex": hex(&speech), "utterance": 7, "offset": 441, "pcm": [0, 1000, -1000, 32767]},
+                {"name": "spectrum", "kind": FrameKind::Spectrum as u8, "seq": 3, "hex": hex(&spectrum), "bins": [0.0, 0.5, 1.0]},
+            ],
+        });
+        agent_contract::vectors::check_or_write("frames", &v).expect("vectors");
+    }
+
     fn frame(kind: u8, version: u8, payload: &[u8]) -> Bytes {
         let mut v = vec![kind, version, 0, 0, 7, 0, 0, 0];
         v.extend_from_slice(payload);

@@ -1,3 +1,4 @@
+// @ts-check
 //! Eyelid motion: blinks in three phases (close, hold, open) at distinct speeds, and the page's own random blinking.
 //
 // Closing is fast and accelerates, opening is slower and decelerates, as in a real blink. The page blinks on its

@@ -1,3 +1,4 @@
+// @ts-check
 //! Where the avatar looks: the eyes jump to a target quickly (a saccade), the head follows more slowly and by less.
 //
 // Targets come in camera-image coordinates (0..1, origin top-left). The avatar faces the person the camera sees,

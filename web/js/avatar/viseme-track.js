@@ -1,3 +1,4 @@
+// @ts-check
 //! A timeline of visemes on the audio clock: which mouth shape is due at a given audio time.
 //
 // Items are stored with absolute audio-clock times (seconds), so lips follow the sound that WebAudio actually

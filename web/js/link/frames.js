@@ -1,3 +1,4 @@
+// @ts-check
 //! Binary frame layout of the browser link (docs/browser-link.md, section 2): an 8-byte header, then the payload.
 
 export const KIND = Object.freeze({

@@ -2,6 +2,7 @@
 //! detections it follows, and the `Agent.speech` / `Agent.avatar` messages it publishes (docs/voice.md,
 //! docs/browser-link.md). Everything inside the module works on the plain types defined here.
 
+use agent_contract::avatar;
 use agent_contract::detections::DetectionsMsg;
 use agent_voice::Viseme;
 use bytes::{BufMut, Bytes, BytesMut};
@@ -230,37 +231,48 @@ pub enum AvatarCommand {
 }
 
 impl AvatarCommand {
-    pub fn to_json(&self) -> Bytes {
-        let value = match self {
+    /// The command as the contract's `Agent.avatar` message.
+    pub fn to_contract(&self) -> avatar::AvatarCommand {
+        match self {
             AvatarCommand::Blink {
                 close_ms,
                 hold_ms,
                 open_ms,
-            } => {
-                json!({ "cmd": "blink", "close_ms": close_ms, "hold_ms": hold_ms, "open_ms": open_ms })
-            }
-            AvatarCommand::Gaze { x, y, source } => {
-                json!({ "cmd": "gaze", "x": round3(*x), "y": round3(*y), "source": source })
-            }
-            AvatarCommand::Mood { mood, intensity } => {
-                json!({ "cmd": "mood", "mood": mood, "intensity": round3(*intensity) })
-            }
-            AvatarCommand::Visemes { utterance, items } => {
-                let items: Vec<serde_json::Value> = items
+            } => avatar::AvatarCommand::Blink {
+                close_ms: *close_ms,
+                hold_ms: *hold_ms,
+                open_ms: *open_ms,
+            },
+            AvatarCommand::Gaze { x, y, source } => avatar::AvatarCommand::Gaze {
+                x: round3(*x),
+                y: round3(*y),
+                source: Some((*source).to_owned()),
+                seq: None,
+            },
+            AvatarCommand::Mood { mood, intensity } => avatar::AvatarCommand::Mood {
+                mood: (*mood).to_owned(),
+                intensity: round3(*intensity),
+            },
+            AvatarCommand::Visemes { utterance, items } => avatar::AvatarCommand::Visemes {
+                utterance: *utterance,
+                items: items
                     .iter()
-                    .map(|(t_ms, viseme)| json!({ "t_ms": (t_ms * 10.0).round() / 10.0, "v": viseme.name() }))
-                    .collect();
-                json!({ "cmd": "visemes", "utterance": utterance, "items": items })
-            }
-            AvatarCommand::SpeechStop {
-                utterance: Some(utterance),
-            } => {
-                json!({ "cmd": "speech_stop", "utterance": utterance })
-            }
-            AvatarCommand::SpeechStop { utterance: None } => json!({ "cmd": "speech_stop" }),
-            AvatarCommand::Say { text } => json!({ "cmd": "say", "text": text }),
-        };
-        Bytes::from(value.to_string())
+                    .map(|(t_ms, viseme)| avatar::VisemeCue {
+                        t_ms: (t_ms * 10.0).round() / 10.0,
+                        v: viseme.name().to_owned(),
+                    })
+                    .collect(),
+            },
+            AvatarCommand::SpeechStop { utterance } => avatar::AvatarCommand::SpeechStop {
+                utterance: *utterance,
+            },
+            AvatarCommand::Say { text } => avatar::AvatarCommand::Say { text: text.clone() },
+        }
+    }
+
+    pub fn to_json(&self) -> Bytes {
+        // Serialising plain data with string keys cannot fail.
+        Bytes::from(serde_json::to_vec(&self.to_contract()).unwrap_or_default())
     }
 }
 
@@ -366,9 +378,10 @@ mod tests {
             utterance: 2,
             items: vec![(0.0, Viseme::Sil), (62.35, Viseme::U)],
         };
+        let sent: serde_json::Value = serde_json::from_slice(&visemes.to_json()).expect("json");
         assert_eq!(
-            visemes.to_json(),
-            r#"{"cmd":"visemes","items":[{"t_ms":0.0,"v":"sil"},{"t_ms":62.4,"v":"U"}],"utterance":2}"#
+            sent,
+            json!({"cmd":"visemes","items":[{"t_ms":0.0,"v":"sil"},{"t_ms":62.4,"v":"U"}],"utterance":2})
         );
         assert_eq!(
             AvatarCommand::SpeechStop { utterance: None }.to_json(),
