@@ -9,143 +9,38 @@
 //! exist yet, or that is removed and later re-created, delivers its data as soon
 //! as it (re)appears.
 
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use bytes::{Bytes, BytesMut};
-use tokio::sync::{broadcast, mpsc, oneshot, watch};
+use bytes::Bytes;
+use tokio::sync::{broadcast, mpsc, watch};
 
 use crate::error::FlowError;
-use crate::protocol::{
-    ChanId, ChanRef, ChannelInfo, ChannelKind, Command, DEFAULT_MAX_FRAME, Envelope, ErrorCode,
-    Reply, ReqId, encode_command,
-};
+use crate::protocol::{ChanRef, ChannelInfo, ChannelKind, Command, ErrorCode, Reply, ReqId};
 use crate::queue::lock;
 use crate::transport::{FlowAddr, Link};
 
+mod core;
+mod frame;
+mod inbox;
+mod options;
+mod owned;
 mod publisher;
 mod session;
 mod subscription;
 
-pub use publisher::{Publisher, Service, ServiceCall};
-pub use subscription::{Data, Subscription};
+pub use self::core::Client;
+pub use inbox::Data;
+pub use options::{ClientEvent, ConnectOptions, SessionInfo};
+pub use owned::ServiceCall;
+pub use publisher::{Publisher, Service};
+pub use subscription::Subscription;
 
-use publisher::Owned;
-use subscription::SubShared;
-
-/// How to log in and behave.
-#[derive(Debug, Clone)]
-pub struct ConnectOptions {
-    /// Login name, shown as the owner of this client's channels.
-    pub name: String,
-    pub token: String,
-    /// Switch to asynchronous mode after login so events flow (satellites want this).
-    pub asynchronous: bool,
-    /// Reconnect after a lost connection, restoring channels and subscriptions.
-    pub reconnect: bool,
-    pub max_frame: usize,
-    /// Capacity of each subscription's drop-oldest queue.
-    pub queue: usize,
-    /// How long to wait for a reply to an ordinary command.
-    pub request_timeout: Duration,
-}
-
-impl ConnectOptions {
-    pub fn new(name: impl Into<String>, token: impl Into<String>) -> Self {
-        ConnectOptions {
-            name: name.into(),
-            token: token.into(),
-            asynchronous: true,
-            reconnect: true,
-            max_frame: DEFAULT_MAX_FRAME,
-            queue: 64,
-            request_timeout: Duration::from_secs(10),
-        }
-    }
-}
-
-/// What the client observed, for whoever listens on [`Client::events`].
-#[derive(Debug, Clone, PartialEq)]
-pub enum ClientEvent {
-    Connected,
-    Disconnected(String),
-    ChannelAdded(ChannelInfo),
-    ChannelRemoved {
-        id: ChanId,
-        name: String,
-    },
-    HeaderChanged {
-        id: ChanId,
-        name: String,
-        header: String,
-    },
-    DbChanged(String),
-    /// The answer to [`Client::call_async`], matched by its request id.
-    CallResult {
-        req: ReqId,
-        result: Result<Bytes, FlowError>,
-    },
-    Goodbye(String),
-}
-
-/// Facts from the login reply.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SessionInfo {
-    pub conn: u32,
-    pub admin: bool,
-    pub server: String,
-}
-
-/// Handle on a hub connection. Clones share the connection.
-#[derive(Debug, Clone)]
-pub struct Client {
-    inner: Arc<Inner>,
-}
-
-/// What runs after a reply arrives, inside the reader, before anything else is
-/// read: so that data following a subscribe reply finds its subscription.
-#[derive(Debug)]
-enum Hook {
-    Subscribed(String),
-    Added(Arc<Owned>),
-    CallAsync,
-}
-
-#[derive(Debug)]
-struct Pending {
-    tx: Option<oneshot::Sender<Result<Reply, FlowError>>>,
-    hook: Option<Hook>,
-}
-
-#[derive(Debug, Default)]
-struct State {
-    pending: HashMap<ReqId, Pending>,
-    subs: HashMap<String, Vec<Arc<SubShared>>>,
-    sub_ids: HashMap<ChanId, String>,
-    owned: HashMap<String, Arc<Owned>>,
-    owned_ids: HashMap<ChanId, Arc<Owned>>,
-    /// Start/stop-publishing news for a channel whose creation reply has not
-    /// been read yet: another client may subscribe as soon as it sees the
-    /// channel added, so the hub's news can overtake the reply.
-    early_listening: HashMap<ChanId, bool>,
-    db: Option<String>,
-    session: Option<SessionInfo>,
-}
-
-#[derive(Debug)]
-struct Inner {
-    opts: ConnectOptions,
-    addr: Option<FlowAddr>,
-    out: mpsc::Sender<OutFrame>,
-    state: Mutex<State>,
-    next_req: AtomicU32,
-    events: broadcast::Sender<ClientEvent>,
-    connected: watch::Sender<bool>,
-    closing: watch::Sender<bool>,
-    closed: AtomicBool,
-}
+use self::core::{Hook, Inner, State};
+use frame::check_json;
+use inbox::SubShared;
+use owned::Owned;
 
 /// Frames queued for the writer; a full queue makes `publish` wait and
 /// `try_publish` drop.
@@ -194,11 +89,6 @@ impl Client {
     /// Events seen on this connection (channel changes, reconnections, async call results).
     pub fn events(&self) -> broadcast::Receiver<ClientEvent> {
         self.inner.events.subscribe()
-    }
-
-    /// Whether the connection is up now.
-    pub fn is_connected(&self) -> bool {
-        *self.inner.connected.borrow()
     }
 
     /// Watches the connection state.
@@ -286,53 +176,6 @@ impl Client {
             }
         }
         Ok(Subscription::new(shared, self.clone()))
-    }
-
-    async fn activate_subscription(&self, name: &str) -> Result<(), FlowError> {
-        let cmd = Command::Subscribe {
-            chan: ChanRef::Name(name.to_string()),
-        };
-        self.request_hooked(cmd, Some(Hook::Subscribed(name.to_string())))
-            .await
-            .map(drop)
-    }
-
-    /// Called when a local subscription handle goes away.
-    fn release_subscription(&self, shared: &Arc<SubShared>) {
-        let name = shared.name.clone();
-        let now_unused = {
-            let mut state = lock(&self.inner.state);
-            let Some(list) = state.subs.get_mut(&name) else {
-                return;
-            };
-            list.retain(|s| !Arc::ptr_eq(s, shared));
-            if list.is_empty() {
-                state.subs.remove(&name);
-                state.sub_ids.retain(|_, n| *n != name);
-                true
-            } else {
-                false
-            }
-        };
-        if now_unused {
-            self.send_nowait(Command::Unsubscribe {
-                chan: ChanRef::Name(name),
-            });
-        }
-    }
-
-    /// Called when a publisher or service handle goes away.
-    fn release_owned(&self, owned: &Arc<Owned>) {
-        {
-            let mut state = lock(&self.inner.state);
-            state.owned.remove(&owned.name);
-            state.owned_ids.retain(|_, o| !Arc::ptr_eq(o, owned));
-        }
-        if let Some(id) = owned.id() {
-            self.send_nowait(Command::RemoveChannel {
-                chan: ChanRef::Id(id),
-            });
-        }
     }
 
     /// Every channel on the hub with its counters.
@@ -465,129 +308,6 @@ impl Client {
     pub async fn ping(&self) -> Result<(), FlowError> {
         self.request(Command::Ping).await.map(drop)
     }
-
-    // ------------------------------------------------------------ plumbing
-
-    /// Sends a command and waits for its reply.
-    pub async fn request(&self, cmd: Command) -> Result<Reply, FlowError> {
-        self.request_hooked(cmd, None).await
-    }
-
-    async fn request_hooked(&self, cmd: Command, hook: Option<Hook>) -> Result<Reply, FlowError> {
-        self.request_timeout(cmd, hook, self.inner.opts.request_timeout)
-            .await
-    }
-
-    async fn request_timeout(
-        &self,
-        cmd: Command,
-        hook: Option<Hook>,
-        timeout: Duration,
-    ) -> Result<Reply, FlowError> {
-        if self.inner.closed.load(Ordering::SeqCst) {
-            return Err(FlowError::Closed);
-        }
-        if !self.is_connected() {
-            return Err(FlowError::Disconnected("not connected".into()));
-        }
-        let (tx, rx) = oneshot::channel();
-        let req = self.register(Some(tx), hook);
-        if let Err(e) = self.send_frame(req, cmd).await {
-            lock(&self.inner.state).pending.remove(&req);
-            return Err(e);
-        }
-        match tokio::time::timeout(timeout, rx).await {
-            Ok(Ok(result)) => result,
-            Ok(Err(_)) => Err(FlowError::Disconnected(
-                "connection closed before the reply".into(),
-            )),
-            Err(_) => {
-                lock(&self.inner.state).pending.remove(&req);
-                Err(FlowError::Timeout(timeout))
-            }
-        }
-    }
-
-    fn register(
-        &self,
-        tx: Option<oneshot::Sender<Result<Reply, FlowError>>>,
-        hook: Option<Hook>,
-    ) -> ReqId {
-        let req = loop {
-            let req = self.inner.next_req.fetch_add(1, Ordering::Relaxed);
-            // Request id 0 means "no reply wanted"; skip it when the counter wraps.
-            if req != 0 {
-                break req;
-            }
-        };
-        lock(&self.inner.state)
-            .pending
-            .insert(req, Pending { tx, hook });
-        req
-    }
-
-    async fn send_frame(&self, req: ReqId, command: Command) -> Result<(), FlowError> {
-        let frame = encode(req, command);
-        self.inner
-            .out
-            .send(frame)
-            .await
-            .map_err(|_| FlowError::Closed)
-    }
-
-    /// Queues a fire-and-forget command without waiting; used from `Drop`.
-    fn send_nowait(&self, command: Command) {
-        if self.is_connected() {
-            // A full queue means the link is saturated; the hub cleans up after
-            // a disconnect anyway, so losing a release command is harmless.
-            let _ = self.inner.out.try_send(encode(0, command));
-        }
-    }
-}
-
-fn encode(req: ReqId, command: Command) -> OutFrame {
-    let mut buf = BytesMut::new();
-    encode_command(&Envelope { req, command }, &mut buf);
-    OutFrame {
-        head: buf.freeze(),
-        payload: Bytes::new(),
-    }
-}
-
-/// One frame on its way to the session's writer: encoded bytes, then a large
-/// publish's payload, which follows its header uncopied (the writer sends it
-/// from the caller's own buffer, as the hub does for subscribers).
-#[derive(Debug)]
-pub(crate) struct OutFrame {
-    head: Bytes,
-    payload: Bytes,
-}
-
-impl OutFrame {
-    /// A `Publish` on `chan`: the payload is copied next to its header when
-    /// small, and travels as its own piece when large.
-    fn publish(chan: ChanId, payload: Bytes) -> OutFrame {
-        if payload.len() < crate::connection::ZERO_COPY_MIN {
-            return encode(0, Command::Publish { chan, payload });
-        }
-        let mut head = BytesMut::with_capacity(16);
-        crate::protocol::codec::encode_publish_head(chan, payload.len(), &mut head);
-        OutFrame {
-            head: head.freeze(),
-            payload,
-        }
-    }
-
-    /// Hands the frame to `writer`'s next batch.
-    fn queue_on<W: crate::transport::TransportWrite>(
-        self,
-        writer: &mut crate::connection::FrameWriter<W>,
-    ) {
-        writer.queue_encoded(self.head);
-        if !self.payload.is_empty() {
-            writer.queue_encoded(self.payload);
-        }
-    }
 }
 
 fn call_command(name: &str, payload: Bytes, timeout: Duration) -> Command {
@@ -604,10 +324,4 @@ fn names(reply: Reply) -> Result<Vec<String>, FlowError> {
         Reply::Names(names) => Ok(names),
         _ => Err(FlowError::UnexpectedReply("list")),
     }
-}
-
-fn check_json(text: &str) -> Result<(), FlowError> {
-    serde_json::from_str::<serde_json::Value>(text)
-        .map(drop)
-        .map_err(|e| FlowError::Json(e.to_string()))
 }

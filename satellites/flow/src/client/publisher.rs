@@ -1,102 +1,16 @@
 //! Owning side of channels: publishers of streams and servers of services.
 
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use bytes::Bytes;
 use tokio::sync::{mpsc, watch};
 
-use super::{Client, OutFrame, encode};
+use super::core::Client;
+use super::frame::{OutFrame, check_json};
+use super::owned::{Owned, ServiceCall};
 use crate::error::FlowError;
-use crate::protocol::{CallId, ChanId, ChannelKind, Command};
+use crate::protocol::{ChanId, Command};
 use crate::queue::lock;
-
-/// A channel this client created, remembered so a reconnect can re-create it.
-#[derive(Debug)]
-pub(super) struct Owned {
-    pub(super) name: String,
-    kind: ChannelKind,
-    header: Mutex<String>,
-    /// Current id, or -1 while the channel does not exist on the hub.
-    id: AtomicI32,
-    listening: watch::Sender<bool>,
-    calls: Mutex<Option<mpsc::Sender<ServiceCall>>>,
-}
-
-impl Owned {
-    pub(super) fn new(
-        name: &str,
-        kind: ChannelKind,
-        header: &str,
-        calls: Option<mpsc::Sender<ServiceCall>>,
-    ) -> Self {
-        Owned {
-            name: name.to_string(),
-            kind,
-            header: Mutex::new(header.to_string()),
-            id: AtomicI32::new(-1),
-            listening: watch::channel(false).0,
-            calls: Mutex::new(calls),
-        }
-    }
-
-    pub(super) fn add_command(&self) -> Command {
-        Command::AddChannel {
-            kind: self.kind,
-            name: self.name.clone(),
-            header: lock(&self.header).clone(),
-        }
-    }
-
-    pub(super) fn id(&self) -> Option<ChanId> {
-        // The "no channel" marker -1 fits in an i16 too, so it must be excluded
-        // explicitly: only 0..=32767 are channel ids.
-        let raw = self.id.load(Ordering::Acquire);
-        if raw < 0 {
-            None
-        } else {
-            ChanId::try_from(raw).ok()
-        }
-    }
-
-    pub(super) fn set_id(&self, id: Option<ChanId>) {
-        self.id.store(id.map_or(-1, i32::from), Ordering::Release);
-        if id.is_none() {
-            self.set_listening(false);
-        }
-    }
-
-    pub(super) fn set_listening(&self, on: bool) {
-        self.listening.send_replace(on);
-    }
-
-    pub(super) fn deliver_call(&self, chan: ChanId, call: CallId, payload: Bytes, client: Client) {
-        let sender = lock(&self.calls).clone();
-        let Some(sender) = sender else { return };
-        let request = ServiceCall {
-            channel: chan,
-            call,
-            payload,
-            client: client.clone(),
-            answered: false,
-        };
-        if let Err(err) = sender.try_send(request) {
-            // The handler is this far behind (or gone): answer at once rather
-            // than let the caller wait for its timeout.
-            let mut request = err.into_inner();
-            request.answered = true;
-            let reply = Command::Respond {
-                call,
-                result: Err("service overloaded".into()),
-            };
-            let _ = client.inner.out.try_send(encode(0, reply));
-        }
-    }
-
-    pub(super) fn close(&self) {
-        lock(&self.calls).take();
-    }
-}
 
 /// Publishes on a streaming channel this client owns. Dropping it removes the channel.
 #[derive(Debug)]
@@ -173,7 +87,7 @@ impl Publisher {
 
     /// Replaces the channel's JSON header; everyone is told.
     pub async fn set_header(&self, header: &str) -> Result<(), FlowError> {
-        super::check_json(header)?;
+        check_json(header)?;
         *lock(&self.owned.header) = header.to_string();
         let chan = self
             .owned
@@ -229,48 +143,5 @@ impl Service {
 impl Drop for Service {
     fn drop(&mut self) {
         self.client.release_owned(&self.owned);
-    }
-}
-
-/// One request to a service; answer it with [`ServiceCall::respond`]. A call
-/// dropped unanswered is answered with an error, so no caller waits forever.
-#[derive(Debug)]
-pub struct ServiceCall {
-    pub channel: ChanId,
-    pub call: CallId,
-    pub payload: Bytes,
-    client: Client,
-    answered: bool,
-}
-
-impl ServiceCall {
-    /// Sends the response (or an error message) back to the caller.
-    pub async fn respond(mut self, result: Result<Bytes, String>) -> Result<(), FlowError> {
-        self.answered = true;
-        let frame = encode(
-            0,
-            Command::Respond {
-                call: self.call,
-                result,
-            },
-        );
-        self.client
-            .inner
-            .out
-            .send(frame)
-            .await
-            .map_err(|_| FlowError::Closed)
-    }
-}
-
-impl Drop for ServiceCall {
-    fn drop(&mut self) {
-        if !self.answered {
-            let reply = Command::Respond {
-                call: self.call,
-                result: Err("request dropped unanswered".into()),
-            };
-            let _ = self.client.inner.out.try_send(encode(0, reply));
-        }
     }
 }

@@ -8,7 +8,10 @@ use std::time::Duration;
 use tokio::sync::mpsc;
 use tracing::{debug, info, warn};
 
-use super::{ClientEvent, Hook, Inner, OutFrame, SessionInfo, encode};
+use super::core::{Client, Hook, Inner};
+use super::frame::{OutFrame, encode};
+use super::inbox::Data;
+use super::options::{ClientEvent, SessionInfo};
 use crate::connection::{Connection, FrameReader, FrameWriter};
 use crate::error::FlowError;
 use crate::protocol::{ChanRef, Command, ErrorCode, Event, PROTOCOL_VERSION, Reply, decode_event};
@@ -245,7 +248,7 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
                 .and_then(|name| state.subs.get(name))
             {
                 for sub in subs {
-                    sub.queue.push(super::Data {
+                    sub.queue.push(Data {
                         channel: chan,
                         seq,
                         ts_us,
@@ -261,11 +264,8 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
             payload,
         } => {
             let owned = lock(&inner.state).owned_ids.get(&chan).cloned();
-            let client = super::Client {
-                inner: inner.clone(),
-            };
             match owned {
-                Some(owned) => owned.deliver_call(chan, call, payload, client),
+                Some(owned) => owned.deliver_call(chan, call, payload, &inner.out),
                 None => {
                     let _ = inner.out.try_send(encode(
                         0,
@@ -294,7 +294,7 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
                     && !state.sub_ids.values().any(|n| *n == info.name)
             };
             if wanted {
-                let client = super::Client {
+                let client = Client {
                     inner: inner.clone(),
                 };
                 let name = info.name.clone();
@@ -412,7 +412,7 @@ fn close_all(inner: &Arc<Inner>) {
 
 /// Re-creates channels, the database selection and subscriptions after a reconnect.
 async fn restore_state(inner: Arc<Inner>) {
-    let client = super::Client {
+    let client = Client {
         inner: inner.clone(),
     };
     let (owned, subs, db) = {

@@ -1,44 +1,10 @@
 //! Receiving side of a subscription: a drop-oldest queue the client's reader fills.
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
-use bytes::Bytes;
-
-use super::Client;
-use crate::protocol::{ChanId, ChannelInfo};
-use crate::queue::{DropOldest, lock};
-
-/// One message from a streaming channel.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Data {
-    pub channel: ChanId,
-    /// Position on the channel, from 1; a gap means messages were dropped.
-    pub seq: u64,
-    /// Hub clock (µs since the Unix epoch) when the message was published.
-    pub ts_us: u64,
-    pub payload: Bytes,
-}
-
-#[derive(Debug)]
-pub(super) struct SubShared {
-    pub(super) name: String,
-    pub(super) queue: DropOldest<Data>,
-    info: Mutex<Option<ChannelInfo>>,
-}
-
-impl SubShared {
-    pub(super) fn new(name: &str, capacity: usize) -> Self {
-        SubShared {
-            name: name.to_string(),
-            queue: DropOldest::new(capacity),
-            info: Mutex::new(None),
-        }
-    }
-
-    pub(super) fn set_info(&self, info: ChannelInfo) {
-        *lock(&self.info) = Some(info);
-    }
-}
+use super::core::Client;
+use super::inbox::{Data, SubShared};
+use crate::protocol::ChannelInfo;
 
 /// A sticky subscription by channel name. Dropping it unsubscribes.
 #[derive(Debug)]
@@ -107,7 +73,7 @@ impl Subscription {
 
     /// The channel's properties as of the last (re)subscription, header included.
     pub fn info(&self) -> Option<ChannelInfo> {
-        lock(&self.shared.info).clone()
+        self.shared.info()
     }
 }
 
