@@ -6,6 +6,7 @@
 pub mod avatar;
 pub mod channels;
 pub mod detections;
+pub mod transcript;
 pub mod vectors;
 
 pub use channels::{Channel, Kind};

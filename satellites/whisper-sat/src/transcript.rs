@@ -1,70 +1,21 @@
-//! The `Agent.transcript` messages: the transcript a satellite publishes for each utterance, and the voice-activity
-//! events (`{"vad":"start"|"end",...}`) that frame it.
+//! The `Agent.transcript` messages a satellite publishes: the types are the contract's
+//! (`agent_contract::transcript`); this is where the satellite's voice activity becomes one.
 
-use serde::{Deserialize, Serialize};
+pub use agent_contract::transcript::{TranscriptMessage, VadKind, VadMessage};
 
 use crate::activity::VoiceActivity;
 
-/// One transcript, serialised as JSON on `Agent.transcript`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TranscriptMessage {
-    /// The utterance id every satellite derives from the audio clock.
-    pub utterance: String,
-    pub text: String,
-    /// Start of the utterance audio and end of speech on the hub clock (µs since the Unix epoch).
-    pub start_us: u64,
-    pub end_us: u64,
-    pub satellite: String,
-    pub model: String,
-    /// Inference time.
-    pub processing_ms: u64,
-    /// Always true for now: no partial results are published.
-    #[serde(rename = "final")]
-    pub is_final: bool,
-    /// The text was decoded during the end-of-speech hangover, from the audio the utterance had when it paused
-    /// (the very audio it ended with). Only present when true.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub speculative: bool,
-    /// The fitted encoder window made whisper loop, and the text comes from a second decode with the full 30 s
-    /// window, which costs several times more (`processing_ms` includes both). Only present when true.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub full_window_retry: bool,
-}
-
-/// Which way voice activity changed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum VadKind {
-    Start,
-    End,
-}
-
-/// A voice-activity event, serialised as JSON on `Agent.transcript` beside the transcripts (it has no `text`).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct VadMessage {
-    pub vad: VadKind,
-    /// When the voice began or ended on the hub clock (ms since the Unix epoch), the clock of `start_us`/`end_us`.
-    pub at_ms: u64,
-    /// On `end`: the utterance whose transcript follows; absent when the speech was dropped as too short or noise.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub utterance: Option<String>,
-    /// The satellite that published the event (the transcript relay).
-    pub satellite: String,
-}
-
-impl VadMessage {
-    /// The message for a voice-activity change seen by `satellite`.
-    pub fn new(activity: &VoiceActivity, satellite: &str) -> VadMessage {
-        let (vad, at_us, utterance) = match activity {
-            VoiceActivity::Start { at_us } => (VadKind::Start, *at_us, None),
-            VoiceActivity::End { at_us, utterance } => (VadKind::End, *at_us, utterance.clone()),
-        };
-        VadMessage {
-            vad,
-            at_ms: at_us / 1000,
-            utterance,
-            satellite: satellite.to_owned(),
-        }
+/// The message for a voice-activity change seen by `satellite`.
+pub fn vad_message(activity: &VoiceActivity, satellite: &str) -> VadMessage {
+    let (vad, at_us, utterance) = match activity {
+        VoiceActivity::Start { at_us } => (VadKind::Start, *at_us, None),
+        VoiceActivity::End { at_us, utterance } => (VadKind::End, *at_us, utterance.clone()),
+    };
+    VadMessage {
+        vad,
+        at_ms: at_us / 1000,
+        utterance,
+        satellite: satellite.to_owned(),
     }
 }
 
@@ -74,12 +25,12 @@ mod tests {
 
     #[test]
     fn voice_activity_serialises_as_the_contract_says() -> Result<(), serde_json::Error> {
-        let start = VadMessage::new(&VoiceActivity::Start { at_us: 1_234_567 }, "sat");
+        let start = vad_message(&VoiceActivity::Start { at_us: 1_234_567 }, "sat");
         assert_eq!(
             serde_json::to_value(&start)?,
             serde_json::json!({"vad":"start","at_ms":1234,"satellite":"sat"})
         );
-        let end = VadMessage::new(
+        let end = vad_message(
             &VoiceActivity::End {
                 at_us: 2_000_999,
                 utterance: Some("u1".into()),

@@ -3,7 +3,7 @@
 
 use agent_brain::Value;
 use agent_contract::detections::DetectionsMsg;
-use serde::Deserialize;
+use agent_contract::transcript::Heard;
 
 /// A percept to assert: `name(args...)`, or the whole current set of a predicate.
 #[derive(Debug, Clone, PartialEq)]
@@ -35,17 +35,6 @@ pub enum Hearing {
 /// `"partial": true`, only mean the user is speaking: the brain answers complete utterances), `{"vad": "start" |
 /// "end"}` voice-activity events, or plain UTF-8 text (for `flowctl` users).
 pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
-    #[derive(Deserialize)]
-    struct Message {
-        #[serde(default)]
-        text: Option<String>,
-        #[serde(default, rename = "final")]
-        is_final: Option<bool>,
-        #[serde(default)]
-        partial: bool,
-        #[serde(default)]
-        vad: Option<String>,
-    }
     let text = std::str::from_utf8(payload).map_err(|e| format!("transcript is not UTF-8: {e}"))?;
     if !text.trim_start().starts_with('{') {
         let text = text.trim();
@@ -55,8 +44,8 @@ pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
             Hearing::Said(text.to_owned())
         });
     }
-    let message: Message =
-        serde_json::from_str(text).map_err(|e| format!("transcript JSON: {e}"))?;
+    let message: Heard = serde_json::from_str(text).map_err(|e| format!("transcript JSON: {e}"))?;
+    let partial = message.is_partial();
     match (message.vad.as_deref(), message.text) {
         (Some("start"), _) => Ok(Hearing::Speaking),
         (Some("end"), _) => Ok(Hearing::Paused),
@@ -66,9 +55,7 @@ pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
         // Nothing the brain acts on (a status or other satellite's note without text): ignored quietly, since
         // a warning per message would flood the log on a busy channel.
         (None, None) => Ok(Hearing::Nothing),
-        (None, Some(_)) if message.is_final == Some(false) || message.partial => {
-            Ok(Hearing::Speaking)
-        }
+        (None, Some(_)) if partial => Ok(Hearing::Speaking),
         (None, Some(text)) => {
             let text = text.trim();
             Ok(if text.is_empty() {

@@ -4,6 +4,7 @@
 
 use agent_contract::avatar;
 use agent_contract::detections::DetectionsMsg;
+use agent_contract::transcript::Heard;
 use agent_voice::Viseme;
 use bytes::{BufMut, Bytes, BytesMut};
 use serde::Deserialize;
@@ -131,16 +132,14 @@ pub fn hearing(payload: &[u8]) -> Option<Hearing> {
     if !text.starts_with('{') {
         return (!text.is_empty()).then_some(Hearing::Said);
     }
-    let value: serde_json::Value = serde_json::from_str(text).ok()?;
-    match value.get("vad").and_then(serde_json::Value::as_str) {
+    let heard: Heard = serde_json::from_str(text).ok()?;
+    match heard.vad.as_deref() {
         Some("start") => return Some(Hearing::Speaking),
         Some("end") => return Some(Hearing::Paused),
         _ => {}
     }
-    let words = value.get("text").and_then(serde_json::Value::as_str)?;
-    let partial = value.get("final").and_then(serde_json::Value::as_bool) == Some(false)
-        || value.get("partial").and_then(serde_json::Value::as_bool) == Some(true);
-    if partial {
+    let words = heard.text.as_deref()?;
+    if heard.is_partial() {
         Some(Hearing::Speaking)
     } else {
         (!words.trim().is_empty()).then_some(Hearing::Said)

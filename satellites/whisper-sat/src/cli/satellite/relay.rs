@@ -16,7 +16,7 @@ use tokio::sync::broadcast;
 use whisper_sat::activity::VoiceActivity;
 use whisper_sat::claim::overlaps;
 use whisper_sat::ledger::SAME_SPEECH_US;
-use whisper_sat::transcript::{TranscriptMessage, VadMessage};
+use whisper_sat::transcript::{TranscriptMessage, vad_message};
 
 /// The service that accepts transcripts for publication.
 pub const SUBMIT: &str = agent_contract::channels::ASR_SUBMIT.name;
@@ -107,7 +107,7 @@ pub async fn relay(
 
 /// Publishes one voice-activity change on `Agent.transcript`.
 async fn publish_activity(publisher: &Publisher, change: &VoiceActivity, satellite: &str) {
-    let message = VadMessage::new(change, satellite);
+    let message = vad_message(change, satellite);
     match serde_json::to_vec(&message) {
         Ok(payload) => {
             if let Err(e) = publisher.publish(bytes::Bytes::from(payload)).await {
