@@ -6,6 +6,7 @@
 pub mod avatar;
 pub mod channels;
 pub mod detections;
+pub mod rules;
 pub mod transcript;
 pub mod vectors;
 

@@ -188,6 +188,20 @@ pub fn avatar() -> serde_json::Value {
     })
 }
 
+/// `Agent.rules`: a rule change as the brain publishes it.
+pub fn rules() -> serde_json::Value {
+    let change = crate::rules::RuleChange {
+        ts_ms: 1_700_000_000_000,
+        program: "brain.tr".into(),
+        rule: "main.converse > answer.time".into(),
+        index: 48,
+        action: "say(\"It is ten past nine.\")".into(),
+        because: vec!["heard(\"what time is it\")".into()],
+        trace: serde_json::json!({}),
+    };
+    serde_json::json!({ "channel": crate::channels::RULES.name, "messages": [change] })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -216,5 +230,15 @@ mod tests {
             );
         }
         check_or_write("avatar", &v).expect("vectors");
+    }
+
+    #[test]
+    fn rule_vectors_match_the_types() {
+        let v = rules();
+        for m in v["messages"].as_array().expect("messages") {
+            let _: crate::rules::RuleChange =
+                serde_json::from_value(m.clone()).expect("a rule change");
+        }
+        check_or_write("rules", &v).expect("vectors");
     }
 }

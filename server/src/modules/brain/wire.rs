@@ -2,7 +2,7 @@
 //! commands it reads, pair-database values, and the local time zone.
 
 use agent_brain::{Trace, Value};
-use serde_json::json;
+use agent_contract::rules::RuleChange;
 
 /// The `Agent.rules` message for one rule change: the fields the page shows (`ts_ms`, `program`, `rule`,
 /// `action`, `because`) and the full trace for tools.
@@ -27,15 +27,16 @@ pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
     let program = std::path::Path::new(origin)
         .file_name()
         .map_or(origin.into(), |name| name.to_string_lossy());
-    let message = json!({
-        "ts_ms": trace.unix_ms,
-        "program": program,
-        "rule": rule,
-        "index": trace.path.last().map_or(0, |leaf| leaf.line),
-        "action": actions.join("; "),
-        "because": because,
-        "trace": trace,
-    });
+    let message = RuleChange {
+        ts_ms: trace.unix_ms,
+        program: program.into_owned(),
+        rule,
+        index: trace.path.last().map_or(0, |leaf| leaf.line),
+        action: actions.join("; "),
+        because,
+        trace: serde_json::to_value(trace).unwrap_or_default(),
+    };
+    // Plain data with string keys always serialises.
     serde_json::to_vec(&message).unwrap_or_default()
 }
 
@@ -80,6 +81,7 @@ pub fn local_utc_offset_s() -> i32 {
 mod tests {
     use super::*;
     use agent_brain::{Action, Effect, Evidence, RuleRef};
+    use serde_json::json;
 
     #[test]
     fn the_trace_message_has_the_fields_the_page_shows() -> Result<(), serde_json::Error> {

@@ -1,0 +1,24 @@
+//! The `Agent.rules` message: one per rule change of the brain, what the page's rule trace shows, with the
+//! brain's full trace for tools.
+
+use serde::{Deserialize, Serialize};
+
+/// A rule change.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RuleChange {
+    /// When it happened (ms since the Unix epoch).
+    pub ts_ms: i64,
+    /// The program's file name.
+    pub program: String,
+    /// The path of active rules, as `main.converse > answer.time`; `(none)` when no rule holds.
+    pub rule: String,
+    /// The source line of the innermost rule.
+    pub index: u32,
+    /// The actions it started, `; `-separated.
+    pub action: String,
+    /// The facts its guard rested on.
+    pub because: Vec<String>,
+    /// The brain's full trace (its own shape, for tools and tests).
+    #[serde(default)]
+    pub trace: serde_json::Value,
+}
