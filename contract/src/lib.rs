@@ -7,6 +7,7 @@ pub mod avatar;
 pub mod channels;
 pub mod detections;
 pub mod rules;
+pub mod say;
 pub mod transcript;
 pub mod vectors;
 

@@ -12,6 +12,7 @@ use tracing::{debug, warn};
 /// The TTS module's service: `{"text": "..."}` queues an utterance and answers `{"utterance": N}`;
 /// `{"cancel": "all"}` or `{"cancel": N}` stops speech (see docs/voice.md).
 use agent_contract::channels::SAY;
+use agent_contract::say::{SayAnswer, SayRequest};
 
 /// Requests waiting for the speech task; when it is this far behind (the TTS module is not answering), new
 /// requests are dropped and logged rather than queued without bound.
@@ -74,7 +75,13 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
     let mut durative: HashMap<String, u64> = HashMap::new();
     while let Some(request) = queue.recv().await {
         let body = match &request {
-            Request::Say { text, .. } => serde_json::json!({ "text": text }),
+            Request::Say { text, .. } => serde_json::to_value(SayRequest {
+                text: text.clone(),
+                voice: None,
+                rate_wpm: None,
+                pitch: None,
+            })
+            .unwrap_or_default(),
             Request::StopDurative { text } => match durative.remove(text) {
                 Some(utterance) => serde_json::json!({ "cancel": utterance }),
                 None => continue,
@@ -92,12 +99,7 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
                     durative: true,
                 } = request
                 {
-                    let utterance = serde_json::from_slice::<serde_json::Value>(&answer)
-                        .ok()
-                        .and_then(|answer| {
-                            answer.get("utterance").and_then(serde_json::Value::as_u64)
-                        });
-                    if let Some(utterance) = utterance {
+                    if let Ok(SayAnswer { utterance }) = serde_json::from_slice(&answer) {
                         durative.insert(text, utterance);
                     }
                 }

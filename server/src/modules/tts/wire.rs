@@ -2,13 +2,11 @@
 //! detections it follows, and the `Agent.speech` / `Agent.avatar` messages it publishes (docs/voice.md,
 //! docs/browser-link.md). Everything inside the module works on the plain types defined here.
 
-use agent_contract::avatar;
 use agent_contract::detections::DetectionsMsg;
 use agent_contract::transcript::Heard;
+use agent_contract::{avatar, say};
 use agent_voice::Viseme;
 use bytes::{BufMut, Bytes, BytesMut};
-use serde::Deserialize;
-use serde_json::json;
 
 /// An `Agent.speech` payload: `[utterance u32 LE][offset u32 LE][s16le PCM]`, `offset` being the index of the
 /// first sample inside the utterance.
@@ -65,15 +63,7 @@ pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
             )),
         };
     }
-    #[derive(Deserialize)]
-    #[serde(deny_unknown_fields)]
-    struct Say {
-        text: String,
-        voice: Option<String>,
-        rate_wpm: Option<u32>,
-        pitch: Option<u32>,
-    }
-    let say: Say = serde_json::from_value(value).map_err(|e| e.to_string())?;
+    let say: say::SayRequest = serde_json::from_value(value).map_err(|e| e.to_string())?;
     if say.text.trim().is_empty() {
         return Err("text is empty".into());
     }
@@ -90,12 +80,16 @@ pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
 
 /// The answer to a `say` call.
 pub fn said(utterance: u64) -> Bytes {
-    Bytes::from(json!({ "utterance": utterance }).to_string())
+    // Plain data with string keys always serialises.
+    Bytes::from(serde_json::to_vec(&say::SayAnswer { utterance }).unwrap_or_default())
 }
 
 /// The answer to a `cancel` call: the utterances stopped.
 pub fn cancelled(utterances: &[u64]) -> Bytes {
-    Bytes::from(json!({ "cancelled": utterances }).to_string())
+    let answer = say::CancelAnswer {
+        cancelled: utterances.to_vec(),
+    };
+    Bytes::from(serde_json::to_vec(&answer).unwrap_or_default())
 }
 
 /// What an `Agent.ctrl` message asks of the TTS module, if anything: `{"say": "text"}` speaks, `{"speech":
@@ -282,6 +276,7 @@ fn round3(value: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use serde_json::json;
 
     #[test]
     fn say_requests() {

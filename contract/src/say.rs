@@ -1,0 +1,28 @@
+//! The `Agent.say` service of the TTS module: a text to speak (or a cancel), and its answers.
+
+use serde::{Deserialize, Serialize};
+
+/// A request to speak `text`, optionally in another espeak-ng voice, rate or pitch than the configured ones.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SayRequest {
+    pub text: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub voice: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_wpm: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch: Option<u32>,
+}
+
+/// The answer to a request to speak: the utterance number its speech and visemes carry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SayAnswer {
+    pub utterance: u64,
+}
+
+/// The answer to `{"cancel": "all" | N}`: the utterances stopped.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CancelAnswer {
+    pub cancelled: Vec<u64>,
+}
