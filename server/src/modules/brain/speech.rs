@@ -98,10 +98,9 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
                     text,
                     durative: true,
                 } = request
+                    && let Ok(SayAnswer { utterance }) = serde_json::from_slice(&answer)
                 {
-                    if let Ok(SayAnswer { utterance }) = serde_json::from_slice(&answer) {
-                        durative.insert(text, utterance);
-                    }
+                    durative.insert(text, utterance);
                 }
             }
             Err(e) => warn!("brain: {} failed: {e}", SAY.name),
