@@ -6,6 +6,7 @@
 pub mod avatar;
 pub mod channels;
 pub mod detections;
+pub mod link;
 pub mod rules;
 pub mod say;
 pub mod transcript;

@@ -202,6 +202,57 @@ pub fn rules() -> serde_json::Value {
     serde_json::json!({ "channel": crate::channels::RULES.name, "messages": [change] })
 }
 
+/// The page link's `welcome` and `status` messages, as the server sends them.
+pub fn link() -> serde_json::Value {
+    use crate::link::*;
+    let welcome = Welcome {
+        kind: "welcome".into(),
+        version: 1,
+        session: 3,
+        server: "robot-agent 0.1.0".into(),
+        audio: AudioFormat {
+            rate: 22050,
+            channels: 1,
+            format: "s16le".into(),
+            chunk_ms: 20,
+        },
+        video: VideoFormat {
+            width: 640,
+            height: 360,
+            fps: 15,
+            format: "jpeg".into(),
+        },
+        fft: FftFormat {
+            size: 1024,
+            bins: 512,
+            rate: 22050,
+            window: "hann".into(),
+            hop: 1024,
+            scale: "linear, full-scale sine = 1.0".into(),
+        },
+        role: RoleInfo {
+            state: "free".into(),
+        },
+    };
+    let status = Status {
+        kind: "status".into(),
+        role: "holder".into(),
+        incoming: Incoming {
+            audio_fps: 50,
+            video_fps: 15,
+            audio_level_dbfs: Some(-32.5),
+        },
+        sending: Sending {
+            audio: true,
+            video: true,
+        },
+        dropped: Dropped::default(),
+        audio_dropped: 0,
+        advice: Advice { video_fps: 15 },
+    };
+    serde_json::json!({ "welcome": welcome, "status": status })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -240,5 +291,14 @@ mod tests {
                 serde_json::from_value(m.clone()).expect("a rule change");
         }
         check_or_write("rules", &v).expect("vectors");
+    }
+
+    #[test]
+    fn link_vectors_match_the_types() {
+        let v = link();
+        let _: crate::link::Welcome =
+            serde_json::from_value(v["welcome"].clone()).expect("welcome");
+        let _: crate::link::Status = serde_json::from_value(v["status"].clone()).expect("status");
+        check_or_write("link", &v).expect("vectors");
     }
 }

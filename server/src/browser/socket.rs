@@ -17,8 +17,9 @@ use super::pacing::FpsAdvice;
 use super::role::{Claim, PageId};
 use super::state::{Notice, Shared, lock};
 use super::uplink::Uplink;
-use super::wire::{self, Dropped, FrameKind, PageMessage, PageText, RoleState};
+use super::wire::{self, FrameKind, PageMessage, PageText, RoleState};
 use crate::modules::spectrum;
+use agent_contract::link::{self, Dropped};
 
 /// Messages waiting for the page's socket; producers wait for room (see `downlink`), so this bounds memory.
 const OUT_QUEUE: usize = 64;
@@ -181,20 +182,37 @@ impl Conn {
         } else {
             RoleState::Free
         };
-        self.send_json(json!({
-            "type": "welcome",
-            "version": 1,
-            "session": self.page,
-            "server": concat!("robot-agent ", env!("CARGO_PKG_VERSION")),
-            "audio": {"rate": 22050, "channels": 1, "format": "s16le", "chunk_ms": 20},
-            "video": {"width": 640, "height": 360, "fps": 15, "format": "jpeg"},
-            "fft": {
-                "size": spectrum::FFT_SIZE, "bins": spectrum::BINS, "rate": 22050, "window": "hann",
-                "hop": self.shared.fft_hop, "scale": "linear, full-scale sine = 1.0",
+        let welcome = link::Welcome {
+            kind: "welcome".into(),
+            version: 1,
+            session: self.page,
+            server: concat!("robot-agent ", env!("CARGO_PKG_VERSION")).into(),
+            audio: link::AudioFormat {
+                rate: 22050,
+                channels: 1,
+                format: "s16le".into(),
+                chunk_ms: 20,
             },
-            "role": {"state": role},
-        }))
-        .await;
+            video: link::VideoFormat {
+                width: 640,
+                height: 360,
+                fps: 15,
+                format: "jpeg".into(),
+            },
+            fft: link::FftFormat {
+                size: spectrum::FFT_SIZE,
+                bins: spectrum::BINS,
+                rate: 22050,
+                window: "hann".into(),
+                hop: self.shared.fft_hop,
+                scale: "linear, full-scale sine = 1.0".into(),
+            },
+            role: link::RoleInfo {
+                state: role.as_str().into(),
+            },
+        };
+        self.send_json(serde_json::to_value(welcome).unwrap_or_default())
+            .await;
     }
 
     async fn send_role(&self, state: RoleState) {
@@ -321,19 +339,22 @@ impl Conn {
             "none"
         };
         let (audio, video) = self.uplink.sending();
+        let status = link::Status {
+            kind: "status".into(),
+            role: role.into(),
+            incoming: link::Incoming {
+                audio_fps: m.audio_frames,
+                video_fps: m.video_frames,
+                audio_level_dbfs: level,
+            },
+            sending: link::Sending { audio, video },
+            dropped: self.dropped,
+            audio_dropped: self.uplink.audio_drops(),
+            advice: link::Advice { video_fps: fps },
+        };
         // Status comes every second: when the page is this far behind, skipping one loses nothing.
         let _ = self.out.try_send(Message::Text(
-            json!({
-                "type": "status",
-                "role": role,
-                "in": {"audio_fps": m.audio_frames, "video_fps": m.video_frames, "audio_level_dbfs": level},
-                "sending": {"audio": audio, "video": video},
-                "dropped": self.dropped,
-                "audio_dropped": self.uplink.audio_drops(),
-                "advice": {"video_fps": fps},
-            })
-            .to_string()
-            .into(),
+            serde_json::to_string(&status).unwrap_or_default().into(),
         ));
     }
 }

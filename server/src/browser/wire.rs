@@ -177,12 +177,16 @@ pub enum RoleState {
     Released,
 }
 
-/// Counters the status message reports.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
-pub struct Dropped {
-    pub video_queue: u64,
-    pub not_holder: u64,
-    pub to_page: u64,
+impl RoleState {
+    /// The name the page reads.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RoleState::Granted => "granted",
+            RoleState::Busy => "busy",
+            RoleState::Free => "free",
+            RoleState::Released => "released",
+        }
+    }
 }
 
 #[cfg(test)]
