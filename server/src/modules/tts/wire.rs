@@ -2,6 +2,7 @@
 //! detections it follows, and the `Agent.speech` / `Agent.avatar` messages it publishes (docs/voice.md,
 //! docs/browser-link.md). Everything inside the module works on the plain types defined here.
 
+use agent_contract::ctrl::Ctrl;
 use agent_contract::detections::DetectionsMsg;
 use agent_contract::transcript::Heard;
 use agent_contract::{avatar, say};
@@ -95,17 +96,16 @@ pub fn cancelled(utterances: &[u64]) -> Bytes {
 /// What an `Agent.ctrl` message asks of the TTS module, if anything: `{"say": "text"}` speaks, `{"speech":
 /// "stop"}` (or `{"cmd": "speech_stop"}`) stops all speech. Every other control message is for someone else.
 pub fn ctrl_request(payload: &[u8]) -> Option<SayRequest> {
-    let value: serde_json::Value = serde_json::from_slice(payload).ok()?;
-    if let Some(text) = value.get("say").and_then(serde_json::Value::as_str) {
+    let ctrl: Ctrl = serde_json::from_slice(payload).ok()?;
+    if let Some(text) = &ctrl.say {
         let text = text.trim();
         return (!text.is_empty()).then(|| SayRequest::Say {
             text: text.to_owned(),
             choice: VoiceChoice::default(),
         });
     }
-    let stop = value.get("speech").and_then(serde_json::Value::as_str) == Some("stop")
-        || value.get("cmd").and_then(serde_json::Value::as_str) == Some("speech_stop");
-    stop.then_some(SayRequest::Cancel(CancelTarget::All))
+    ctrl.stops_speech()
+        .then_some(SayRequest::Cancel(CancelTarget::All))
 }
 
 /// What an `Agent.transcript` message says about the user's voice.

@@ -228,13 +228,15 @@ pub async fn follow_audio(
 pub async fn follow_ctrl(client: Client, enabled: watch::Sender<bool>) -> anyhow::Result<()> {
     let sub = client.subscribe(channels::CTRL.name).await?;
     while let Some(d) = sub.recv().await {
-        match serde_json::from_slice::<serde_json::Value>(&d.payload) {
-            Ok(v) => {
-                if let Some(on) = v.get("asr").and_then(serde_json::Value::as_bool) {
+        match serde_json::from_slice::<agent_contract::ctrl::Ctrl>(&d.payload) {
+            Ok(ctrl) => {
+                if let Some(on) = ctrl.asr {
                     enabled.send_replace(on);
                 }
             }
-            Err(e) => tracing::warn!("ignoring Agent.ctrl message that is not JSON: {e}"),
+            Err(e) => tracing::warn!(
+                "ignoring an Agent.ctrl message that is not the contract's shape: {e}"
+            ),
         }
     }
     Ok(())
