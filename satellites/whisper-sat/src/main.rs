@@ -2,6 +2,8 @@
 
 mod cli;
 
+use std::io::IsTerminal;
+
 use clap::Parser;
 
 /// Logging when `RUST_LOG` is not set. whisper.cpp's own messages are left out: every speculative decode that the
@@ -17,6 +19,8 @@ fn main() -> anyhow::Result<()> {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG)),
         )
         .with_writer(std::io::stderr)
+        // Colour codes only for a terminal: `make run` piped to a file gets plain text.
+        .with_ansi(std::io::stderr().is_terminal())
         .init();
     cli::Command::parse().run()
 }
