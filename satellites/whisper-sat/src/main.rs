@@ -13,11 +13,17 @@ use clap::Parser;
 const DEFAULT_LOG: &str = "info,whisper_rs=warn,whisper_rs::whisper_logging_hook=off";
 
 fn main() -> anyhow::Result<()> {
+    let mut filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG));
+    // A filter that does not name whisper_rs (`RUST_LOG=warn`, as the benches set it) still leaves whisper.cpp's
+    // own messages out: an aborted speculative decode is normal operation, not an error to show.
+    if !std::env::var("RUST_LOG").is_ok_and(|v| v.contains("whisper_rs"))
+        && let Ok(quiet) = "whisper_rs::whisper_logging_hook=off".parse()
+    {
+        filter = filter.add_directive(quiet);
+    }
     tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG)),
-        )
+        .with_env_filter(filter)
         .with_writer(std::io::stderr)
         // Colour codes only for a terminal: `make run` piped to a file gets plain text.
         .with_ansi(std::io::stderr().is_terminal())
