@@ -315,10 +315,14 @@ fn device_flags(devices: &Devices) -> Vec<String> {
     }
 }
 
+/// How long Chromium may take to start and print its DevTools address.
+const DEVTOOLS_PATIENCE: Duration = Duration::from_secs(120);
+
 /// Reads Chromium's stderr until it prints its DevTools address; keeps draining it afterwards.
 async fn devtools_url(stderr: tokio::process::ChildStderr) -> anyhow::Result<String> {
     let mut lines = BufReader::new(stderr).lines();
-    let found = tokio::time::timeout(Duration::from_secs(30), async {
+    // A cold start on a busy two-core machine (SwiftShader, a detector and Whisper at work) has taken over 30 s.
+    let found = tokio::time::timeout(DEVTOOLS_PATIENCE, async {
         while let Ok(Some(line)) = lines.next_line().await {
             if let Some(pos) = line.find("ws://") {
                 return Some(line[pos..].trim().to_string());
@@ -327,7 +331,7 @@ async fn devtools_url(stderr: tokio::process::ChildStderr) -> anyhow::Result<Str
         None
     })
     .await
-    .map_err(|_| anyhow!("chromium printed no DevTools address within 30 s"))?;
+    .map_err(|_| anyhow!("chromium printed no DevTools address within {DEVTOOLS_PATIENCE:?}"))?;
     let url = found.context("chromium exited before printing its DevTools address")?;
     // A full stderr pipe would block the browser: keep reading it.
     tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
