@@ -12,19 +12,21 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: run test bench fuzz deps model model-release build build-debug clean
+.PHONY: run test bench fuzz deps model model-release build build-debug python clean
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
 run: deps model-release build
 	scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting and lints and run every test: the page's JavaScript units (node's test
-## runner, no npm package needed) and the workspace's Rust suites.
-test: deps model build-debug
+## runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
+## binaries.
+test: deps model build-debug python
 	$(CARGO) fmt --all --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 	node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
 	$(CARGO) test --workspace --no-fail-fast
+	AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
 
 ## Benchmarks against their baselines, side by side (not part of the tests).
 bench: deps model-release build
@@ -37,6 +39,9 @@ bench: deps model-release build
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
 	$(TARGET_DIR)/release/whisper-sat bench --write docs/bench-asr.md
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin voice-latency -- --write docs/bench-voice-latency.md
+	$(MAKE) python
+	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
+	AGENT_BIN_DIR=$(TARGET_DIR)/release satellites/python/.venv/bin/python satellites/python/bench/bench_python.py --write docs/bench-python.md
 
 ## Coverage-guided fuzzing of the protocol decoder (not in CI).
 fuzz:
@@ -57,6 +62,10 @@ build:
 
 build-debug:
 	$(CARGO) build --workspace --bins
+
+## The Python SDK (satellites/python), pip-installed into satellites/python/.venv with pytest and numpy.
+python:
+	scripts/python-sdk.sh
 
 clean:
 	$(CARGO) clean

@@ -84,7 +84,11 @@ pub async fn echo(
     name: &str,
     count: Option<u64>,
     json: bool,
+    save: Option<&std::path::Path>,
 ) -> anyhow::Result<()> {
+    if let Some(dir) = save {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let sub = client.subscribe(name).await?;
     let mut seen = 0u64;
     let mut out = std::io::stdout();
@@ -93,6 +97,11 @@ pub async fn echo(
             bail!("connection closed")
         };
         seen += 1;
+        if let Some(dir) = save {
+            let path = dir.join(format!("{}.bin", msg.seq));
+            std::fs::write(&path, &msg.payload)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
         let text = std::str::from_utf8(&msg.payload)
             .ok()
             .filter(|t| serde_json::from_str::<serde_json::Value>(t).is_ok());

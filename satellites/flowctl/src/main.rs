@@ -57,6 +57,9 @@ enum Cmd {
         /// One JSON object per message (seq, timestamp, size, payload if JSON).
         #[arg(long)]
         json: bool,
+        /// Also write each message's payload to DIR/SEQ.bin (binary data such as JPEG or PCM, byte for byte).
+        #[arg(long)]
+        save: Option<PathBuf>,
     },
     /// Publish on a streaming channel (created if needed): stdin lines, a file, or a directory of files at a rate.
     Pub {
@@ -154,7 +157,12 @@ async fn run(args: Args) -> anyhow::Result<()> {
 async fn dispatch(client: &Client, cmd: Cmd) -> anyhow::Result<()> {
     match cmd {
         Cmd::Channels { json } => commands::channels(client, json).await,
-        Cmd::Echo { name, count, json } => commands::echo(client, &name, count, json).await,
+        Cmd::Echo {
+            name,
+            count,
+            json,
+            save,
+        } => commands::echo(client, &name, count, json, save.as_deref()).await,
         Cmd::Pub {
             name,
             header,

@@ -251,7 +251,11 @@ impl Client {
     }
 
     fn __repr__(&self) -> String {
-        format!("Client(name={:?}, connected={})", self.name, self.connected())
+        format!(
+            "Client(name={:?}, connected={})",
+            self.name,
+            self.connected()
+        )
     }
 }
 

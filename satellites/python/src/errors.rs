@@ -6,8 +6,18 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 
-create_exception!(_native, FlowError, PyException, "Anything that went wrong talking to the hub.");
-create_exception!(_native, AuthError, FlowError, "The hub refused the login token.");
+create_exception!(
+    _native,
+    FlowError,
+    PyException,
+    "Anything that went wrong talking to the hub."
+);
+create_exception!(
+    _native,
+    AuthError,
+    FlowError,
+    "The hub refused the login token."
+);
 create_exception!(
     _native,
     TimeoutError,
@@ -77,9 +87,10 @@ pub fn to_py(e: RustError) -> PyErr {
             ErrorCode::ServiceGone => ServiceGone::new_err(text),
             ErrorCode::ServiceFailed => ServiceFailed::new_err(reply.message.clone()),
             ErrorCode::Overloaded | ErrorCode::Limit => Overloaded::new_err(text),
-            ErrorCode::NotFound | ErrorCode::Exists | ErrorCode::NotOwner | ErrorCode::WrongKind => {
-                ChannelError::new_err(text)
-            }
+            ErrorCode::NotFound
+            | ErrorCode::Exists
+            | ErrorCode::NotOwner
+            | ErrorCode::WrongKind => ChannelError::new_err(text),
             ErrorCode::Database | ErrorCode::NoDatabase => DatabaseError::new_err(text),
             ErrorCode::ShuttingDown => ConnectionLost::new_err(text),
             ErrorCode::BadRequest | ErrorCode::Internal => FlowError::new_err(text),

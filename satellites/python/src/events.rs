@@ -31,12 +31,14 @@ pub struct Events {
 }
 
 fn period(ms: Option<f64>) -> PyResult<Option<Duration>> {
-    ms.map(|ms| seconds(ms / 1000.0)).transpose().and_then(|d| match d {
-        Some(d) if d.is_zero() => Err(pyo3::exceptions::PyValueError::new_err(
-            "a tick period must be above zero (None turns the pulse off)",
-        )),
-        d => Ok(d),
-    })
+    ms.map(|ms| seconds(ms / 1000.0))
+        .transpose()
+        .and_then(|d| match d {
+            Some(d) if d.is_zero() => Err(pyo3::exceptions::PyValueError::new_err(
+                "a tick period must be above zero (None turns the pulse off)",
+            )),
+            d => Ok(d),
+        })
 }
 
 async fn next_message(feeds: &[Arc<Feed>]) -> Event {

@@ -105,9 +105,7 @@ impl Message {
     fn pcm<'py>(slf: Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
         let py = slf.py();
         let numpy = py.import("numpy").map_err(|_| {
-            pyo3::exceptions::PyImportError::new_err(
-                "Message.pcm() needs numpy: pip install numpy",
-            )
+            pyo3::exceptions::PyImportError::new_err("Message.pcm() needs numpy: pip install numpy")
         })?;
         if !slf.get().payload.len().is_multiple_of(2) {
             return Err(pyo3::exceptions::PyValueError::new_err(format!(

@@ -27,21 +27,30 @@ impl Publisher {
             let mut listening = publisher.subscribers();
             let name = name.clone();
             runtime().spawn(async move {
-                // The news arrives on the runtime; the callback runs where it may take the GIL without holding up
-                // the connection's reader.
-                while listening.changed().await.is_ok() {
+                // Reported from "nobody listens": a subscriber that was there before the channel existed makes it
+                // start out listening, which the callback must hear too.
+                let mut reported = false;
+                loop {
                     let now = *listening.borrow_and_update();
-                    let callback = Python::attach(|py| callback.clone_ref(py));
-                    let name = name.clone();
-                    let _ = tokio::task::spawn_blocking(move || {
-                        Python::attach(|py| {
-                            if let Err(e) = callback.call1(py, (now,)) {
-                                eprintln!("flow: on_subscribers callback of {name} failed:");
-                                e.print(py);
-                            }
-                        });
-                    })
-                    .await;
+                    if now != reported {
+                        reported = now;
+                        // The news arrives on the runtime; the callback runs where it may take the GIL without
+                        // holding up the connection's reader.
+                        let callback = Python::attach(|py| callback.clone_ref(py));
+                        let name = name.clone();
+                        let _ = tokio::task::spawn_blocking(move || {
+                            Python::attach(|py| {
+                                if let Err(e) = callback.call1(py, (now,)) {
+                                    eprintln!("flow: on_subscribers callback of {name} failed:");
+                                    e.print(py);
+                                }
+                            });
+                        })
+                        .await;
+                    }
+                    if listening.changed().await.is_err() {
+                        break;
+                    }
                 }
             })
         });
@@ -57,7 +66,9 @@ impl Publisher {
             .lock()
             .map_err(|_| ChannelError::new_err("publisher lock poisoned"))?
             .clone()
-            .ok_or_else(|| ChannelError::new_err(format!("{}: the publisher was closed", self.name)))
+            .ok_or_else(|| {
+                ChannelError::new_err(format!("{}: the publisher was closed", self.name))
+            })
     }
 }
 

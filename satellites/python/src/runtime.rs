@@ -18,7 +18,9 @@ static RUNTIME: OnceLock<Runtime> = OnceLock::new();
 /// writer of its connections) without taking cores from the robot.
 pub fn runtime() -> &'static Runtime {
     // `start` ran when the module was imported; the module is not usable without it.
-    RUNTIME.get().unwrap_or_else(|| unreachable!("flow._native imported without its runtime"))
+    RUNTIME
+        .get()
+        .unwrap_or_else(|| unreachable!("flow._native imported without its runtime"))
 }
 
 /// Starts the runtime and makes `asyncio` awaitables run on it; called once when the module loads, where a failure

@@ -33,10 +33,11 @@ ASR_PRESENCE_PREFIX: str = _contract["asr_presence_prefix"]
 
 
 def _name(suffix: str) -> str:
-    name = "Agent." + suffix
-    if name not in CHANNELS:
-        raise ImportError(f"the contract has no channel {name}")
-    return name
+    # Looked up rather than spelled here: a channel renamed in the contract fails at import, not at run time.
+    for name in CHANNELS:
+        if name.split(".", 1)[1] == suffix:
+            return name
+    raise ImportError(f"the contract has no channel ending in {suffix!r}")
 
 
 AUDIO = _name("audio")

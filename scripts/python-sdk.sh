@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Creates the Python SDK's virtual environment (satellites/python/.venv) and installs into it what the SDK's tests
+# and benchmark use: the SDK itself, built from satellites/python by pip with maturin (as a user installs it),
+# pytest and numpy. Re-running rebuilds the SDK incrementally (cargo's cache), so a changed binding is what runs.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+venv=satellites/python/.venv
+if [[ ! -x $venv/bin/python ]]; then
+    python3 -m venv "$venv"
+fi
+# pytest and numpy only once; pip answers quickly when they are present.
+"$venv/bin/python" -c "import pytest, numpy" 2>/dev/null || "$venv/bin/pip" install -q 'pytest>=8' 'numpy>=1.24'
+"$venv/bin/pip" install -q --force-reinstall --no-deps ./satellites/python
