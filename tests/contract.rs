@@ -1,5 +1,6 @@
-//! The contract holds: no Rust file outside `contract/` spells a channel name as a string literal (they come from
-//! `agent_contract::channels`), and the page's test vectors still match the contract's types.
+//! The contract holds: no Rust or Python file outside `contract/` spells a channel name as a string literal (they
+//! come from `agent_contract::channels`, and in Python from `flow.agent`, which reads them from it), and the page's
+//! test vectors still match the contract's types.
 
 use std::path::{Path, PathBuf};
 
@@ -7,8 +8,8 @@ fn workspace() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// Every `.rs` file under `dir`, skipping build outputs.
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+/// Every `.rs` and `.py` file under `dir`, skipping build outputs and virtual environments.
+fn source_files(dir: &Path, out: &mut Vec<PathBuf>) {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
@@ -19,11 +20,11 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
         if path.is_dir() {
             if !matches!(
                 name.as_ref(),
-                "target" | "node_modules" | ".git" | "contract"
+                "target" | "node_modules" | ".git" | "contract" | ".venv" | "venv" | "bench-venv"
             ) {
-                rust_files(&path, out);
+                source_files(&path, out);
             }
-        } else if name.ends_with(".rs") {
+        } else if name.ends_with(".rs") || name.ends_with(".py") {
             out.push(path);
         }
     }
@@ -51,7 +52,7 @@ fn channel_literals(text: &str) -> Vec<String> {
 #[test]
 fn no_channel_name_is_spelt_outside_the_contract() {
     let mut files = Vec::new();
-    rust_files(&workspace(), &mut files);
+    source_files(&workspace(), &mut files);
     assert!(
         files.len() > 50,
         "the walk found only {} files",

@@ -1,5 +1,6 @@
-//! The process's one tokio runtime, and how Python threads wait on it: with the GIL released, waking every
-//! [`SIGNAL_POLL`] to let Python run its signal handlers, so that Ctrl-C stops a blocked `recv` or `call`.
+//! The process's one tokio runtime, and how Python threads wait on it: with the GIL released, and on the main
+//! thread waking every [`SIGNAL_POLL`] to let Python run its signal handlers, so that Ctrl-C stops a blocked
+//! `recv` or `call`.
 
 use std::future::Future;
 use std::sync::OnceLock;
@@ -45,13 +46,17 @@ pub fn start() -> PyResult<()> {
     Ok(())
 }
 
-/// Runs `fut` to completion with the GIL released. A pending signal (Ctrl-C) is raised within [`SIGNAL_POLL`] as
-/// the Python exception its handler throws; the future is then dropped, which cancels it.
+/// Runs `fut` to completion with the GIL released. On the main thread, where Python runs signal handlers, a
+/// pending signal (Ctrl-C) is raised within [`SIGNAL_POLL`] as the exception its handler throws, and the future is
+/// dropped, which cancels it; other threads never see signals and wait without waking.
 pub fn wait<F>(py: Python<'_>, fut: F) -> PyResult<F::Output>
 where
     F: Future + Send,
     F::Output: Send,
 {
+    if !on_main_thread(py) {
+        return Ok(py.detach(|| runtime().block_on(fut)));
+    }
     let mut fut = std::pin::pin!(fut);
     loop {
         let step = py.detach(|| {
@@ -62,6 +67,18 @@ where
             Err(_elapsed) => py.check_signals()?,
         }
     }
+}
+
+/// Whether this is the interpreter's main thread, the only one Python delivers signals to.
+fn on_main_thread(py: Python<'_>) -> bool {
+    let check = || -> PyResult<bool> {
+        let threading = py.import("threading")?;
+        let main = threading.call_method0("main_thread")?;
+        let current = threading.call_method0("current_thread")?;
+        Ok(main.is(&current))
+    };
+    // If Python cannot say, keep the signal checks: they are cheap and always correct.
+    check().unwrap_or(true)
 }
 
 /// Like [`wait`], giving up after `timeout` (seconds; `None` waits for ever) with `Ok(None)`.

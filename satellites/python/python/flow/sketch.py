@@ -4,7 +4,7 @@ tick handlers and ``on_message``; ``run()`` blocks until Ctrl-C.
     class Counter(Sketch):
         def setup(self):
             self.out = self.client.publisher("Demo.count")
-            self.subscribe("Agent.transcript")
+            self.subscribe(agent.TRANSCRIPT)
             self.n = 0
 
         def one_sec_tick(self):
