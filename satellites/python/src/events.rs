@@ -1,10 +1,15 @@
-//! `Events`: what drives a `Sketch`, merged in Rust: the FastTick / SlowTick / OneSecTick pulses (tokio timers,
-//! nothing spins) and the messages of its subscriptions, one at a time, with ticks first when both are due.
+//! `Events`: what drives a `Sketch`, merged in Rust: the FastTick / SlowTick / OneSecTick pulses and the messages
+//! of its subscriptions, one at a time, with ticks first when both are due.
+//!
+//! The pulses keep their own schedule rather than tokio intervals: tokio's timer counts whole milliseconds, so an
+//! interval fires up to a millisecond after its deadline before any scheduling noise, which at 100 Hz is a tenth of
+//! the period. Here the runtime's timer wakes the waiting Python thread [`EARLY`] before the deadline and the thread
+//! sleeps the rest itself (a kernel sleep, accurate to tens of microseconds); nothing spins.
 
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use flow::tick::{JitterStats, Pulses, Tick, TickConfig};
+use flow::tick::{JitterMeter, JitterStats, Tick};
 use futures_util::future::select_all;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -14,6 +19,89 @@ use crate::errors::ConnectionLost;
 use crate::message::Message;
 use crate::runtime::{seconds, wait};
 use crate::subscription::{Feed, Subscription};
+
+/// How long before a pulse's deadline the runtime's (millisecond) timer wakes the thread that finishes the wait.
+const EARLY: Duration = Duration::from_millis(2);
+
+/// One pulse: its period, its next deadline and how late it has fired.
+#[derive(Debug)]
+struct Lane {
+    tick: Tick,
+    period: Duration,
+    next: Instant,
+    late: JitterMeter,
+}
+
+/// The enabled pulses of one sketch.
+#[derive(Debug, Default)]
+struct Schedule {
+    lanes: Vec<Lane>,
+}
+
+impl Schedule {
+    fn new(periods: &[(Tick, Option<Duration>)]) -> Self {
+        let start = Instant::now();
+        Schedule {
+            lanes: periods
+                .iter()
+                .filter_map(|&(tick, period)| {
+                    period.map(|period| Lane {
+                        tick,
+                        period,
+                        next: start + period,
+                        late: JitterMeter::default(),
+                    })
+                })
+                .collect(),
+        }
+    }
+
+    /// Waits for the next deadline of any pulse and returns which fired; pends for ever with no pulse enabled.
+    /// Dropped before it returns (a message came first), it has changed nothing.
+    async fn next(&mut self) -> Tick {
+        let Some((index, lane)) = self
+            .lanes
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, l)| l.next)
+            .map(|(i, l)| (i, l.next))
+        else {
+            return std::future::pending().await;
+        };
+        let coarse = lane.checked_sub(EARLY).unwrap_or(lane);
+        tokio::time::sleep_until(tokio::time::Instant::from_std(coarse)).await;
+        // This future runs on the Python thread that waits for it (`block_on`), never on a runtime worker, so
+        // the thread may sleep the last stretch itself.
+        let now = Instant::now();
+        if lane > now {
+            std::thread::sleep(lane - now);
+        }
+        self.lanes[index].fire(Instant::now())
+    }
+
+    fn stats(&self, tick: Tick) -> JitterStats {
+        self.lanes
+            .iter()
+            .find(|l| l.tick == tick)
+            .map(|l| l.late.stats())
+            .unwrap_or_default()
+    }
+}
+
+impl Lane {
+    /// Records how late this pulse fired at `now` and moves its deadline on.
+    fn fire(&mut self, now: Instant) -> Tick {
+        self.late.record(now.saturating_duration_since(self.next));
+        self.next += self.period;
+        // A sketch that was busy past whole periods skips them rather than firing a burst (as tokio's `Skip`).
+        if self.next <= now {
+            let behind = now.duration_since(self.next).as_nanos() / self.period.as_nanos().max(1);
+            let skip = u32::try_from(behind + 1).unwrap_or(u32::MAX);
+            self.next += self.period * skip;
+        }
+        self.tick
+    }
+}
 
 /// The next thing a sketch handles.
 enum Event {
@@ -26,7 +114,7 @@ enum Event {
 #[pyclass(frozen, module = "flow._native")]
 #[derive(Debug)]
 pub struct Events {
-    pulses: Arc<Mutex<Pulses>>,
+    pulses: Arc<Mutex<Schedule>>,
     feeds: Vec<Arc<Feed>>,
 }
 
@@ -78,16 +166,11 @@ impl Events {
         slow_ms: Option<f64>,
         one_sec: bool,
     ) -> PyResult<Self> {
-        let config = TickConfig {
-            fast: period(fast_ms)?,
-            slow: period(slow_ms)?,
-            one_sec,
-        };
-        // Timers belong to the runtime that will poll them.
-        let pulses = {
-            let _guard = crate::runtime::runtime().enter();
-            Pulses::new(config)
-        };
+        let pulses = Schedule::new(&[
+            (Tick::Fast, period(fast_ms)?),
+            (Tick::Slow, period(slow_ms)?),
+            (Tick::OneSec, one_sec.then_some(Duration::from_secs(1))),
+        ]);
         Ok(Events {
             pulses: Arc::new(Mutex::new(pulses)),
             feeds: subscriptions.iter().map(|s| s.feed()).collect(),
@@ -117,16 +200,16 @@ impl Events {
         }
     }
 
-    /// Lateness of each pulse against its schedule so far, as measured by the timer (`fast`, `slow`, `one_sec`:
+    /// Lateness of each pulse against its schedule so far, measured when the wait ends, before Python runs (`fast`, `slow`, `one_sec`:
     /// ticks, mean_us, p50_us, p99_us, max_us).
     fn jitter<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let pulses = self.pulses.clone();
         let (fast, slow, one) = wait(py, async move {
             let p = pulses.lock().await;
             (
-                p.fast_jitter.stats(),
-                p.slow_jitter.stats(),
-                p.one_sec_jitter.stats(),
+                p.stats(Tick::Fast),
+                p.stats(Tick::Slow),
+                p.stats(Tick::OneSec),
             )
         })?;
         let d = PyDict::new(py);
