@@ -42,6 +42,7 @@ bench: deps model-release build
 	$(MAKE) python
 	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
 	AGENT_BIN_DIR=$(TARGET_DIR)/release satellites/python/.venv/bin/python satellites/python/bench/bench_python.py --write docs/bench-python.md
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_record -- --write docs/bench-record.md
 
 ## Coverage-guided fuzzing of the protocol decoder (not in CI).
 fuzz:

@@ -8,6 +8,7 @@ venv=satellites/python/.venv
 if [[ ! -x $venv/bin/python ]]; then
     python3 -m venv "$venv"
 fi
-# pytest and numpy only once; pip answers quickly when they are present.
-"$venv/bin/python" -c "import pytest, numpy" 2>/dev/null || "$venv/bin/pip" install -q 'pytest>=8' 'numpy>=1.24'
+# pytest and numpy (and mcap, the reader tests/record.rs checks recordings with) only once; pip answers quickly when
+# they are present.
+"$venv/bin/python" -c "import pytest, numpy, mcap" 2>/dev/null || "$venv/bin/pip" install -q 'pytest>=8' 'numpy>=1.24' 'mcap>=1.2'
 "$venv/bin/pip" install -q --force-reinstall --no-deps ./satellites/python

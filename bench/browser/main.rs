@@ -13,6 +13,7 @@ use agent_contract::channels as ch;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use agent_bench::{cpu_ticks, percentile};
 use agent_tests::browser_chromium::Chromium;
 use agent_tests::browser_link::{session_token, start_link_only};
 use agent_tests::browser_media::{prepare, read_wav, speech_fixture};
@@ -337,28 +338,6 @@ async fn latency_phase(chunks: usize) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
         }
     }
     Ok((link, base))
-}
-
-fn percentile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[((s.len() - 1) as f64 * q).round() as usize]
-}
-
-/// utime + stime of `pid`, in clock ticks.
-fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
-    // The command name (field 2) may contain spaces; fields after the closing parenthesis are plain.
-    let rest = stat
-        .rsplit_once(')')
-        .map(|(_, r)| r)
-        .context("malformed /proc stat")?;
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    // After ')': state is field 3, so utime (14) and stime (15) are at indices 11 and 12.
-    Ok(f.get(11).context("utime")?.parse::<u64>()? + f.get(12).context("stime")?.parse::<u64>()?)
 }
 
 fn rss_kib(pid: u32) -> anyhow::Result<u64> {

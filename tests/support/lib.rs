@@ -10,6 +10,7 @@ pub mod browser_media;
 pub mod fixtures;
 pub mod http;
 pub mod raw;
+pub mod recording;
 pub mod satellite;
 pub mod wait;
 

@@ -1,6 +1,7 @@
 //! flowctl: the command-line client of the flow hub (list channels, watch,
 //! publish files, WAV audio and JPEG sequences, call services, use the pair
-//! database). Errors are one line on stderr and a non-zero exit.
+//! database, record and replay MCAP files, watch rates). Errors are one line on
+//! stderr and a non-zero exit.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -11,6 +12,12 @@ use flow::token::{TokenKind, resolve_token};
 use flow::{Client, ConnectOptions, FlowAddr};
 
 mod commands;
+mod duration;
+mod hz;
+mod record;
+mod replay;
+mod signals;
+mod top;
 mod wav;
 
 /// Command-line client of the flow hub.
@@ -113,6 +120,14 @@ enum Cmd {
         #[command(subcommand)]
         op: commands::DbOp,
     },
+    /// Record channels into an MCAP file (Foxglove opens it) until Ctrl-C or --duration.
+    Record(record::RecordArgs),
+    /// Publish an MCAP recording again with its recorded timing.
+    Replay(replay::ReplayArgs),
+    /// A live table of channels: rates, subscribers, drops.
+    Top(top::TopArgs),
+    /// The rate and inter-arrival statistics of a channel, every second.
+    Hz(hz::HzArgs),
 }
 
 #[tokio::main(flavor = "current_thread")]
@@ -136,7 +151,12 @@ async fn run(args: Args) -> anyhow::Result<()> {
     opts.reconnect = false;
     opts.asynchronous = matches!(
         args.command,
-        Cmd::Echo { .. } | Cmd::Pub { .. } | Cmd::PubWav { .. }
+        Cmd::Echo { .. }
+            | Cmd::Pub { .. }
+            | Cmd::PubWav { .. }
+            | Cmd::Record(_)
+            | Cmd::Replay(_)
+            | Cmd::Hz(_)
     );
     opts.queue = 1024;
     let asynchronous = opts.asynchronous;
@@ -221,5 +241,9 @@ async fn dispatch(client: &Client, cmd: Cmd) -> anyhow::Result<()> {
             Ok(())
         }
         Cmd::Db { db, op } => commands::db(client, db.as_deref(), op).await,
+        Cmd::Record(args) => record::record(client, args).await,
+        Cmd::Replay(args) => replay::replay(client, args).await,
+        Cmd::Top(args) => top::top(client, args).await,
+        Cmd::Hz(args) => hz::hz(client, args).await,
     }
 }

@@ -1,0 +1,53 @@
+//! `flowctl record`: records hub channels into an MCAP file until Ctrl-C, SIGTERM or `--duration`, then writes
+//! the file's summary and prints what it holds.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use flow::Client;
+use flow_record::{RecordOptions, Recorder, Selection};
+
+/// `flowctl record` options.
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// The MCAP file to write (replaced if it exists).
+    #[arg(short = 'o', long)]
+    output: PathBuf,
+    /// Record only channels matching this glob (repeatable); by default every stream channel, including those
+    /// created while recording.
+    #[arg(long = "channels")]
+    channels: Vec<String>,
+    /// Stop after this long (e.g. 30s, 5m); by default at Ctrl-C or SIGTERM.
+    #[arg(long, value_parser = crate::duration::parse)]
+    duration: Option<Duration>,
+}
+
+pub async fn record(client: &Client, args: RecordArgs) -> anyhow::Result<()> {
+    let opts = RecordOptions {
+        channels: Selection::new(&args.channels)?,
+        ..RecordOptions::default()
+    };
+    let recorder = Recorder::start(client.clone(), &args.output, opts)
+        .await
+        .with_context(|| format!("recording to {}", args.output.display()))?;
+    eprintln!("recording to {} (Ctrl-C stops)", args.output.display());
+    crate::signals::until_stopped(args.duration).await?;
+    let report = recorder.stop().await?;
+    println!(
+        "recorded {} messages on {} channels into {}",
+        report.messages(),
+        report.channels.len(),
+        args.output.display()
+    );
+    for (name, c) in &report.channels {
+        println!(
+            "  {name:<32} {:>8} msgs {:>12} bytes {:>6} missing {:>6} dropped",
+            c.written.messages, c.written.bytes, c.written.missing, c.dropped
+        );
+    }
+    if report.annotations > 0 {
+        println!("  {} image annotations", report.annotations);
+    }
+    Ok(())
+}
