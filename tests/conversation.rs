@@ -170,5 +170,77 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
     );
     // Real speech: whole s16le samples.
     assert_eq!(seen.speech_bytes % 2, 0);
+    metrics_tell_the_same_turn(&agent).await
+}
+
+/// `/metrics`, scraped after the turn and read by Prometheus's own parser, counts what the test just saw: every
+/// stage of the turn once at least, the satellite's utterance and claim, the traffic and the connections.
+async fn metrics_tell_the_same_turn(agent: &Agent) -> anyhow::Result<()> {
+    use agent_tests::metrics::{parse, scrape, value};
+    let whole = ("stage", "speech_end_to_reply_audio");
+    let samples = tokio::time::timeout(PATIENCE, async {
+        loop {
+            let samples = parse(&scrape(agent).await?).await?;
+            if value(&samples, "agent_conversation_seconds_count", &[whole]).unwrap_or(0.0) >= 1.0 {
+                return anyhow::Ok(samples);
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    })
+    .await
+    .context("the observer never counted the turn")??;
+    for stage in [
+        "speech_end_to_vad_end",
+        "vad_end_to_transcript",
+        "transcript_to_rule",
+        "rule_to_reply_audio",
+    ] {
+        let n = value(
+            &samples,
+            "agent_conversation_seconds_count",
+            &[("stage", stage)],
+        );
+        assert!(n >= Some(1.0), "stage {stage}: {n:?}");
+    }
+    let total = value(&samples, "agent_conversation_seconds_sum", &[whole]).unwrap_or(0.0);
+    assert!(total > 0.0 && total < 60.0, "voice to voice took {total} s");
+    let sum_of = |name: &str| -> f64 {
+        samples
+            .iter()
+            .filter(|s| s.name == name)
+            .map(|s| s.value)
+            .sum()
+    };
+    assert!(
+        sum_of("agent_asr_utterances_total") >= 1.0,
+        "no utterance counted"
+    );
+    assert!(sum_of("agent_asr_claims_total") >= 1.0, "no claim counted");
+    assert!(sum_of("agent_asr_processing_seconds_count") >= 1.0);
+    // The microphone's channel went with flowctl; the satellite's transcript channel is still there.
+    let heard = value(
+        &samples,
+        "flow_channel_messages_total",
+        &[("channel", ch::TRANSCRIPT.name)],
+    );
+    assert!(heard >= Some(3.0), "transcript messages: {heard:?}");
+    assert!(value(&samples, "flow_connections", &[("transport", "tcp")]) >= Some(2.0));
+    assert!(value(&samples, "flow_connections", &[("transport", "module")]) >= Some(1.0));
+    let submitted = value(
+        &samples,
+        "flow_service_calls_total",
+        &[("service", ch::ASR_SUBMIT.name), ("outcome", "answered")],
+    );
+    assert!(
+        submitted >= Some(1.0),
+        "transcript submissions: {submitted:?}"
+    );
+    assert!(
+        value(
+            &samples,
+            "flow_tick_lateness_seconds_count",
+            &[("pulse", "one_sec")]
+        ) >= Some(1.0)
+    );
     Ok(())
 }

@@ -178,6 +178,18 @@ async fn with_every_module_on_the_page_draws_what_the_agent_sees_and_plays_what_
         drawn.0 > 200 && drawn.0 > drawn.1,
         "the face box should be drawn on the mirrored preview's left: lit pixels (left, right) = {drawn:?}"
     );
+    // The status strip's "camera -> box": measured on the page's clock from the frame's capture to its boxes.
+    browser
+        .wait_for(&tab, "agentDebug.latency.camera.last > 0", STAGE)
+        .await?;
+    let camera = browser.eval(&tab, "agentDebug.latency").await?;
+    println!("page latencies after the face: {camera}");
+    assert!(
+        camera["camera"]["median"]
+            .as_f64()
+            .is_some_and(|ms| ms > 0.0 && ms < 10_000.0),
+        "{camera}"
+    );
     let png = browser.screenshot(&tab).await?;
     std::fs::create_dir_all(artifacts_dir())?;
     std::fs::write(artifacts_dir().join("pipeline-face.png"), &png)?;
@@ -213,6 +225,12 @@ async fn with_every_module_on_the_page_draws_what_the_agent_sees_and_plays_what_
         heard.iter().any(|t| t.to_lowercase().contains("time")),
         "transcripts: {heard:?}"
     );
+    // The turn's "speech end -> reply" reached the status strip from the observer module.
+    browser
+        .wait_for(&tab, "agentDebug.latency.voice.last > 0", STAGE)
+        .await?;
+    let voice = browser.eval(&tab, "agentDebug.latency.voice.last").await?;
+    println!("speech end -> reply audio: {voice} ms");
     let before = browser.eval(&tab, "agentDebug.speechChunks").await?;
     let before = before.as_u64().unwrap_or_default();
     browser
@@ -237,5 +255,16 @@ async fn with_every_module_on_the_page_draws_what_the_agent_sees_and_plays_what_
     let png = browser.screenshot(&tab).await?;
     std::fs::write(artifacts_dir().join("pipeline-code.png"), &png)?;
     browser.quit().await;
+
+    // The vision module's stage times reached /metrics, read by Prometheus's own parser.
+    let samples = agent_tests::metrics::parse(&agent_tests::metrics::scrape(&agent).await?).await?;
+    for stage in ["decode", "faces", "total"] {
+        let n = agent_tests::metrics::value(
+            &samples,
+            "agent_vision_stage_seconds_count",
+            &[("stage", stage)],
+        );
+        assert!(n > Some(5.0), "vision stage {stage} counted {n:?} times");
+    }
     Ok(())
 }

@@ -65,6 +65,8 @@ pub const DETECTIONS: Channel = stream(
 );
 /// The rule trace of the brain.
 pub const RULES: Channel = stream("Agent.rules", "rule trace (brain module)");
+/// One message per conversational turn with its stage latencies ([`crate::latency::TurnLatency`]).
+pub const LATENCY: Channel = stream("Agent.latency", "turn latencies (observer module)");
 /// Where whisper satellites submit transcripts for the relay to publish once.
 pub const ASR_SUBMIT: Channel = service(
     "Agent.asr.submit",
@@ -78,7 +80,7 @@ pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
 /// Every channel with a fixed name.
 pub const ALL: &[Channel] = &[
     AUDIO, VIDEO, VIDEO_Y, AUDIO_FFT, CTRL, AVATAR, SPEECH, SAY, TRANSCRIPT, FACES, MOTION, CODES,
-    DETECTIONS, RULES, ASR_SUBMIT,
+    DETECTIONS, RULES, LATENCY, ASR_SUBMIT,
 ];
 
 /// Headers of the channels whose producer is fixed.
@@ -102,6 +104,8 @@ pub mod headers {
     pub const RULES: &str = r#"{"format":"json","content":"rule trace","doc":"docs/brain.md"}"#;
     /// `Agent.transcript`.
     pub const TRANSCRIPT: &str = r#"{"mime":"application/json"}"#;
+    /// `Agent.latency`.
+    pub const LATENCY: &str = r#"{"format":"json","content":"turn latencies","source":"observer","doc":"docs/metrics.md"}"#;
 
     /// The header of one of the vision module's JSON channels (`content`: faces, motion, codes or detections).
     pub fn vision(content: &str) -> String {
@@ -151,6 +155,7 @@ mod tests {
             headers::SAY,
             headers::RULES,
             headers::TRANSCRIPT,
+            headers::LATENCY,
             &headers::vision("faces"),
             &headers::speech(22050, 20),
         ] {

@@ -7,6 +7,7 @@ pub mod avatar;
 pub mod channels;
 pub mod ctrl;
 pub mod detections;
+pub mod latency;
 pub mod link;
 pub mod rules;
 pub mod say;

@@ -104,3 +104,16 @@ pub struct Status {
     pub audio_dropped: u64,
     pub advice: Advice,
 }
+
+/// The answer to the page's `{"type":"ping","t":...}`: its `t` back, and the server's clock, from which the page
+/// estimates the offset between the two clocks (for latencies measured across them).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Pong {
+    /// Always `pong`.
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// The page's `t`, unchanged.
+    pub t: f64,
+    /// The server's time when it answered (ms since the Unix epoch, with fractions).
+    pub server_ms: f64,
+}

@@ -250,7 +250,32 @@ pub fn link() -> serde_json::Value {
         audio_dropped: 0,
         advice: Advice { video_fps: 15 },
     };
-    serde_json::json!({ "welcome": welcome, "status": status })
+    let pong = Pong {
+        kind: "pong".into(),
+        t: 1234.5,
+        server_ms: 1_700_000_000_123.25,
+    };
+    serde_json::json!({ "welcome": welcome, "status": status, "pong": pong })
+}
+
+/// `Agent.latency`: two turns as the observer publishes them.
+pub fn latency() -> serde_json::Value {
+    let turn =
+        |speech_end_ms: u64, vad_ms: f64, transcript_ms: f64, rule_ms: f64, reply_ms: f64| {
+            crate::latency::TurnLatency {
+                kind: "voice".into(),
+                speech_end_ms,
+                vad_ms,
+                transcript_ms,
+                rule_ms,
+                reply_ms,
+                total_ms: vad_ms + transcript_ms + rule_ms + reply_ms,
+            }
+        };
+    serde_json::json!({
+        "channel": crate::channels::LATENCY.name,
+        "messages": [turn(1_700_000_000_000, 300.0, 12.5, 2.0, 48.5), turn(1_700_000_009_000, 310.0, 0.0, 1.5, 40.0)],
+    })
 }
 
 #[cfg(test)]
@@ -299,6 +324,17 @@ mod tests {
         let _: crate::link::Welcome =
             serde_json::from_value(v["welcome"].clone()).expect("welcome");
         let _: crate::link::Status = serde_json::from_value(v["status"].clone()).expect("status");
+        let _: crate::link::Pong = serde_json::from_value(v["pong"].clone()).expect("pong");
         check_or_write("link", &v).expect("vectors");
+    }
+
+    #[test]
+    fn latency_vectors_match_the_types() {
+        let v = latency();
+        for m in v["messages"].as_array().expect("messages") {
+            let t: crate::latency::TurnLatency = serde_json::from_value(m.clone()).expect("a turn");
+            assert!(t.total_ms > 0.0);
+        }
+        check_or_write("latency", &v).expect("vectors");
     }
 }

@@ -7,6 +7,7 @@ pub mod cli;
 pub mod config;
 pub mod http;
 pub mod hub;
+pub mod metrics;
 pub mod module;
 pub mod net;
 pub mod pairdb;

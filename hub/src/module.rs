@@ -66,6 +66,11 @@ impl ModuleContext {
         }
     }
 
+    /// The registry behind `/metrics`, where a module adds its own figures.
+    pub fn metrics(&self) -> Arc<crate::metrics::Metrics> {
+        self.shared.metrics.clone()
+    }
+
     /// The server's configuration (e.g. the data directory).
     pub fn config(&self) -> &crate::config::Config {
         &self.shared.config

@@ -3,7 +3,7 @@
 //! OneSecTick always runs (it also refreshes channel rates: one wake-up a
 //! second). FastTick and SlowTick run only while some module listens, so an
 //! idle server sleeps. Lateness of every tick is measured and exposed at
-//! `/api/status`.
+//! `/api/status` and, as a histogram, at `/metrics`.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -12,6 +12,7 @@ use flow::tick::{JitterStats, Pulses, Tick, TickConfig};
 use tokio::sync::{Notify, broadcast, watch};
 
 use crate::hub::Hub;
+use crate::metrics::{Metrics, PulseLabel};
 
 /// Jitter of each pulse.
 #[derive(Debug, Clone, Copy, Default)]
@@ -60,7 +61,12 @@ impl PulseHub {
     }
 
     /// Runs until shutdown.
-    pub async fn run(self: Arc<Self>, hub: Arc<Hub>, mut shutdown: watch::Receiver<bool>) {
+    pub async fn run(
+        self: Arc<Self>,
+        hub: Arc<Hub>,
+        metrics: Arc<Metrics>,
+        mut shutdown: watch::Receiver<bool>,
+    ) {
         let idle = TickConfig {
             fast: None,
             slow: None,
@@ -86,6 +92,15 @@ impl PulseHub {
             }
             tokio::select! {
                 tick = pulses.next() => {
+                    let pulse = match tick {
+                        Tick::Fast => "fast",
+                        Tick::Slow => "slow",
+                        Tick::OneSec => "one_sec",
+                    };
+                    metrics
+                        .tick_lateness
+                        .get_or_create(&PulseLabel { pulse })
+                        .observe(pulses.last_late.as_secs_f64());
                     if tick == Tick::OneSec {
                         hub.update_rates();
                         *self.stats.lock().unwrap_or_else(std::sync::PoisonError::into_inner) = TickStats {

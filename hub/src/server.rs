@@ -15,6 +15,7 @@ use tracing::info;
 use crate::config::Config;
 use crate::http::access::{self, Access, PeerInfo};
 use crate::hub::{Hub, HubLimits, OutboxLimits};
+use crate::metrics::Metrics;
 use crate::module::Module;
 use crate::net::{Admission, IoRuntime};
 use crate::pairdb::PairDb;
@@ -105,8 +106,10 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         Duration::from_millis(config.ticks.fast_ms),
         Duration::from_millis(config.ticks.slow_ms),
     ));
+    let hub = Arc::new(Hub::new(limits));
     let shared = Arc::new(Shared {
-        hub: Arc::new(Hub::new(limits)),
+        metrics: Arc::new(Metrics::new(hub.clone())),
+        hub,
         pairdb: Arc::new(pairdb),
         tokens,
         pulses: pulses.clone(),
@@ -116,9 +119,11 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         config,
     });
     let mut tasks = Vec::new();
-    tasks.push(tokio::spawn(
-        pulses.run(shared.hub.clone(), shared.shutdown.subscribe()),
-    ));
+    tasks.push(tokio::spawn(pulses.run(
+        shared.hub.clone(),
+        shared.metrics.clone(),
+        shared.shutdown.subscribe(),
+    )));
 
     // Socket connections are served on the hub's own I/O runtime; listeners are created inside its context so
     // that they, and every connection they accept, belong to its reactor.

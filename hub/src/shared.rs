@@ -8,6 +8,7 @@ use tokio::sync::watch;
 
 use crate::config::Config;
 use crate::hub::Hub;
+use crate::metrics::Metrics;
 use crate::net::admission::Admission;
 use crate::pairdb::PairDb;
 use crate::pulse::PulseHub;
@@ -21,6 +22,8 @@ pub struct Shared {
     pub pairdb: Arc<PairDb>,
     pub tokens: Tokens,
     pub pulses: Arc<PulseHub>,
+    /// What `/metrics` shows; modules register their own figures here.
+    pub metrics: Arc<Metrics>,
     /// Connections that have not logged in yet, against `hub.max_unauthenticated`.
     pub admission: Arc<Admission>,
     /// Flips to true once at shutdown; every task watches it.

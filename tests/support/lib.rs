@@ -9,6 +9,7 @@ pub mod browser_link;
 pub mod browser_media;
 pub mod fixtures;
 pub mod http;
+pub mod metrics;
 pub mod raw;
 pub mod recording;
 pub mod satellite;

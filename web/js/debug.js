@@ -1,6 +1,6 @@
 //! `window.agentDebug`: a read-only view of the page's state for end-to-end tests and for debugging by hand.
 
-export function installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech }) {
+export function installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech, latencies }) {
   const hook = {};
   const define = (name, get) => Object.defineProperty(hook, name, { get, enumerable: true });
   define("eyelid", () => avatar.debugState().eyelid);
@@ -27,6 +27,12 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("blinkLog", () => avatar.debugState().blinkLog ?? null);
   define("visemeSchedule", () => avatar.debugState().schedule ?? null);
   define("role", () => page.role);
+  // The status strip's latencies: last and median of each, ms (null until measured).
+  define("latency", () => ({
+    voice: { last: latencies.voice.last, median: latencies.voice.median() },
+    camera: { last: latencies.camera.last, median: latencies.camera.median() },
+    clockOffsetMs: link.clock.offset(),
+  }));
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));
   define("received", () => ({ ...link.received }));

@@ -8,6 +8,7 @@ import { Camera } from "./media/camera.js";
 import { Microphone } from "./media/microphone.js";
 import { SpeechPlayer } from "./media/speech.js";
 import { Overlay } from "./panels/overlay.js";
+import { Latencies } from "./panels/latency.js";
 import { RuleTrace } from "./panels/rules.js";
 import { Spectrum } from "./panels/spectrum.js";
 import { StatusStrip } from "./panels/status.js";
@@ -53,6 +54,9 @@ const page = {
   videoFps: 15,
 };
 
+/** The status strip's "speech end -> reply audio" and "camera capture -> box drawn" figures. */
+const latencies = new Latencies();
+
 const mic = new Microphone(
   (pcm) => {
     if (page.role === "holder" && link.sendMedia(KIND.AUDIO, pcm)) page.sent.audio += 1;
@@ -61,8 +65,11 @@ const mic = new Microphone(
 );
 const camera = new Camera(
   $("camera"),
-  (jpeg) => {
-    if (page.role === "holder" && link.sendMedia(KIND.VIDEO, jpeg)) page.sent.video += 1;
+  (jpeg, capturedAt) => {
+    if (page.role === "holder" && link.sendMedia(KIND.VIDEO, jpeg)) {
+      page.sent.video += 1;
+      if (Number.isFinite(capturedAt)) latencies.frameSent(capturedAt, performance.timeOrigin + performance.now());
+    }
   },
   () => link.backlog < SEND_BACKLOG_LIMIT,
 );
@@ -203,6 +210,8 @@ link.addEventListener("role", (ev) => {
 link.addEventListener("avatar", (ev) => handleAvatar(ev.detail.data));
 link.addEventListener("detections", (ev) => overlay.show(ev.detail.data));
 link.addEventListener("rules", (ev) => rules.add(ev.detail.data));
+link.addEventListener("latency", (ev) => latencies.turn(ev.detail.data));
+overlay.onDrawn = (frameTsUs, drawnMs) => latencies.detectionsDrawn(frameTsUs, drawnMs, (s) => link.clock.toPage(s));
 link.addEventListener("spectrum", (ev) => spectrum.push(ev.detail.body));
 link.addEventListener("speech", (ev) => {
   const s = decodeSpeech(ev.detail.body);
@@ -313,6 +322,8 @@ setInterval(() => {
       levelDb: mic.levelDb,
       drops: page.serverDrops + camera.skipped,
       rttMs: link.rttMs,
+      voice: latencies.voice.text(),
+      camera: latencies.camera.text(),
     },
     performance.now(),
   );
@@ -320,6 +331,6 @@ setInterval(() => {
   refreshAgentControls();
 }, 500);
 
-installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech });
+installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech, latencies });
 refreshButtons();
 link.start();

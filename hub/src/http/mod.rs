@@ -1,4 +1,4 @@
-//! The HTTP edge: health, JSON status APIs and the WebSocket flow link. Who may call them is decided in front of
+//! The HTTP edge: health, JSON status APIs, Prometheus metrics and the WebSocket flow link. Who may call them is decided in front of
 //! every route by [`access::gate`].
 
 pub mod access;
@@ -33,8 +33,64 @@ pub fn app(shared: Arc<Shared>) -> Router {
         .route("/healthz", get(|| async { "ok" }))
         .route("/api/channels", get(channels))
         .route("/api/status", get(status))
+        .route("/metrics", get(metrics))
+        .route("/api/graph", get(graph))
+        .route("/api/graph/stream", get(graph_stream))
         .route("/flow", get(flow_link))
         .with_state(shared)
+}
+
+/// `GET /metrics`: the Prometheus text exposition (a scraper sends `Authorization: Bearer` with a token, as every
+/// tool does).
+async fn metrics(State(shared): State<Arc<Shared>>) -> Result<Response, AppError> {
+    let text = shared.metrics.render().map_err(|e| {
+        AppError(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("encoding the metrics: {e}"),
+        )
+    })?;
+    Ok((
+        [(
+            header::CONTENT_TYPE,
+            "text/plain; version=0.0.4; charset=utf-8",
+        )],
+        text,
+    )
+        .into_response())
+}
+
+/// `GET /api/graph`: every connection and every channel between them, with rates.
+async fn graph(State(shared): State<Arc<Shared>>) -> axum::Json<crate::hub::Graph> {
+    axum::Json(shared.hub.graph())
+}
+
+/// How often `/api/graph/stream` sends the graph: the hub's rates change once a second too.
+const GRAPH_PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// `GET /api/graph/stream`: the graph as server-sent events, one `graph` event a second, until the page leaves or
+/// the server shuts down. Only the connected pages cost anything; an idle server sends nothing.
+async fn graph_stream(
+    State(shared): State<Arc<Shared>>,
+) -> axum::response::sse::Sse<
+    impl futures_util::Stream<Item = Result<axum::response::sse::Event, std::convert::Infallible>>,
+> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    let mut ticks = tokio::time::interval(GRAPH_PERIOD);
+    ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let shutdown = shared.shutdown.subscribe();
+    let stream = futures_util::stream::unfold(
+        (shared, ticks, shutdown),
+        |(shared, mut ticks, mut shutdown)| async move {
+            tokio::select! {
+                _ = ticks.tick() => {}
+                _ = shutdown.wait_for(|down| *down) => return None,
+            }
+            let graph = serde_json::to_string(&shared.hub.graph()).unwrap_or_default();
+            let event = Event::default().event("graph").data(graph);
+            Some((Ok(event), (shared, ticks, shutdown)))
+        },
+    );
+    Sse::new(stream).keep_alive(KeepAlive::default())
 }
 
 /// `GET /api/channels`: every channel with its counters.

@@ -14,9 +14,11 @@ use flow::protocol::{
 };
 
 mod deadlines;
+mod graph;
 pub mod outbox;
 
 pub use deadlines::MAX_CALL_TIMEOUT_MS;
+pub use graph::{Graph, GraphChannel, GraphNode};
 pub use outbox::{Outbox, OutboxLimits};
 
 /// A connection (satellite or module) as the hub knows it.
@@ -43,6 +45,8 @@ fn err<T>(code: ErrorCode, message: impl Into<String>) -> HubResult<T> {
 #[derive(Debug)]
 struct Conn {
     label: String,
+    /// How it reached the hub: the peer address's scheme (`tcp`, `unix`, `ws`, `module`).
+    transport: String,
     outbox: Arc<Outbox>,
     is_async: bool,
     admin: bool,
@@ -101,6 +105,53 @@ struct State {
     deadlines: deadlines::Deadlines,
     next_call: CallId,
     last_rate: Option<Instant>,
+    /// How service calls ended, by service name: kept across a service's removal and re-creation, for `/metrics`.
+    call_outcomes: HashMap<String, CallOutcomes>,
+}
+
+/// Most distinct service names whose call outcomes are kept; more share the name [`OTHER_SERVICES`], so that a
+/// client inventing names cannot grow the table without bound.
+const MAX_SERVICE_NAMES: usize = 1024;
+const OTHER_SERVICES: &str = "(other)";
+
+/// How the calls to one service ended.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct CallOutcomes {
+    pub answered: u64,
+    /// The service answered with an error.
+    pub failed: u64,
+    pub timeout: u64,
+    /// The owner left, or could not be reached, before answering.
+    pub gone: u64,
+    pub overloaded: u64,
+}
+
+impl CallOutcomes {
+    pub fn by_outcome(&self) -> [(&'static str, u64); 5] {
+        [
+            ("answered", self.answered),
+            ("failed", self.failed),
+            ("timeout", self.timeout),
+            ("gone", self.gone),
+            ("overloaded", self.overloaded),
+        ]
+    }
+}
+
+/// The outcome counters of service `name`.
+fn outcomes<'a>(st: &'a mut State, name: &str) -> &'a mut CallOutcomes {
+    let key = if st.call_outcomes.contains_key(name) || st.call_outcomes.len() < MAX_SERVICE_NAMES {
+        name
+    } else {
+        OTHER_SERVICES
+    };
+    st.call_outcomes.entry(key.to_string()).or_default()
+}
+
+/// The outcome counters of the service behind channel `id`, if it still exists.
+fn outcomes_of(st: &mut State, id: ChanId) -> Option<&mut CallOutcomes> {
+    let name = st.channels.get(&id)?.name.clone();
+    Some(outcomes(st, &name))
 }
 
 /// The hub: shared by every connection task.
@@ -160,6 +211,7 @@ impl Hub {
             id,
             Conn {
                 label: format!("{peer}#{id}"),
+                transport: peer.split(':').next().unwrap_or(peer).to_string(),
                 outbox: outbox.clone(),
                 is_async: false,
                 admin: false,
@@ -433,10 +485,10 @@ impl Hub {
             );
         }
         if ch.inflight >= limit {
-            return err(
-                ErrorCode::Overloaded,
-                format!("{} already has {limit} calls in flight", ch.name),
-            );
+            let message = format!("{} already has {limit} calls in flight", ch.name);
+            let name = ch.name.clone();
+            outcomes(&mut st, &name).overloaded += 1;
+            return err(ErrorCode::Overloaded, message);
         }
         ch.inflight += 1;
         ch.msgs += 1;
@@ -465,6 +517,9 @@ impl Hub {
         });
         if !delivered {
             finish_call(&mut st, call);
+            if let Some(o) = outcomes_of(&mut st, id) {
+                o.gone += 1;
+            }
             return err(ErrorCode::ServiceGone, "the service owner is not reachable");
         }
         let earliest = st.deadlines.first().is_some_and(|&(_, c)| c == call);
@@ -494,6 +549,12 @@ impl Hub {
         let Some(pending) = finish_call(&mut st, call) else {
             return Ok(());
         };
+        if let Some(o) = outcomes_of(&mut st, pending.chan) {
+            match &result {
+                Ok(_) => o.answered += 1,
+                Err(_) => o.failed += 1,
+            }
+        }
         let result = match result {
             Ok(payload) => Ok(Reply::Payload(payload)),
             Err(message) => Err(ErrorReply::new(ErrorCode::ServiceFailed, message)),
@@ -525,6 +586,33 @@ impl Hub {
             .get(&id)
             .map(Channel::info)
             .ok_or_else(|| ErrorReply::new(ErrorCode::NotFound, "no such channel"))
+    }
+
+    /// Every connection and every channel between them, with their rates: the application graph.
+    pub fn graph(&self) -> Graph {
+        graph::snapshot(&self.lock())
+    }
+
+    /// Open connections by transport (`tcp`, `unix`, `ws`, `module`).
+    pub fn connections_by_transport(&self) -> std::collections::BTreeMap<String, usize> {
+        let st = self.lock();
+        let mut by = std::collections::BTreeMap::new();
+        for c in st.conns.values() {
+            *by.entry(c.transport.clone()).or_insert(0) += 1;
+        }
+        by
+    }
+
+    /// How calls to each service have ended, by service name.
+    pub fn service_calls(&self) -> Vec<(String, CallOutcomes)> {
+        let st = self.lock();
+        let mut list: Vec<_> = st
+            .call_outcomes
+            .iter()
+            .map(|(name, o)| (name.clone(), *o))
+            .collect();
+        list.sort_by(|a, b| a.0.cmp(&b.0));
+        list
     }
 
     /// Updates each channel's msgs/s and bytes/s; call about once a second.
@@ -651,6 +739,7 @@ fn expire_due_locked(st: &mut State, now: Instant) -> Option<Instant> {
             "service {name} did not answer within {} ms",
             pending.timeout_ms
         );
+        outcomes(st, &name).timeout += 1;
         reply_to(
             st,
             pending.caller,
@@ -707,6 +796,7 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
         .collect();
     for call in orphaned {
         if let Some(p) = take_call(st, call) {
+            outcomes(st, &ch.name).gone += 1;
             let e = ErrorReply::new(
                 ErrorCode::ServiceGone,
                 format!("service {} went away", ch.name),

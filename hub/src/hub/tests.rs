@@ -937,3 +937,93 @@ fn a_call_to_an_owner_that_stopped_reading_fails_as_gone() {
         );
     }
 }
+
+#[test]
+fn the_graph_has_every_connection_and_an_edge_per_channel_to_its_subscribers() {
+    let hub = Hub::new(limits(64));
+    let (camera, _) = hub.connect("ws:127.0.0.1:5000");
+    hub.login(camera, "browser", false);
+    let (vision, _) = hub.connect("module:vision");
+    hub.login(vision, "vision", false);
+    hub.set_async(vision);
+    let (ears, _) = hub.connect("tcp:127.0.0.1:6000");
+    hub.login(ears, "whisper-sat", false);
+    hub.set_async(ears);
+    hub.add_channel(
+        camera,
+        ChannelKind::Stream,
+        "Cam.video",
+        r#"{"format":"jpeg"}"#,
+    )
+    .expect("add video");
+    hub.add_channel(camera, ChannelKind::Stream, "Cam.audio", "{}")
+        .expect("add audio");
+    hub.add_channel(ears, ChannelKind::Service, "Ears.submit", "{}")
+        .expect("add service");
+    hub.subscribe(vision, &ChanRef::Name("Cam.video".into()))
+        .expect("vision subscribes");
+    hub.subscribe(ears, &ChanRef::Name("Cam.audio".into()))
+        .expect("ears subscribe");
+    let g = hub.graph();
+    let names: Vec<_> = g
+        .nodes
+        .iter()
+        .map(|n| (n.name.as_str(), n.transport.as_str()))
+        .collect();
+    assert_eq!(
+        names,
+        vec![
+            ("browser", "ws"),
+            ("vision", "module"),
+            ("whisper-sat", "tcp")
+        ]
+    );
+    let edges: Vec<_> = g
+        .channels
+        .iter()
+        .map(|c| (c.name.as_str(), c.kind, c.from, c.to.clone()))
+        .collect();
+    assert_eq!(
+        edges,
+        vec![
+            ("Cam.audio", "stream", camera, vec![ears]),
+            ("Cam.video", "stream", camera, vec![vision]),
+            ("Ears.submit", "service", ears, vec![]),
+        ]
+    );
+    // The page's layout tests read this very snapshot.
+    let value = serde_json::to_value(&g).expect("graph as JSON");
+    agent_contract::vectors::check_or_write("graph", &value).expect("contract/vectors/graph.json");
+}
+
+#[test]
+fn call_outcomes_are_counted_by_service_and_kept_after_it_goes() {
+    let hub = Hub::new(limits(64));
+    let (owner, owner_box) = async_conn(&hub, "svc");
+    let (caller, _) = async_conn(&hub, "caller");
+    hub.add_channel(owner, ChannelKind::Service, "S", "{}")
+        .expect("add");
+    let name = ChanRef::Name("S".into());
+    let ok = hub.call(caller, 1, &name, Bytes::new(), T).expect("call 1");
+    hub.respond(owner, ok, Ok(Bytes::new())).expect("answer");
+    let bad = hub.call(caller, 2, &name, Bytes::new(), T).expect("call 2");
+    hub.respond(owner, bad, Err("no".into())).expect("refuse");
+    hub.call(caller, 3, &name, Bytes::new(), 1).expect("call 3");
+    hub.expire_due(Instant::now() + Duration::from_secs(1));
+    hub.call(caller, 4, &name, Bytes::new(), T).expect("call 4");
+    drain(&owner_box);
+    hub.disconnect(owner);
+    let calls = hub.service_calls();
+    assert_eq!(calls.len(), 1);
+    assert_eq!(
+        calls[0].1,
+        CallOutcomes {
+            answered: 1,
+            failed: 1,
+            timeout: 1,
+            gone: 1,
+            overloaded: 0
+        }
+    );
+    assert_eq!(calls[0].0, "S");
+}

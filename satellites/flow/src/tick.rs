@@ -101,6 +101,8 @@ pub struct Pulses {
     pub fast_jitter: JitterMeter,
     pub slow_jitter: JitterMeter,
     pub one_sec_jitter: JitterMeter,
+    /// How late the tick that [`Pulses::next`] returned last fired, for callers that keep their own histogram.
+    pub last_late: Duration,
 }
 
 fn interval(period: Duration) -> Interval {
@@ -118,6 +120,7 @@ impl Pulses {
             fast_jitter: JitterMeter::default(),
             slow_jitter: JitterMeter::default(),
             one_sec_jitter: JitterMeter::default(),
+            last_late: Duration::ZERO,
         }
     }
 
@@ -135,6 +138,7 @@ impl Pulses {
             at = maybe(&mut self.fast) => (Tick::Fast, at),
         };
         let late = Instant::now().saturating_duration_since(scheduled);
+        self.last_late = late;
         match tick {
             Tick::Fast => self.fast_jitter.record(late),
             Tick::Slow => self.slow_jitter.record(late),

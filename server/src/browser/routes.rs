@@ -21,6 +21,7 @@ use crate::http::access::{Credential, header_str as header, same_origin};
 pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(index))
+        .route("/graph", get(graph_page))
         .route("/api/session", post(new_session))
         .route("/link", get(link))
         .route("/{*path}", get(asset))
@@ -29,6 +30,11 @@ pub fn router(shared: Arc<Shared>) -> Router {
 
 async fn index(headers: HeaderMap) -> Response {
     asset_response("", &headers)
+}
+
+/// The live application graph (`web/graph.html`), linked from the page's top bar.
+async fn graph_page(headers: HeaderMap) -> Response {
+    asset_response("graph.html", &headers)
 }
 
 async fn asset(Path(path): Path<String>, headers: HeaderMap) -> Response {

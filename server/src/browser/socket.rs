@@ -316,7 +316,19 @@ impl Conn {
                     .await;
                 }
             }
-            PageMessage::Ping { t } => self.send_json(json!({"type": "pong", "t": t})).await,
+            PageMessage::Ping { t } => {
+                // The server's clock rides along, so the page can put hub timestamps on its own clock.
+                let server_ms = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0.0, |d| d.as_secs_f64() * 1000.0);
+                let pong = link::Pong {
+                    kind: "pong".into(),
+                    t,
+                    server_ms,
+                };
+                self.send_json(serde_json::to_value(pong).unwrap_or_default())
+                    .await
+            }
         }
         Ok(())
     }

@@ -5,6 +5,7 @@ use crate::module::Module;
 pub mod audio_fft;
 pub mod brain;
 mod luma;
+pub mod observer;
 mod on_demand;
 pub mod spectrum;
 pub mod tts;
@@ -21,5 +22,6 @@ pub fn builtin() -> Vec<Box<dyn Module>> {
         Box::new(vision::VisionModule),
         Box::new(video_y::VideoY),
         Box::new(audio_fft::AudioFft),
+        Box::new(observer::ObserverModule),
     ]
 }

@@ -1,5 +1,6 @@
 //! The page's end of the browser link: session, one WebSocket, reconnects, JSON control and binary media.
 
+import { ServerClock } from "./clock.js";
 import { decodeFrame, encodeFrame, KIND } from "./frames.js";
 
 const RECONNECT_MIN_MS = 500;
@@ -19,6 +20,8 @@ export class Link extends EventTarget {
     this.received = {};
     this.receivedTotal = 0;
     this.rttMs = null;
+    /** The server's clock on the page's, from the pongs (link/clock.js). */
+    this.clock = new ServerClock();
     this.backoff = RECONNECT_MIN_MS;
     this.pingTimer = null;
   }
@@ -82,7 +85,11 @@ export class Link extends EventTarget {
       }
       const type = typeof msg.type === "string" ? msg.type : "unknown";
       this.received[type] = (this.received[type] ?? 0) + 1;
-      if (type === "pong" && Number.isFinite(msg.t)) this.rttMs = performance.now() - msg.t;
+      if (type === "pong" && Number.isFinite(msg.t)) {
+        const now = performance.now();
+        this.rttMs = now - msg.t;
+        this.clock.sample(performance.timeOrigin + msg.t, performance.timeOrigin + now, msg.server_ms);
+      }
       this.emit(type, msg);
       return;
     }

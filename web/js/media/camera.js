@@ -53,7 +53,7 @@ export class Camera {
       this.inFlight = Math.max(0, this.inFlight - 1);
       if (ev.data.error) console.warn("camera: JPEG encoding failed:", ev.data.error);
       else if (!this.running) return;
-      else if (this.canSend()) this.onFrame(ev.data.jpeg);
+      else if (this.canSend()) this.onFrame(ev.data.jpeg, ev.data.capturedAt);
       else this.skipped += 1;
     };
     this.video.srcObject = stream;
@@ -104,12 +104,13 @@ export class Camera {
     const sw = FRAME_WIDTH / scale;
     const sh = FRAME_HEIGHT / scale;
     this.inFlight += 1;
+    const capturedAt = performance.timeOrigin + performance.now();
     createImageBitmap(v, (v.videoWidth - sw) / 2, (v.videoHeight - sh) / 2, sw, sh, {
       resizeWidth: FRAME_WIDTH,
       resizeHeight: FRAME_HEIGHT,
       resizeQuality: "medium",
     }).then(
-      (bitmap) => this.worker.postMessage({ type: "bitmap", bitmap, quality: JPEG_QUALITY }, [bitmap]),
+      (bitmap) => this.worker.postMessage({ type: "bitmap", bitmap, quality: JPEG_QUALITY, capturedAt }, [bitmap]),
       (err) => {
         this.inFlight -= 1;
         console.warn("camera: frame grab failed:", err);

@@ -5,7 +5,8 @@
 //   (MediaStreamTrackProcessor). The worker paces itself on the camera's own frames, so a busy main thread cannot
 //   slow the camera down; it keeps one frame in `fps` and encodes it.
 // - `{type: "bitmap", bitmap, quality}`: one already scaled ImageBitmap (browsers without track processors).
-// `{type: "fps", fps}` changes the pace. Answers are `{jpeg}` (an ArrayBuffer) or `{error}`.
+// `{type: "fps", fps}` changes the pace. Answers are `{jpeg, capturedAt}` (an ArrayBuffer, and when the frame was
+// taken, ms since the epoch: the start of the "camera capture -> box drawn" latency) or `{error}`.
 
 let canvas = null;
 let ctx = null;
@@ -19,10 +20,10 @@ function surface(width, height) {
   return ctx;
 }
 
-async function encode(quality) {
+async function encode(quality, capturedAt) {
   const blob = await canvas.convertToBlob({ type: "image/jpeg", quality });
   const jpeg = await blob.arrayBuffer();
-  self.postMessage({ jpeg }, [jpeg]);
+  self.postMessage({ jpeg, capturedAt }, [jpeg]);
 }
 
 /** Draws `frame` scaled to cover width x height (centre crop), like the preview's object-fit: cover. */
@@ -49,10 +50,11 @@ async function pump({ readable, quality, width, height }) {
       continue;
     }
     next = Math.max(next + interval, now - interval / 2);
+    const capturedAt = performance.timeOrigin + now;
     try {
       drawCover(frame, width, height);
       frame.close();
-      await encode(quality);
+      await encode(quality, capturedAt);
     } catch (err) {
       frame.close();
       self.postMessage({ error: String(err && err.message ? err.message : err) });
@@ -71,7 +73,7 @@ self.onmessage = async (ev) => {
     try {
       surface(msg.bitmap.width, msg.bitmap.height).drawImage(msg.bitmap, 0, 0);
       msg.bitmap.close();
-      await encode(msg.quality);
+      await encode(msg.quality, msg.capturedAt);
     } catch (err) {
       self.postMessage({ error: String(err && err.message ? err.message : err) });
     }

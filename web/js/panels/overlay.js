@@ -21,6 +21,9 @@ export class Overlay {
     this.dirty = false;
     this.w = 0;
     this.h = 0;
+    /** Called once per message with boxes, when they are first drawn: (frame.ts_us, drawn at, ms since epoch). */
+    this.onDrawn = null;
+    this.undrawn = null;
     trackCanvasSize(canvas, this.ctx, (w, h) => {
       this.w = w;
       this.h = h;
@@ -36,6 +39,7 @@ export class Overlay {
     if (!data) return;
     this.last = data;
     this.items = data.items.length;
+    if (data.items.length > 0 && Number.isFinite(message.frame.ts_us)) this.undrawn = message.frame.ts_us;
     this.lastAt = performance.now();
     this.count += 1;
     this.dirty = true;
@@ -94,6 +98,10 @@ export class Overlay {
       if (labelAt && item.label) label(ctx, String(item.label), labelAt[0], labelAt[1], colour);
     }
     ctx.globalAlpha = 1;
+    if (this.undrawn !== null) {
+      this.onDrawn?.(this.undrawn, performance.timeOrigin + performance.now());
+      this.undrawn = null;
+    }
   }
 }
 

@@ -6,13 +6,16 @@ export class StatusStrip {
     this.el = {
       connDot: $("st-conn-dot"), conn: $("st-conn"), role: $("st-role"), fpsOut: $("st-fps-out"),
       audOut: $("st-aud-out"), fpsIn: $("st-fps-in"), level: $("st-level"), levelBar: $("st-level-bar"),
-      drops: $("st-drops"), rtt: $("st-rtt"), pill: $("conn-pill"),
+      drops: $("st-drops"), rtt: $("st-rtt"), pill: $("conn-pill"), voice: $("st-voice"), camera: $("st-camera"),
     };
     this.prev = null;
     this.rates = null;
   }
 
-  /** Refreshes from `s` = {connection, role, sentVideo, sentAudio, received, levelDb, drops, rttMs}. */
+  /**
+   * Refreshes from `s` = {connection, role, sentVideo, sentAudio, received, levelDb, drops, rttMs, voice, camera}
+   * (the last two: the latency figures' text, panels/latency.js).
+   */
   update(s, nowMs) {
     const e = this.el;
     e.conn.textContent = s.connection;
@@ -41,5 +44,7 @@ export class StatusStrip {
     e.levelBar.style.width = `${Math.max(0, Math.min(100, ((db + 60) / 60) * 100))}%`;
     e.drops.textContent = String(s.drops);
     e.rtt.textContent = s.rttMs === null ? "–" : s.rttMs.toFixed(1);
+    e.voice.textContent = s.voice;
+    e.camera.textContent = s.camera;
   }
 }
