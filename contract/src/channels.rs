@@ -65,6 +65,8 @@ pub const DETECTIONS: Channel = stream(
 );
 /// The rule trace of the brain.
 pub const RULES: Channel = stream("Agent.rules", "rule trace (brain module)");
+/// Whether the session is being recorded, and where ([`crate::recording::RecordingState`]).
+pub const RECORDING: Channel = stream("Agent.recording", "recording state (recorder module)");
 /// One message per conversational turn with its stage latencies ([`crate::latency::TurnLatency`]).
 pub const LATENCY: Channel = stream("Agent.latency", "turn latencies (observer module)");
 /// Where whisper satellites submit transcripts for the relay to publish once.
@@ -80,7 +82,7 @@ pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
 /// Every channel with a fixed name.
 pub const ALL: &[Channel] = &[
     AUDIO, VIDEO, VIDEO_Y, AUDIO_FFT, CTRL, AVATAR, SPEECH, SAY, TRANSCRIPT, FACES, MOTION, CODES,
-    DETECTIONS, RULES, LATENCY, ASR_SUBMIT,
+    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT,
 ];
 
 /// Headers of the channels whose producer is fixed.
@@ -104,6 +106,8 @@ pub mod headers {
     pub const RULES: &str = r#"{"format":"json","content":"rule trace","doc":"docs/brain.md"}"#;
     /// `Agent.transcript`.
     pub const TRANSCRIPT: &str = r#"{"mime":"application/json"}"#;
+    /// `Agent.recording`.
+    pub const RECORDING: &str = r#"{"format":"json","content":"recording state","source":"recorder","doc":"docs/recording.md"}"#;
     /// `Agent.latency`.
     pub const LATENCY: &str = r#"{"format":"json","content":"turn latencies","source":"observer","doc":"docs/metrics.md"}"#;
 
@@ -156,6 +160,7 @@ mod tests {
             headers::RULES,
             headers::TRANSCRIPT,
             headers::LATENCY,
+            headers::RECORDING,
             &headers::vision("faces"),
             &headers::speech(22050, 20),
         ] {

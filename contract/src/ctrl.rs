@@ -1,6 +1,6 @@
 //! `Agent.ctrl`: control messages from the page holding the role (or any satellite). A message carries one or more
 //! of these fields and each consumer acts on its own: the TTS module on `say` and on a stop (`"speech": "stop"` or
-//! `"cmd": "speech_stop"`), whisper satellites on `asr`. Other fields are for other consumers and are ignored.
+//! `"cmd": "speech_stop"`), whisper satellites on `asr`, the recorder module on `record`. Other fields are for other consumers and are ignored.
 
 use serde::{Deserialize, Serialize};
 
@@ -18,6 +18,9 @@ pub struct Ctrl {
     /// Listening on or off.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub asr: Option<bool>,
+    /// Start (`true`) or stop (`false`) recording the session into an MCAP file (the recorder module).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub record: Option<bool>,
 }
 
 impl Ctrl {

@@ -9,6 +9,7 @@ pub mod ctrl;
 pub mod detections;
 pub mod latency;
 pub mod link;
+pub mod recording;
 pub mod rules;
 pub mod say;
 pub mod transcript;

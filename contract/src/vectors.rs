@@ -258,6 +258,21 @@ pub fn link() -> serde_json::Value {
     serde_json::json!({ "welcome": welcome, "status": status, "pong": pong })
 }
 
+/// `Agent.recording`: recording, then stopped.
+pub fn recording() -> serde_json::Value {
+    let state = |recording: bool, messages: u64| crate::recording::RecordingState {
+        recording,
+        file: Some("data/recordings/session-20261202-013000.mcap".into()),
+        started_ms: Some(1_700_000_000_000),
+        messages,
+        error: None,
+    };
+    serde_json::json!({
+        "channel": crate::channels::RECORDING.name,
+        "messages": [state(true, 120), state(false, 450)],
+    })
+}
+
 /// `Agent.latency`: two turns as the observer publishes them.
 pub fn latency() -> serde_json::Value {
     let turn =
@@ -326,6 +341,16 @@ mod tests {
         let _: crate::link::Status = serde_json::from_value(v["status"].clone()).expect("status");
         let _: crate::link::Pong = serde_json::from_value(v["pong"].clone()).expect("pong");
         check_or_write("link", &v).expect("vectors");
+    }
+
+    #[test]
+    fn recording_vectors_match_the_types() {
+        let v = recording();
+        for m in v["messages"].as_array().expect("messages") {
+            let _: crate::recording::RecordingState =
+                serde_json::from_value(m.clone()).expect("a recording state");
+        }
+        check_or_write("recording", &v).expect("vectors");
     }
 
     #[test]

@@ -31,6 +31,10 @@ pub struct Args {
     /// Directory for tokens, the pair database and the socket.
     #[arg(long)]
     data_dir: Option<PathBuf>,
+    /// Record every stream channel into this MCAP file from start to shutdown (the recorder module,
+    /// `[modules.recorder] file`; robot-agent has it, the bare hub records with `flowctl record`).
+    #[arg(long, value_name = "FILE")]
+    record: Option<PathBuf>,
 }
 
 /// Runs the binary `name` (described by `about`) with the application `build` makes from the configuration, until
@@ -74,6 +78,12 @@ async fn run(
     if let Some(v) = args.data_dir {
         config.server.data_dir = v;
     }
+    if let Some(file) = &args.record {
+        config.modules.entry("recorder".into()).or_default().insert(
+            "file".into(),
+            toml::Value::String(file.display().to_string()),
+        );
+    }
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
     tracing_subscriber::fmt()
@@ -82,6 +92,17 @@ async fn run(
         .init();
 
     let app = build(&config)?;
+    if args.record.is_some()
+        && !app
+            .modules
+            .iter()
+            .any(|m| m.name() == "recorder" && config.module_enabled("recorder"))
+    {
+        anyhow::bail!(
+            "--record needs the recorder module, which {name} does not run (record with `flowctl record`, or \
+             enable [modules.recorder])"
+        );
+    }
     let server = crate::start(config, app)
         .await
         .with_context(|| format!("starting {name}"))?;

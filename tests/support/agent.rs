@@ -73,6 +73,8 @@ pub struct AgentOptions {
     pub log: Option<String>,
     /// The binary: `robot-agent` (default) or `flow-hub` (the hub alone).
     pub program: Option<&'static str>,
+    /// More command-line arguments (e.g. `--record FILE`).
+    pub args: Vec<String>,
 }
 
 /// Everything a process printed, line by line, with a wake-up for waiters.
@@ -217,6 +219,7 @@ impl Agent {
             .arg("flow.sock")
             .arg("--data-dir")
             .arg(dir.path());
+        cmd.args(&opts.args);
         if let Some(toml) = &opts.config {
             let path = dir.path().join("test-config.toml");
             std::fs::write(&path, toml).context("writing the test configuration")?;

@@ -27,6 +27,8 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("blinkLog", () => avatar.debugState().blinkLog ?? null);
   define("visemeSchedule", () => avatar.debugState().schedule ?? null);
   define("role", () => page.role);
+  // The recorder's last state (Agent.recording): recording, file, started_ms, messages, error.
+  define("recording", () => ({ ...page.recording }));
   // The status strip's latencies: last and median of each, ms (null until measured).
   define("latency", () => ({
     voice: { last: latencies.voice.last, median: latencies.voice.median() },

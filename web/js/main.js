@@ -52,6 +52,8 @@ const page = {
   serverDrops: 0,
   lastError: null,
   videoFps: 15,
+  /** The recorder module's state, as Agent.recording last said. */
+  recording: { recording: false, file: null, started_ms: null, messages: 0 },
 };
 
 /** The status strip's "speech end -> reply audio" and "camera capture -> box drawn" figures. */
@@ -155,6 +157,25 @@ $("asr-btn").addEventListener("click", () => {
   }
 });
 $("hush-btn").addEventListener("click", () => link.sendJson({ type: "ctrl", data: { speech: "stop" } }));
+// The recorder module answers on Agent.recording; the button shows what it says, not what was asked.
+$("rec-btn").addEventListener("click", () => {
+  link.sendJson({ type: "ctrl", data: { record: !page.recording.recording } });
+});
+link.addEventListener("recording", (ev) => {
+  page.recording = ev.detail.data;
+  const r = page.recording;
+  $("rec-btn").dataset.on = String(r.recording);
+  $("rec-btn").textContent = r.recording ? "Stop recording" : "Record";
+  const name = r.file ? r.file.split("/").pop() : "";
+  $("rec-state").textContent = r.error
+    ? r.error
+    : r.recording
+      ? `● recording ${name}`
+      : r.file
+        ? `saved ${name} (${r.messages} messages)`
+        : "not recording";
+  $("rec-state").title = r.file ?? "";
+});
 $("say-form").addEventListener("submit", (ev) => {
   ev.preventDefault();
   const text = $("say-text").value.trim();
@@ -163,7 +184,7 @@ $("say-form").addEventListener("submit", (ev) => {
 
 function refreshAgentControls() {
   const holder = page.role === "holder";
-  for (const id of ["asr-btn", "hush-btn", "say-text", "say-btn"]) $(id).disabled = !holder;
+  for (const id of ["asr-btn", "hush-btn", "say-text", "say-btn", "rec-btn"]) $(id).disabled = !holder;
   $("agent-meta").textContent = holder ? "you are talking to the agent" : "only while you hold the microphone";
 }
 

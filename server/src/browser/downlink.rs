@@ -1,4 +1,5 @@
-//! Hub channels to one page: avatar commands, detections, rule trace, turn latencies, speech PCM and the spectrum.
+//! Hub channels to one page: avatar commands, detections, rule trace, turn latencies, the recording state, speech
+//! PCM and the spectrum.
 //!
 //! Each channel has its own subscription (a drop-oldest queue in the SDK) and a small task that turns messages into
 //! WebSocket frames and waits for room in the page's outgoing queue. A page that reads slowly therefore loses the
@@ -25,11 +26,12 @@ enum Route {
     Spectrum,
 }
 
-const ROUTES: [(&str, Route); 6] = [
+const ROUTES: [(&str, Route); 7] = [
     (channels::AVATAR.name, Route::Json("avatar")),
     (channels::DETECTIONS.name, Route::Json("detections")),
     (channels::RULES.name, Route::Json("rules")),
     (channels::LATENCY.name, Route::Json("latency")),
+    (channels::RECORDING.name, Route::Json("recording")),
     (channels::SPEECH.name, Route::Speech),
     (channels::AUDIO_FFT.name, Route::Spectrum),
 ];

@@ -7,6 +7,7 @@ pub mod brain;
 mod luma;
 pub mod observer;
 mod on_demand;
+pub mod recorder;
 pub mod spectrum;
 pub mod tts;
 pub mod video_y;
@@ -23,5 +24,6 @@ pub fn builtin() -> Vec<Box<dyn Module>> {
         Box::new(video_y::VideoY),
         Box::new(audio_fft::AudioFft),
         Box::new(observer::ObserverModule),
+        Box::new(recorder::RecorderModule),
     ]
 }
