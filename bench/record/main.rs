@@ -7,8 +7,8 @@
 //!   lateness report and the error of arrival times at a subscriber against the recorded schedule. Target: p99
 //!   lateness <= 2 ms.
 //!
-//! Options: `--seconds N` (per CPU phase, default 5), `--rounds N` (default 3), `--fps N` (publish rate of the CPU
-//! phases, default 120), `--replay-seconds N` (default 20), `--write PATH` (the Markdown report). Needs release
+//! Options: `--seconds N` (per CPU phase, default 10), `--rounds N` (default 3), `--fps N` (publish rate of the CPU
+//! phases, default 200), `--replay-seconds N` (default 20), `--write PATH` (the Markdown report). Needs release
 //! builds of `flow-hub` and `flowctl` (`AGENT_BIN_DIR`, as `make bench` sets it).
 
 mod overhead;
@@ -21,9 +21,9 @@ use anyhow::{Context, bail};
 
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> anyhow::Result<()> {
-    let mut seconds = 5u64;
+    let mut seconds = 10u64;
     let mut rounds = 3u32;
-    let mut fps = 120u32;
+    let mut fps = 200u32;
     let mut replay_seconds = 20u64;
     let mut write: Option<PathBuf> = None;
     let mut args = std::env::args().skip(1);

@@ -174,9 +174,10 @@ impl Replayer {
             };
             let deadline = start + Duration::from_nanos((due.offset_ns as f64 / speed) as u64);
             tokio::select! {
-                () = tokio::time::sleep_until(deadline) => {}
+                () = tokio::time::sleep_until(deadline.checked_sub(EARLY).unwrap_or(deadline)) => {}
                 () = &mut stop => break,
             }
+            finish_wait(deadline);
             lateness.record(Instant::now().saturating_duration_since(deadline));
             if let Some(Some(publisher)) = publishers.get(due.output) {
                 publisher.publish(due.payload).await?;
@@ -198,6 +199,20 @@ impl Replayer {
         report.undecodable = undecodable;
         report.lateness = lateness.summary();
         Ok(report)
+    }
+}
+
+/// How long before a deadline the runtime's timer hands over to the thread. Tokio's timer has millisecond
+/// granularity (a sleep ends at the first tick after its deadline, up to a millisecond late, more on a busy
+/// machine); the rest of the wait is a plain thread sleep, exact to tens of microseconds.
+const EARLY: Duration = Duration::from_millis(2);
+
+/// Waits on the thread for the last moments before `deadline`: at most [`EARLY`] of blocking per message, which
+/// the replay's task can afford (the SDK's writer sends the previous message during the timer sleep before it).
+fn finish_wait(deadline: Instant) {
+    let left = deadline.saturating_duration_since(Instant::now());
+    if !left.is_zero() {
+        std::thread::sleep(left);
     }
 }
 
