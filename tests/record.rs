@@ -403,6 +403,32 @@ async fn a_recorder_killed_with_sigkill_leaves_a_file_readable_up_to_its_last_ch
     Ok(())
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_ends_with_a_finished_file_when_the_hub_goes_away() -> anyhow::Result<()> {
+    recording::python()?;
+    let dir = DataDir::new()?;
+    let hub = Agent::hub(&dir).await?;
+    let work = tempfile::tempdir()?;
+    let file = work.path().join("gone.mcap");
+    let sdk = hub.client("gone-feeder").await?;
+    let publisher = sdk.publisher("Gone.json", r#"{"format":"json"}"#).await?;
+    let recorder = RecordProcess::start(&hub, &file, &[]).await?;
+    agent_tests::until_subscribed(&publisher).await?;
+    for n in 0..20 {
+        publisher
+            .publish(serde_json::json!({ "n": n }).to_string())
+            .await?;
+    }
+    until_file(&file, |c| c.on("Gone.json").len() == 20).await?;
+    hub.kill9().await?;
+    let out = recorder.wait_exit().await?;
+    assert!(out.contains("recorded 20 messages"), "{out}");
+    // Finished: the summary is there, as after Ctrl-C.
+    let py = recording::python_check(&file, "indexed").await?;
+    assert_eq!(py["summary"]["message_count"], 20, "{py}");
+    Ok(())
+}
+
 #[tokio::test]
 async fn top_once_prints_one_row_per_channel_with_its_owner_and_subscribers() -> anyhow::Result<()>
 {

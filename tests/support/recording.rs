@@ -65,7 +65,7 @@ impl RecordProcess {
     }
 
     /// Ctrl-C: the recorder finishes the file (summary, footer) and prints its report, which this returns.
-    pub async fn interrupt(mut self) -> anyhow::Result<String> {
+    pub async fn interrupt(self) -> anyhow::Result<String> {
         let pid = self.pid()?;
         let status = std::process::Command::new("kill")
             .arg("-INT")
@@ -73,12 +73,17 @@ impl RecordProcess {
             .status()
             .context("running kill")?;
         anyhow::ensure!(status.success(), "kill -INT {pid} failed");
+        self.wait_exit().await
+    }
+
+    /// Waits for the recorder to exit (after a signal, or by itself when the hub goes away) and returns its report.
+    pub async fn wait_exit(mut self) -> anyhow::Result<String> {
         let mut stdout = self.child.stdout.take().context("no stdout")?;
         let mut out = String::new();
         tokio::io::AsyncReadExt::read_to_string(&mut stdout, &mut out).await?;
         let status = tokio::time::timeout(crate::satellite::SATELLITE_PATIENCE, self.child.wait())
             .await
-            .context("flowctl record did not exit after SIGINT")??;
+            .context("flowctl record did not exit")??;
         anyhow::ensure!(
             status.success(),
             "flowctl record exited with {status}: {out}"

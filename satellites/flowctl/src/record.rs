@@ -32,8 +32,16 @@ pub async fn record(client: &Client, args: RecordArgs) -> anyhow::Result<()> {
         .await
         .with_context(|| format!("recording to {}", args.output.display()))?;
     eprintln!("recording to {} (Ctrl-C stops)", args.output.display());
-    crate::signals::until_stopped(args.duration).await?;
+    let mut connected = client.connection_state();
+    let lost = tokio::select! {
+        r = crate::signals::until_stopped(args.duration) => { r?; false }
+        // A hub that goes away ends the recording too, with its file finished.
+        _ = connected.wait_for(|up| !*up) => true,
+    };
     let report = recorder.stop().await?;
+    if lost {
+        eprintln!("flowctl: the hub closed the connection; the recording ends here");
+    }
     println!(
         "recorded {} messages on {} channels into {}",
         report.messages(),
