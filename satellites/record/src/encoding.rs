@@ -79,7 +79,11 @@ impl Form {
     /// The MCAP message encoding, schema name and schema text of this form on channel `name`.
     pub fn mcap_kind(&self, name: &str) -> (&'static str, Option<(String, String)>) {
         match self {
-            Form::Json => (JSON, Some((name.to_string(), schemas::permissive(name)))),
+            Form::Json => {
+                let schema = crate::contract_schemas::for_channel(name)
+                    .unwrap_or_else(|| schemas::permissive(name));
+                (JSON, Some((name.to_string(), schema)))
+            }
             Form::RawAudio { .. } => (
                 JSON,
                 Some((schemas::RAW_AUDIO.into(), schemas::RAW_AUDIO_SCHEMA.into())),

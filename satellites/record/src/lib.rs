@@ -8,6 +8,7 @@
 //! `flowctl replay` use them; see docs/recording.md.
 
 pub mod annotations;
+pub mod contract_schemas;
 pub mod encoding;
 pub mod error;
 pub mod lateness;
