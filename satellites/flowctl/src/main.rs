@@ -158,7 +158,10 @@ async fn run(args: Args) -> anyhow::Result<()> {
             | Cmd::Replay(_)
             | Cmd::Hz(_)
     );
-    opts.queue = 1024;
+    opts.queue = match args.command {
+        Cmd::Record(_) => record::SUBSCRIPTION_QUEUE,
+        _ => 1024,
+    };
     let asynchronous = opts.asynchronous;
     let client = Client::connect(&addr, opts).await?;
     let result = dispatch(&client, args.command).await;

@@ -8,6 +8,10 @@ use anyhow::Context;
 use flow::Client;
 use flow_record::{RecordOptions, Recorder, Selection};
 
+/// Messages each of the recorder's subscriptions may hold before it drops the oldest: 5 s of 20 ms audio, 17 s of
+/// 15 fps video, while bounding a recording of every channel to some tens of MB even if the disk stalls.
+pub const SUBSCRIPTION_QUEUE: usize = 256;
+
 /// `flowctl record` options.
 #[derive(Debug, clap::Args)]
 pub struct RecordArgs {
