@@ -429,6 +429,25 @@ async fn a_recording_ends_with_a_finished_file_when_the_hub_goes_away() -> anyho
     Ok(())
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_with_a_duration_stops_by_itself_with_a_finished_file() -> anyhow::Result<()> {
+    recording::python()?;
+    let dir = DataDir::new()?;
+    let hub = Agent::hub(&dir).await?;
+    let work = tempfile::tempdir()?;
+    let file = work.path().join("timed.mcap");
+    let sdk = hub.client("timed-feeder").await?;
+    let publisher = sdk.publisher("Timed.bin", "{}").await?;
+    let recorder = RecordProcess::start(&hub, &file, &["--duration", "2s"]).await?;
+    agent_tests::until_subscribed(&publisher).await?;
+    publisher.publish(vec![1u8, 2, 3]).await?;
+    let out = recorder.wait_exit().await?;
+    assert!(out.starts_with("recorded "), "{out}");
+    let py = recording::python_check(&file, "indexed").await?;
+    assert!(py["summary"].is_object(), "{py}");
+    Ok(())
+}
+
 #[tokio::test]
 async fn top_once_prints_one_row_per_channel_with_its_owner_and_subscribers() -> anyhow::Result<()>
 {
