@@ -590,7 +590,7 @@ impl Hub {
 
     /// Every connection and every channel between them, with their rates: the application graph.
     pub fn graph(&self) -> Graph {
-        graph::snapshot(&self.lock())
+        graph_of(&self.lock())
     }
 
     /// Open connections by transport (`tcp`, `unix`, `ws`, `module`).
@@ -806,6 +806,44 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
     }
     let subscribers: Vec<ConnId> = ch.subscribers.iter().map(|(c, _)| *c).collect();
     broadcast_except(st, &subscribers, |_| removed.clone());
+}
+
+/// The graph of the hub's state now.
+fn graph_of(st: &State) -> Graph {
+    let mut nodes: Vec<GraphNode> = st
+        .conns
+        .iter()
+        .map(|(&id, c)| GraphNode {
+            id,
+            name: c
+                .label
+                .rsplit_once('#')
+                .map_or(c.label.as_str(), |(n, _)| n)
+                .to_string(),
+            label: c.label.clone(),
+            transport: c.transport.clone(),
+        })
+        .collect();
+    nodes.sort_by_key(|n| n.id);
+    let mut channels: Vec<GraphChannel> = st
+        .channels
+        .values()
+        .map(|ch| {
+            let mut to: Vec<ConnId> = ch.subscribers.iter().map(|(c, _)| *c).collect();
+            to.sort_unstable();
+            GraphChannel {
+                name: ch.name.clone(),
+                kind: ch.kind.as_str(),
+                from: ch.owner,
+                to,
+                msgs_per_s: ch.rate.msgs_per_s,
+                bytes_per_s: ch.rate.bytes_per_s,
+                dropped: ch.dropped,
+            }
+        })
+        .collect();
+    channels.sort_by(|a, b| a.name.cmp(&b.name));
+    Graph { nodes, channels }
 }
 
 #[cfg(test)]

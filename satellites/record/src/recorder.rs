@@ -6,9 +6,9 @@
 //! drop their oldest (counted per channel as `dropped`); the hub in turn drops for a recorder that reads too
 //! slowly. Every loss shows as a gap in a channel's sequence numbers (`missing` in the report).
 //!
-//! Log time: the MCAP log time of a message is the time the recorder took it from its subscription (the hub's
-//! own receive time is not part of `Data`); the publish time is `Data::ts_us`, the hub clock when the message was
-//! published.
+//! Log time: the MCAP log time of a message is the hub's receive time, `Data::ts_us` (the hub stamps every
+//! message as its publish arrives); FlowProtocol carries no clock of the publisher's, so the publish time is the
+//! same stamp.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -156,7 +156,8 @@ impl Run {
             tokio::select! {
                 _ = &mut stopped => return self.drain().await,
                 Some((name, data)) = self.streams.next(), if !self.streams.is_empty() => {
-                    let item = Item::Message { name, data, log_ns: now_ns() };
+                    let log_ns = hub_receive_ns(&data);
+                    let item = Item::Message { name, data, log_ns };
                     hand_over(&self.items, item).await?;
                 }
                 event = events.recv() => match event {
@@ -217,13 +218,23 @@ impl Run {
             while let Some(data) = sub.try_recv() {
                 let item = Item::Message {
                     name: name.clone(),
+                    log_ns: hub_receive_ns(&data),
                     data,
-                    log_ns: now_ns(),
                 };
                 hand_over(&self.items, item).await?;
             }
         }
         Ok(())
+    }
+}
+
+/// A message's log time: when the hub received it (`Data.ts_us`, stamped by the hub as the publish arrives), or
+/// the recorder's clock for a message without a stamp.
+fn hub_receive_ns(data: &flow::Data) -> u64 {
+    if data.ts_us > 0 {
+        data.ts_us.saturating_mul(1000)
+    } else {
+        now_ns()
     }
 }
 

@@ -28,7 +28,7 @@ pub const META_DERIVED: &str = "flow.derived_from";
 pub(crate) enum Item {
     /// A channel appeared (or was re-created, or changed its header); its messages follow.
     Channel(ChannelInfo),
-    /// A message of a channel, with the recorder's receive time in ns since the Unix epoch.
+    /// A message of a channel, with its log time (the hub's receive time) in ns since the Unix epoch.
     Message {
         name: String,
         data: Data,
