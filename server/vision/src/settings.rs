@@ -50,6 +50,8 @@ pub struct FaceSettings {
     pub equalize: bool,
     /// Pixels scanned per frame; 0 scans the whole pyramid on every frame.
     pub scan_budget_px: u64,
+    /// The cascade that must confirm each candidate (one of the cascade names), or `none`.
+    pub verify: String,
 }
 
 /// `[modules.vision.motion]`.
@@ -117,6 +119,7 @@ impl Default for FaceSettings {
             max_detect_width: face.max_detect_width,
             equalize: face.equalize,
             scan_budget_px: face.scan_budget_px.unwrap_or(0),
+            verify: face.verify.map_or("none", Cascade::name).to_owned(),
         }
     }
 }
@@ -226,7 +229,14 @@ impl VisionSettings {
                 "faces.scan_budget_px",
                 "must be 0 (whole scan) or at least 10000",
             )?;
+            let verify = match f.verify.as_str() {
+                "none" => None,
+                name => Some(Cascade::from_name(name).ok_or_else(|| {
+                    invalid("faces.verify", format!("unknown cascade {name:?}; one of haar_default, haar_alt, haar_alt2, lbp, lbp_improved, or none"))
+                })?),
+            };
             Some(FaceParams {
+                verify,
                 cascade,
                 cascade_dir: f.cascade_dir.clone(),
                 scale_factor: f.scale_factor,
