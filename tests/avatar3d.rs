@@ -44,10 +44,6 @@ fn media() -> &'static FakeMedia {
     })
 }
 
-fn artifacts_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
-}
-
 fn repo_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
@@ -161,8 +157,8 @@ impl Stage {
             "screenshot {name} is only {} bytes",
             png.len()
         );
-        std::fs::create_dir_all(artifacts_dir())?;
-        let path = artifacts_dir().join(format!("{name}.png"));
+        std::fs::create_dir_all(agent_tests::artifacts_dir())?;
+        let path = agent_tests::artifacts_dir().join(format!("{name}.png"));
         std::fs::write(&path, &png).with_context(|| format!("writing {}", path.display()))?;
         println!("screenshot: {}", path.display());
         Ok(())

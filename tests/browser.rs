@@ -4,7 +4,6 @@
 //! Needs `chromium` and `ffmpeg` (Debian packages) and a built `robot-agent` (`cargo build -p robot-agent`).
 
 use agent_contract::channels as ch;
-use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
@@ -38,10 +37,6 @@ fn media() -> &'static (FakeMedia, FakeMedia) {
         });
         prepare(dir.path()).expect("converting fixtures with ffmpeg")
     })
-}
-
-fn artifacts_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
 }
 
 /// The page's URL in kiosk mode (microphone and camera start on their own; no echo cancellation, so the fixture
@@ -318,8 +313,8 @@ async fn page_streams_microphone_and_camera_into_hub_and_obeys_avatar_commands()
         .wait_for(&tab, "agentDebug.detections > 1", Duration::from_secs(5))
         .await?;
     let png = browser.screenshot(&tab).await?;
-    std::fs::create_dir_all(artifacts_dir())?;
-    let shot = artifacts_dir().join("browser-page.png");
+    std::fs::create_dir_all(agent_tests::artifacts_dir())?;
+    let shot = agent_tests::artifacts_dir().join("browser-page.png");
     std::fs::write(&shot, &png).with_context(|| format!("writing {}", shot.display()))?;
     ensure!(png.len() > 10_000, "screenshot is only {} bytes", png.len());
     browser.quit().await;

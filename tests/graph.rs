@@ -12,10 +12,6 @@ use serde_json::Value;
 /// Two shared cores, Chromium and whisper.cpp starting: generous, never a measurement.
 const PATIENCE: Duration = Duration::from_secs(120);
 
-fn artifacts_dir() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_graph_page_shows_the_satellites_modules_and_channels_of_a_running_agent()
 -> anyhow::Result<()> {
@@ -101,8 +97,8 @@ async fn the_graph_page_shows_the_satellites_modules_and_channels_of_a_running_a
     let curves = browser.eval(&tab, "graphDebug.curves").await?;
     assert_eq!(drawn[1].as_u64(), curves.as_u64(), "{drawn}");
     let png = browser.screenshot(&tab).await?;
-    std::fs::create_dir_all(artifacts_dir())?;
-    std::fs::write(artifacts_dir().join("graph.png"), &png)?;
+    std::fs::create_dir_all(agent_tests::artifacts_dir())?;
+    std::fs::write(agent_tests::artifacts_dir().join("graph.png"), &png)?;
     browser.quit().await;
     Ok(())
 }

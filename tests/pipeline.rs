@@ -16,10 +16,6 @@ use serde_json::Value;
 /// Generous bound for each stage: on two cores the browser, the detectors and Whisper share the machine.
 const STAGE: Duration = Duration::from_secs(90);
 
-fn artifacts_dir() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
-}
-
 /// Every JSON message of a subscription, collected in the background.
 fn collect(sub: flow::Subscription) -> Arc<Mutex<Vec<Value>>> {
     let seen = Arc::new(Mutex::new(Vec::new()));
@@ -191,8 +187,8 @@ async fn with_every_module_on_the_page_draws_what_the_agent_sees_and_plays_what_
         "{camera}"
     );
     let png = browser.screenshot(&tab).await?;
-    std::fs::create_dir_all(artifacts_dir())?;
-    std::fs::write(artifacts_dir().join("pipeline-face.png"), &png)?;
+    std::fs::create_dir_all(agent_tests::artifacts_dir())?;
+    std::fs::write(agent_tests::artifacts_dir().join("pipeline-face.png"), &png)?;
 
     // The avatar looks towards the person: a face on the right of the camera image is the avatar's left, so its
     // eyes and head turn to the viewer's left.
@@ -253,7 +249,7 @@ async fn with_every_module_on_the_page_draws_what_the_agent_sees_and_plays_what_
     let shown = visemes_seen(&browser, &tab).await?;
     assert!(shown >= 3, "visemes shown: {shown}");
     let png = browser.screenshot(&tab).await?;
-    std::fs::write(artifacts_dir().join("pipeline-code.png"), &png)?;
+    std::fs::write(agent_tests::artifacts_dir().join("pipeline-code.png"), &png)?;
     browser.quit().await;
 
     // The vision module's stage times reached /metrics, read by Prometheus's own parser.

@@ -21,4 +21,9 @@ pub use fixtures::fixture;
 pub use raw::RawConn;
 pub use satellite::Satellite;
 pub use wait::PATIENCE;
+
+/// Where tests save screenshots and other files for people to look at (`artifacts/`, git-ignored).
+pub fn artifacts_dir() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
+}
 pub use wait::{recv, until_subscribed, until_unsubscribed};

@@ -2,7 +2,6 @@
 //! (`prometheus_client.parser`, in the SDK's venv that `make test` creates), so the exposition format is checked by
 //! a real parser, not by ours.
 
-use std::path::PathBuf;
 use std::process::Stdio;
 
 use anyhow::Context;
@@ -44,17 +43,6 @@ pub async fn scrape(agent: &Agent) -> anyhow::Result<String> {
     Ok(answer.body)
 }
 
-fn venv_python() -> anyhow::Result<PathBuf> {
-    let python =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../satellites/python/.venv/bin/python");
-    anyhow::ensure!(
-        python.exists(),
-        "{} is missing: run `make python` (make test does), which installs prometheus-client there",
-        python.display()
-    );
-    Ok(python)
-}
-
 const PARSER: &str = r#"
 import json, sys
 from prometheus_client.parser import text_string_to_metric_families
@@ -68,7 +56,7 @@ print(json.dumps(out))
 
 /// Every sample of `text`, as `prometheus_client.parser` reads it; a parse error fails with the parser's reason.
 pub async fn parse(text: &str) -> anyhow::Result<Vec<Sample>> {
-    let mut child = tokio::process::Command::new(venv_python()?)
+    let mut child = tokio::process::Command::new(crate::recording::python()?)
         .arg("-c")
         .arg(PARSER)
         .stdin(Stdio::piped())

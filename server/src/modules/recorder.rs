@@ -43,15 +43,16 @@ impl Default for RecorderParams {
 }
 
 impl RecorderParams {
-    fn from_json(params: &serde_json::Value) -> anyhow::Result<Self> {
+    /// The checked section and its channel selection, parsed once.
+    fn from_json(params: &serde_json::Value) -> anyhow::Result<(Self, Selection)> {
         let p: RecorderParams = serde_path_to_error::deserialize(params)
             .map_err(|e| anyhow::anyhow!("[modules.recorder] {}: {}", e.path(), e.inner()))?;
-        Selection::new(&p.channels)
+        let selection = Selection::new(&p.channels)
             .map_err(|e| anyhow::anyhow!("[modules.recorder] channels: {e}"))?;
         if p.dir.is_empty() {
             anyhow::bail!("[modules.recorder] dir: must name a directory");
         }
-        Ok(p)
+        Ok((p, selection))
     }
 }
 
@@ -71,7 +72,7 @@ struct Running {
 /// What the module does and tells.
 struct Desk {
     client: flow::Client,
-    params: RecorderParams,
+    channels: Selection,
     dir: PathBuf,
     running: Option<Running>,
     state: RecordingState,
@@ -92,7 +93,7 @@ impl Desk {
                     .map_err(|e| anyhow::anyhow!("{}: {e}", parent.display()))?;
             }
             let opts = RecordOptions {
-                channels: Selection::new(&self.params.channels)?,
+                channels: self.channels.clone(),
                 ..RecordOptions::default()
             };
             anyhow::Ok(Recorder::start(self.client.clone(), &path, opts).await?)
@@ -153,7 +154,7 @@ impl Module for RecorderModule {
 
     fn run(self: Box<Self>, mut ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
-            let params = RecorderParams::from_json(&ctx.params)?;
+            let (params, channels) = RecorderParams::from_json(&ctx.params)?;
             let client = ctx.client.clone();
             let dir = Path::new(&ctx.config().server.data_dir).join(&params.dir);
             let state = client
@@ -163,7 +164,7 @@ impl Module for RecorderModule {
             let first = params.file.clone().map(PathBuf::from);
             let mut desk = Desk {
                 client,
-                params,
+                channels,
                 dir,
                 running: None,
                 state: RecordingState {
