@@ -240,13 +240,25 @@ impl Agent {
             .spawn()
             .context("starting robot-agent")?;
         let output = Arc::new(Output::default());
-        collect(child.stdout.take(), output.clone());
-        collect(child.stderr.take(), output.clone());
+        let readers: Vec<_> = [
+            collect(child.stdout.take(), output.clone()),
+            collect(child.stderr.take(), output.clone()),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
         let ready = tokio::select! {
             r = output.wait_for("flow hub: unix:", 1, START_TIMEOUT) => r,
-            status = child.wait() => Err(anyhow::anyhow!(
-                "robot-agent exited at start ({status:?}):\n{}", output.lines().join("\n")
-            )),
+            status = child.wait() => {
+                // The process has gone, but its last lines (the error a test reads) may still be in the pipes:
+                // drain them before reporting, so the report never races the readers.
+                for reader in readers {
+                    let _ = tokio::time::timeout(Duration::from_secs(5), reader).await;
+                }
+                Err(anyhow::anyhow!(
+                    "robot-agent exited at start ({status:?}):\n{}", output.lines().join("\n")
+                ))
+            }
         };
         ready?;
         let lines = output.lines();
@@ -385,9 +397,13 @@ fn after<'a>(lines: &'a [String], prefix: &str) -> Option<&'a str> {
     lines.iter().find_map(|l| l.strip_prefix(prefix))
 }
 
-fn collect(stream: Option<impl AsyncRead + Unpin + Send + 'static>, output: Arc<Output>) {
-    let Some(stream) = stream else { return };
-    tokio::spawn(async move {
+/// Copies `stream`'s lines into `output` until it ends; the handle finishes at end of stream.
+fn collect(
+    stream: Option<impl AsyncRead + Unpin + Send + 'static>,
+    output: Arc<Output>,
+) -> Option<tokio::task::JoinHandle<()>> {
+    let stream = stream?;
+    Some(tokio::spawn(async move {
         let mut lines = BufReader::new(stream).lines();
         while let Ok(Some(line)) = lines.next_line().await {
             if std::env::var_os("AGENT_TEST_ECHO").is_some() {
@@ -395,5 +411,5 @@ fn collect(stream: Option<impl AsyncRead + Unpin + Send + 'static>, output: Arc<
             }
             output.push(line);
         }
-    });
+    }))
 }
