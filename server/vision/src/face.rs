@@ -91,6 +91,10 @@ pub struct FaceParams {
     /// every candidate). Two cascades trained apart rarely share a ghost: on the annotated fixtures `haar_alt`
     /// over `haar_default`'s candidates keeps 22 of 23 faces and drops every false one (docs/vision.md).
     pub verify: Option<Cascade>,
+    /// Scan where motion appears first, at every face size, before going on with the cycle (see
+    /// [`FaceScanner::scan_with_motion`]): a face that comes into view moves, so its box is found within a few
+    /// frames instead of within one cycle.
+    pub motion_focus: bool,
 }
 
 impl Default for FaceParams {
@@ -105,6 +109,7 @@ impl Default for FaceParams {
             equalize: true,
             scan_budget_px: Some(DEFAULT_SCAN_BUDGET_PX),
             verify: Some(Cascade::HaarAlt),
+            motion_focus: true,
         }
     }
 }
@@ -244,6 +249,8 @@ impl FaceDetector {
         let whole = ScanUnit {
             min_window: self.window,
             max_window: Size::new(0, 0),
+            left: 0,
+            width: i32::MAX,
             first_row: 0,
             rows: i32::MAX,
             cost: 0,
@@ -283,15 +290,15 @@ impl FaceDetector {
     /// Runs the cascade over one unit of the prepared image and maps the hits back to frame pixels.
     fn run_unit(&mut self, unit: &ScanUnit, factor: f64) -> Result<Vec<BoxPx>, VisionError> {
         let image_rows = self.equalized.rows();
-        let first_row = unit.first_row.min(image_rows);
+        let image_cols = self.equalized.cols();
+        let first_row = unit.first_row.clamp(0, image_rows);
         let rows = unit.rows.min(image_rows - first_row);
-        if rows < self.window.height {
+        let left = unit.left.clamp(0, image_cols);
+        let cols = unit.width.min(image_cols - left);
+        if rows < self.window.height || cols < self.window.width {
             return Ok(Vec::new());
         }
-        let stripe = Mat::roi(
-            &self.equalized,
-            Rect::new(0, first_row, self.equalized.cols(), rows),
-        )?;
+        let stripe = Mat::roi(&self.equalized, Rect::new(left, first_row, cols, rows))?;
         self.classifier.detect_multi_scale(
             &stripe,
             &mut self.found,
@@ -306,7 +313,7 @@ impl FaceDetector {
             .iter()
             .map(|r| {
                 BoxPx {
-                    x: r.x,
+                    x: r.x + left,
                     y: r.y + first_row,
                     width: r.width,
                     height: r.height,
@@ -318,12 +325,14 @@ impl FaceDetector {
 }
 
 /// One piece of the full scan: a band of pyramid levels (window sizes) over a horizontal stripe of the prepared
-/// image.
+/// image, or of a region of it (`left`, `width`; the whole width for the cycle's units).
 #[derive(Debug, Clone, PartialEq)]
 struct ScanUnit {
     min_window: Size,
     /// `Size(0, 0)` means no upper limit.
     max_window: Size,
+    left: i32,
+    width: i32,
     first_row: i32,
     rows: i32,
     /// Estimated pixels scanned.
@@ -391,6 +400,8 @@ fn plan_units(
             units.push(ScanUnit {
                 min_window,
                 max_window,
+                left: 0,
+                width,
                 first_row,
                 rows,
                 cost: stripe_cost,
@@ -413,9 +424,44 @@ pub struct FaceScan {
     pub units_per_cycle: usize,
 }
 
+/// How far a motion region is grown on each edge before it is scanned, as a fraction of its side: the moving part
+/// of a head (a turn, the hair) can be smaller than the face, and the cascade needs the whole face in view.
+const FOCUS_MARGIN: f64 = 0.25;
+/// Regions waiting for a focus scan at most; further ones are dropped (motion that goes on comes back).
+const FOCUS_MAX_JOBS: usize = 4;
+/// A new motion region that lies this much inside a region being scanned, or scanned recently, is not queued again.
+const FOCUS_COVERED: f64 = 0.7;
+/// How long a scanned region counts as recently scanned, in frames (1 s at 15 fps).
+const FOCUS_RECENT_FRAMES: u64 = 15;
+/// Consecutive frames the focus scans may take the whole budget before one frame goes to the cycle, so that
+/// motion that never stops cannot starve the faces that stand still.
+const FOCUS_MAX_STREAK: u32 = 6;
+
+/// A region where motion appeared, scanned at every face size that fits it, largest sizes first: the large
+/// windows cost least (the image is shrunk most), and the face that moved in is usually the large thing in its
+/// region, so it is found on the first frames.
+#[derive(Debug, Clone)]
+struct FocusJob {
+    /// The grown region in prepared-image pixels.
+    region: Rect,
+    /// Units not scanned yet, largest windows first.
+    pending: std::collections::VecDeque<ScanUnit>,
+    /// Faces found in the region so far, in frame pixels.
+    found: Vec<BoxPx>,
+}
+
+/// A face found by a focus scan, reported until the cycle has run over the whole frame after it (the cycle's own
+/// result then holds the face, if it is still there).
+#[derive(Debug, Clone, Copy)]
+struct FocusHit {
+    face: BoxPx,
+    found_at_cycle: u64,
+}
+
 /// Spreads the cascade's full scan over consecutive frames so that each frame costs about `scan_budget_px`,
 /// and reports the union of the latest result of every part. A face is therefore found within one cycle (about
-/// 2.5 s for a 640x360 frame at the default budget and 15 fps) and its box refreshed once per cycle.
+/// 2.5 s for a 640x360 frame at the default budget and 15 fps) and its box refreshed once per cycle; with
+/// `motion_focus`, regions where motion appears are scanned first (see [`FaceScanner::scan_with_motion`]).
 #[derive(Debug)]
 pub struct FaceScanner {
     detector: FaceDetector,
@@ -425,6 +471,13 @@ pub struct FaceScanner {
     latest: Vec<Vec<BoxPx>>,
     next_unit: usize,
     completed_cycles: u64,
+    focus_jobs: std::collections::VecDeque<FocusJob>,
+    focus_hits: Vec<FocusHit>,
+    /// Regions whose focus scan finished, with the frame number it finished on.
+    focus_done: Vec<(Rect, u64)>,
+    /// Frames in a row on which the focus scans left nothing of the budget to the cycle.
+    focus_streak: u32,
+    frames: u64,
 }
 
 impl FaceScanner {
@@ -441,6 +494,11 @@ impl FaceScanner {
             latest: Vec::new(),
             next_unit: 0,
             completed_cycles: 0,
+            focus_jobs: std::collections::VecDeque::new(),
+            focus_hits: Vec::new(),
+            focus_done: Vec::new(),
+            focus_streak: 0,
+            frames: 0,
         })
     }
 
@@ -462,6 +520,24 @@ impl FaceScanner {
 
     /// Scans the next units of the frame within the budget.
     pub fn scan(&mut self, frame: &GreyFrame) -> Result<FaceScan, VisionError> {
+        self.scan_with_motion(frame, &[])
+    }
+
+    /// Scans the next units of the frame within the budget, regions where motion appeared on this frame first
+    /// (`moving`, in frame pixels: the motion detector's regions of this frame, not held ones).
+    ///
+    /// Each new motion region, grown by a quarter on every side, becomes a focus job: a scan of that region at
+    /// every face size, cut into units like the cycle and run largest windows first, ahead of the cycle and within
+    /// the same per-frame budget. Faces it finds are reported at once. When a job has scanned its whole region,
+    /// boxes from earlier scans that lie inside it and that it did not find again are dropped: the face has left
+    /// (or was never there), so it does not stay on screen until the cycle comes round. Ignored unless
+    /// `motion_focus` is set and the scan is budgeted.
+    pub fn scan_with_motion(
+        &mut self,
+        frame: &GreyFrame,
+        moving: &[BoxPx],
+    ) -> Result<FaceScan, VisionError> {
+        self.frames += 1;
         let Some(budget) = self.detector.params.scan_budget_px else {
             let candidates = self.detector.detect(frame)?;
             let faces = self.verified(frame, candidates)?;
@@ -490,12 +566,21 @@ impl FaceScanner {
             self.latest = vec![Vec::new(); self.units.len()];
             self.next_unit = 0;
             self.plan_for = Some(prepared);
+            self.focus_jobs.clear();
+            self.focus_hits.clear();
+            self.focus_done.clear();
+        }
+        if self.detector.params.motion_focus {
+            self.queue_focus(moving, factor, prepared, budget);
         }
         let mut spent = 0_u64;
+        if self.focus_streak < FOCUS_MAX_STREAK {
+            spent = self.run_focus(factor, budget)?;
+        }
         let mut ran = 0;
         while ran < self.units.len() {
             let unit = &self.units[self.next_unit];
-            if ran > 0 && spent + unit.cost > budget {
+            if spent > 0 && spent + unit.cost > budget {
                 break;
             }
             spent += unit.cost;
@@ -508,13 +593,127 @@ impl FaceScanner {
                 self.completed_cycles += 1;
             }
         }
-        let faces = merge_overlapping(self.latest.iter().flatten().copied());
-        let faces = self.verified(frame, faces)?;
+        self.focus_streak = if ran == 0 { self.focus_streak + 1 } else { 0 };
+        // A focus hit has served its purpose once the cycle has covered the whole frame after it.
+        let cycles = self.completed_cycles;
+        self.focus_hits.retain(|h| cycles < h.found_at_cycle + 2);
+        let candidates = merge_overlapping(
+            self.latest
+                .iter()
+                .flatten()
+                .copied()
+                .chain(self.focus_hits.iter().map(|h| h.face)),
+        );
+        let faces = self.verified(frame, candidates)?;
         Ok(FaceScan {
             faces,
             completed_cycles: self.completed_cycles,
             units_per_cycle: self.units.len(),
         })
+    }
+
+    /// Turns this frame's motion regions into focus jobs, skipping those already being scanned or scanned in the
+    /// last second.
+    fn queue_focus(&mut self, moving: &[BoxPx], factor: f64, prepared: (i32, i32), budget: u64) {
+        let frames = self.frames;
+        self.focus_done
+            .retain(|(_, done)| frames <= done + FOCUS_RECENT_FRAMES);
+        let window = self.detector.window;
+        for region in moving {
+            let grow_x = f64::from(region.width) * FOCUS_MARGIN;
+            let grow_y = f64::from(region.height) * FOCUS_MARGIN;
+            let left = ((f64::from(region.x) - grow_x) * factor).floor().max(0.0) as i32;
+            let top = ((f64::from(region.y) - grow_y) * factor).floor().max(0.0) as i32;
+            let right = ((f64::from(region.x + region.width) + grow_x) * factor)
+                .ceil()
+                .min(f64::from(prepared.0)) as i32;
+            let bottom = ((f64::from(region.y + region.height) + grow_y) * factor)
+                .ceil()
+                .min(f64::from(prepared.1)) as i32;
+            let grown = Rect::new(left, top, right - left, bottom - top);
+            if grown.width < window.width || grown.height < window.height {
+                continue;
+            }
+            let area = f64::from(grown.width) * f64::from(grown.height);
+            let covered = self
+                .focus_jobs
+                .iter()
+                .map(|j| j.region)
+                .chain(self.focus_done.iter().map(|(r, _)| *r))
+                .any(|r| f64::from((r & grown).area()) >= FOCUS_COVERED * area);
+            if covered || self.focus_jobs.len() >= FOCUS_MAX_JOBS {
+                continue;
+            }
+            // Finer units than the cycle's, so that the focus scans fill the frame's budget closely.
+            let mut units = plan_units(
+                grown.width,
+                grown.height,
+                window,
+                self.detector.params.scale_factor,
+                (budget / 2).max(1),
+            );
+            for unit in &mut units {
+                unit.left += grown.x;
+                unit.first_row += grown.y;
+            }
+            units.reverse();
+            self.focus_jobs.push_back(FocusJob {
+                region: grown,
+                pending: units.into(),
+                found: Vec::new(),
+            });
+        }
+    }
+
+    /// Runs focus units within the budget; returns the pixels spent.
+    fn run_focus(&mut self, factor: f64, budget: u64) -> Result<u64, VisionError> {
+        let mut spent = 0_u64;
+        while let Some(job) = self.focus_jobs.front_mut() {
+            let Some(unit) = job.pending.front() else {
+                self.finish_focus(factor);
+                continue;
+            };
+            if spent > 0 && spent + unit.cost > budget {
+                break;
+            }
+            spent += unit.cost;
+            let unit = unit.clone();
+            let found = self.detector.run_unit(&unit, factor)?;
+            let cycle = self.completed_cycles;
+            self.focus_hits
+                .extend(found.iter().map(|&face| FocusHit {
+                    face,
+                    found_at_cycle: cycle,
+                }));
+            job.found.extend(found);
+            job.pending.pop_front();
+            if job.pending.is_empty() {
+                self.finish_focus(factor);
+            }
+        }
+        Ok(spent)
+    }
+
+    /// Ends the first focus job: earlier boxes wholly inside its region that it did not find again are dropped.
+    fn finish_focus(&mut self, factor: f64) {
+        let Some(job) = self.focus_jobs.pop_front() else {
+            return;
+        };
+        let region = BoxPx {
+            x: job.region.x,
+            y: job.region.y,
+            width: job.region.width,
+            height: job.region.height,
+        }
+        .unscale(factor);
+        let stale = |b: &BoxPx| {
+            b.intersection_area(&region) == b.area() && !job.found.iter().any(|f| f.iou(b) > 0.3)
+        };
+        for boxes in &mut self.latest {
+            boxes.retain(|b| !stale(b));
+        }
+        self.focus_hits.retain(|h| !stale(&h.face));
+        self.focus_done.push((job.region, self.frames));
     }
 }
 

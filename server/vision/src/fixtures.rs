@@ -41,6 +41,102 @@ pub fn image_as_jpeg(path: &Path) -> Result<Vec<u8>, FixtureError> {
     Ok(jpeg.to_vec())
 }
 
+/// The camera format the page sends: 640x360 JPEGs encoded by the browser at quality 0.75
+/// (`web/js/media/camera.js`), which libjpeg's quality 75 reproduces.
+pub const CAMERA_WIDTH: i32 = 640;
+pub const CAMERA_HEIGHT: i32 = 360;
+pub const CAMERA_JPEG_QUALITY: i32 = 75;
+
+/// An annotated photo as the camera would send it, with its ground truth in the same pixels.
+#[derive(Debug, Clone)]
+pub struct CameraImage {
+    pub jpeg: Vec<u8>,
+    pub truth: FaceTruth,
+}
+
+/// Puts an annotated photo into a 640x360 camera frame: scaled to fit with its aspect ratio kept, centred, the
+/// rest black (what a canvas without alpha shows where nothing is drawn), then encoded as a colour JPEG at the
+/// page's quality. The ground-truth boxes are scaled and shifted the same way.
+pub fn letterbox(fixtures: &Path, truth: &FaceTruth) -> Result<CameraImage, FixtureError> {
+    use opencv::core::{self, Mat, MatTraitConst, Scalar, Size, Vector, VectorToVec};
+    use opencv::{imgcodecs, imgproc};
+    let path = fixtures.join(&truth.image);
+    let failed = |reason: String| FixtureError::Image {
+        path: path.clone(),
+        reason,
+    };
+    // The annotations refer to the stored pixels, so EXIF orientation is ignored as the decoder does.
+    let photo = imgcodecs::imread(
+        path.as_os_str(),
+        imgcodecs::IMREAD_COLOR | imgcodecs::IMREAD_IGNORE_ORIENTATION,
+    )
+    .map_err(|e| failed(e.to_string()))?;
+    if photo.empty() {
+        return Err(failed("not an image OpenCV can read".to_owned()));
+    }
+    let scale = (f64::from(CAMERA_WIDTH) / f64::from(photo.cols()))
+        .min(f64::from(CAMERA_HEIGHT) / f64::from(photo.rows()));
+    let width = ((f64::from(photo.cols()) * scale).round() as i32).clamp(1, CAMERA_WIDTH);
+    let height = ((f64::from(photo.rows()) * scale).round() as i32).clamp(1, CAMERA_HEIGHT);
+    let mut scaled = Mat::default();
+    // Area averaging when shrinking, like a browser's high-quality downscale; bilinear when enlarging.
+    let interpolation = if scale < 1.0 {
+        imgproc::INTER_AREA
+    } else {
+        imgproc::INTER_LINEAR
+    };
+    imgproc::resize(
+        &photo,
+        &mut scaled,
+        Size::new(width, height),
+        0.0,
+        0.0,
+        interpolation,
+    )
+    .map_err(|e| failed(e.to_string()))?;
+    let left = (CAMERA_WIDTH - width) / 2;
+    let top = (CAMERA_HEIGHT - height) / 2;
+    let mut framed = Mat::default();
+    core::copy_make_border(
+        &scaled,
+        &mut framed,
+        top,
+        CAMERA_HEIGHT - height - top,
+        left,
+        CAMERA_WIDTH - width - left,
+        core::BORDER_CONSTANT,
+        Scalar::all(0.0),
+    )
+    .map_err(|e| failed(e.to_string()))?;
+    let mut jpeg = Vector::<u8>::new();
+    let params = Vector::<i32>::from_slice(&[imgcodecs::IMWRITE_JPEG_QUALITY, CAMERA_JPEG_QUALITY]);
+    imgcodecs::imencode(".jpg", &framed, &mut jpeg, &params).map_err(|e| failed(e.to_string()))?;
+    // Both axes are scaled by the same factor, so box corners map exactly like the pixels.
+    let map = |v: i32, offset: i32| (f64::from(v) * scale).round() as i32 + offset;
+    let boxes = truth
+        .boxes
+        .iter()
+        .map(|b| {
+            let x = map(b.x, left);
+            let y = map(b.y, top);
+            BoxPx {
+                x,
+                y,
+                width: map(b.x + b.width, left) - x,
+                height: map(b.y + b.height, top) - y,
+            }
+        })
+        .collect();
+    Ok(CameraImage {
+        jpeg: jpeg.to_vec(),
+        truth: FaceTruth {
+            image: truth.image.clone(),
+            face_count: truth.face_count,
+            boxes,
+        },
+    })
+}
+
 /// Why a fixture could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum FixtureError {

@@ -7,6 +7,7 @@
 pub mod appearance;
 pub mod codes;
 pub mod error;
+pub mod evaluation;
 pub mod face;
 pub mod fixtures;
 pub mod frame;

@@ -124,18 +124,29 @@ impl VisionPipeline {
     ) -> Result<FrameDetections, VisionError> {
         let started = Instant::now();
         let mut timings = StageTimings::default();
-        let (faces, face_cycles) = match self.faces.as_mut() {
-            Some(scanner) => {
-                let scan = timed(&mut timings.faces, || scanner.scan(frame))?;
-                (Some(scan.faces), scan.completed_cycles)
-            }
-            None => (None, 0),
-        };
         let motion = match self.motion.as_mut() {
             Some(detector) => Some(timed(&mut timings.motion, || {
                 detector.process(frame, frame_us)
             })?),
             None => None,
+        };
+        // Motion first: the face scanner looks first where something has just moved, since a face that comes into
+        // view moves (see `FaceScanner::scan_with_motion`). Held results repeat an older frame's regions, which
+        // were queued then.
+        let moving: &[BoxPx] = match &motion {
+            Some(Motion::Moving {
+                regions,
+                held: false,
+                ..
+            }) => regions,
+            _ => &[],
+        };
+        let (faces, face_cycles) = match self.faces.as_mut() {
+            Some(scanner) => {
+                let scan = timed(&mut timings.faces, || scanner.scan_with_motion(frame, moving))?;
+                (Some(scan.faces), scan.completed_cycles)
+            }
+            None => (None, 0),
         };
         let codes = match self.codes.as_mut() {
             Some(reader) => {

@@ -52,6 +52,8 @@ pub struct FaceSettings {
     pub scan_budget_px: u64,
     /// The cascade that must confirm each candidate (one of the cascade names), or `none`.
     pub verify: String,
+    /// Scan regions where motion appears first, at every face size (needs the motion detector).
+    pub motion_focus: bool,
 }
 
 /// `[modules.vision.motion]`.
@@ -120,6 +122,7 @@ impl Default for FaceSettings {
             equalize: face.equalize,
             scan_budget_px: face.scan_budget_px.unwrap_or(0),
             verify: face.verify.map_or("none", Cascade::name).to_owned(),
+            motion_focus: face.motion_focus,
         }
     }
 }
@@ -245,6 +248,7 @@ impl VisionSettings {
                 max_detect_width: f.max_detect_width,
                 equalize: f.equalize,
                 scan_budget_px: (f.scan_budget_px > 0).then_some(f.scan_budget_px),
+                motion_focus: f.motion_focus,
             })
         } else {
             None

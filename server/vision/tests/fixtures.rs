@@ -5,7 +5,12 @@ use std::path::{Path, PathBuf};
 
 use agent_vision::codes::{CodeParams, CodeReader, Symbology};
 use agent_vision::face::{FaceParams, FaceScanner};
-use agent_vision::fixtures::{FaceTotals, GroundTruth, fixtures_dir, image_as_jpeg, score_faces};
+use agent_vision::evaluation::{
+    Placement, StillReport, appearance_trial, face_patch, read_colour,
+};
+use agent_vision::fixtures::{
+    FaceTotals, GroundTruth, fixtures_dir, image_as_jpeg, letterbox, score_faces,
+};
 use agent_vision::frame::{DEFAULT_MAX_PIXELS, GreyFrame, decode_jpeg};
 use agent_vision::gaze::GazeSource;
 use agent_vision::motion::{Motion, MotionDetector, MotionParams};
@@ -73,6 +78,62 @@ fn faces_recall_and_false_positives_on_annotated_photos() {
     println!("{}", totals.summary());
     if let Err(e) = totals.check() {
         panic!("{e}");
+    }
+}
+
+/// The annotated photos as the camera sends them (letterboxed into 640x360, colour JPEG at the page's quality),
+/// through the pipeline the module runs, with every detector on: the bar holds there too.
+#[test]
+fn faces_letterboxed_into_camera_frames_through_the_pipeline() {
+    let dir = fixtures();
+    let truth = GroundTruth::load(&dir).expect("ground truth");
+    let images: Vec<(Vec<u8>, _)> = truth
+        .faces
+        .iter()
+        .map(|t| {
+            let camera = letterbox(&dir, t).expect("letterbox");
+            (camera.jpeg, camera.truth)
+        })
+        .collect();
+    let mut pipeline = VisionPipeline::new(PipelineParams::default()).expect("pipeline");
+    let report = StillReport::run(&mut pipeline, &images).expect("run");
+    print!("{}", report.table());
+    if let Err(e) = report.totals.check() {
+        panic!("{e}");
+    }
+}
+
+/// A face that comes into an empty scene gets its box within 4 frames (267 ms at 15 fps): the scanner looks
+/// where the motion appeared first. Counted in frames, so the test does not depend on the machine's speed.
+#[test]
+fn a_face_that_appears_is_boxed_within_four_frames() {
+    let dir = fixtures();
+    let truth = GroundTruth::load(&dir).expect("ground truth");
+    let obama = truth
+        .faces
+        .iter()
+        .find(|t| t.image == "faces/fr_obama.jpg")
+        .expect("fr_obama.jpg in the ground truth");
+    let patch = face_patch(&dir, obama).expect("patch");
+    let backgrounds: Vec<_> = (1..=60)
+        .map(|i| read_colour(&motion_frame(&dir, i)).expect("background"))
+        .collect();
+    for (face_px, centre_x, centre_y, lead_in) in
+        [(48, 160, 120, 10), (90, 450, 200, 23), (140, 320, 180, 37)]
+    {
+        let mut pipeline = VisionPipeline::new(PipelineParams::default()).expect("pipeline");
+        let placement = Placement {
+            face_px,
+            centre_x,
+            centre_y,
+        };
+        let outcome = appearance_trial(&mut pipeline, &backgrounds, &patch, placement, lead_in, 40)
+            .expect("trial");
+        println!("{placement:?}: boxed after {:?} frames", outcome.frames);
+        assert!(
+            outcome.frames.is_some_and(|f| f <= 4),
+            "{placement:?}: {outcome:?}"
+        );
     }
 }
 
