@@ -40,6 +40,10 @@ pub enum AvatarCommand {
     SpeechStop {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         utterance: Option<u64>,
+        /// The user started speaking over the agent (barge-in): the page fades the speech out rather than cutting
+        /// it, and the brain records the interrupted reply. Only present when true.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        barge_in: bool,
     },
     /// The caption shown while the agent speaks.
     Say { text: String },

@@ -21,4 +21,8 @@ pub struct RuleChange {
     /// The brain's full trace (its own shape, for tools and tests).
     #[serde(default)]
     pub trace: serde_json::Value,
+    /// Set on the entry a barge-in adds: the reply the user cut off by speaking over it (the rule that said it
+    /// may have ended already; `rule` is what holds now). Absent on rule changes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interrupted: Option<String>,
 }

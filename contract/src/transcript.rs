@@ -29,6 +29,23 @@ pub struct TranscriptMessage {
     /// window, which costs several times more (`processing_ms` includes both). Only present when true.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub full_window_retry: bool,
+    /// How the satellite judged the transcript of the pause the utterance ended at: `complete` (the turn ended
+    /// after the short confirmation silence instead of the whole hangover), `incomplete` (held open for the rest
+    /// of the sentence) or `unknown` (the ordinary hangover). Absent when no pause was judged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn: Option<TurnVerdict>,
+}
+
+/// What a transcript says about the end of the user's turn (docs/asr.md, "End of turn").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TurnVerdict {
+    /// The user said something whole: the turn ends after the confirmation silence.
+    Complete,
+    /// The user is mid-sentence: the utterance is held open longer than the hangover for the rest.
+    Incomplete,
+    /// No telling: the ordinary hangover ends the utterance.
+    Unknown,
 }
 
 /// Which way voice activity changed.

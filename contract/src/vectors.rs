@@ -175,8 +175,18 @@ pub fn avatar() -> serde_json::Value {
                 cue(800.0, "sil"),
             ],
         },
-        AvatarCommand::SpeechStop { utterance: Some(7) },
-        AvatarCommand::SpeechStop { utterance: None },
+        AvatarCommand::SpeechStop {
+            utterance: Some(7),
+            barge_in: false,
+        },
+        AvatarCommand::SpeechStop {
+            utterance: None,
+            barge_in: false,
+        },
+        AvatarCommand::SpeechStop {
+            utterance: None,
+            barge_in: true,
+        },
         AvatarCommand::Say {
             text: "Hello! Nice to see you.".into(),
         },
@@ -198,8 +208,18 @@ pub fn rules() -> serde_json::Value {
         action: "say(\"It is ten past nine.\")".into(),
         because: vec!["heard(\"what time is it\")".into()],
         trace: serde_json::json!({}),
+        interrupted: None,
     };
-    serde_json::json!({ "channel": crate::channels::RULES.name, "messages": [change] })
+    let barge_in = crate::rules::RuleChange {
+        ts_ms: 1_700_000_001_500,
+        rule: "main.idle".into(),
+        index: 44,
+        action: "interrupted say(\"It is ten past nine.\")".into(),
+        because: vec!["the user spoke over it".into()],
+        interrupted: Some("It is ten past nine.".into()),
+        ..change.clone()
+    };
+    serde_json::json!({ "channel": crate::channels::RULES.name, "messages": [change, barge_in] })
 }
 
 /// The page link's `welcome` and `status` messages, as the server sends them.

@@ -13,6 +13,7 @@ pub mod metrics;
 pub mod raw;
 pub mod recording;
 pub mod satellite;
+pub mod spoken;
 pub mod wait;
 
 pub use agent::{Agent, AgentOptions, DataDir};

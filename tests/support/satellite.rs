@@ -22,6 +22,11 @@ pub struct Satellite {
 impl Satellite {
     /// Starts `whisper-sat run --name NAME` against `agent` and waits until it has joined.
     pub async fn start(agent: &Agent, name: &str) -> anyhow::Result<Satellite> {
+        Self::start_with(agent, name, &[]).await
+    }
+
+    /// Starts `whisper-sat run --name NAME ARGS...` against `agent` and waits until it has joined.
+    pub async fn start_with(agent: &Agent, name: &str, args: &[&str]) -> anyhow::Result<Satellite> {
         let mut cmd = command("whisper-sat")?;
         cmd.arg("run")
             .arg("--addr")
@@ -30,6 +35,7 @@ impl Satellite {
             .arg(agent.token())
             .arg("--name")
             .arg(name)
+            .args(args)
             .env(
                 "RUST_LOG",
                 std::env::var("AGENT_TEST_LOG").unwrap_or_else(|_| {

@@ -283,7 +283,8 @@ function handleAvatar(cmd) {
       break;
     }
     case "speech_stop":
-      speech.stop();
+      // A barge-in fades the reply out over 80 ms; a cancel stops it at once.
+      speech.stop(cmd.barge_in === true ? 0.08 : 0);
       avatar.stopSpeech();
       pendingVisemes.clear();
       showCaption(null);

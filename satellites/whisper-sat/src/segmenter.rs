@@ -23,6 +23,8 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use realfft::{RealFftPlanner, RealToComplex};
+
+use crate::turn::Turn;
 use webrtc_vad::{SampleRate, Vad, VadMode};
 
 /// The rate the segmenter works at (Whisper's input rate; also one WebRTC VAD supports).
@@ -53,6 +55,12 @@ pub struct SegmenterConfig {
     pub tonal_flatness: f32,
     /// Utterances with less tonal voiced time than this are dropped as noise.
     pub min_tonal_ms: u32,
+    /// Silence after which a pause whose transcript reads as a complete turn ends the utterance (the end-of-turn
+    /// confirmation; at least the post-roll).
+    pub turn_confirm_ms: u32,
+    /// How long the end of a paused utterance waits for the verdict on its transcript, and how long an utterance
+    /// whose transcript trails off is held open for the rest of the sentence.
+    pub turn_wait_ms: u32,
 }
 
 impl Default for SegmenterConfig {
@@ -65,10 +73,12 @@ impl Default for SegmenterConfig {
             onset_voiced_ms: 80,
             min_voiced_ms: 200,
             max_utterance_ms: 25_000,
-            post_roll_ms: 150,
+            post_roll_ms: 100,
             energy_floor_dbfs: -50.0,
             tonal_flatness: 0.3,
             min_tonal_ms: 100,
+            turn_confirm_ms: 120,
+            turn_wait_ms: 900,
         }
     }
 }
@@ -82,6 +92,10 @@ pub enum SegmenterError {
         "onset_voiced_ms ({voiced}) must not exceed onset_ms ({window}), which must be at least 20"
     )]
     Onset { voiced: u32, window: u32 },
+    #[error(
+        "turn_confirm_ms ({confirm}) must be at least post_roll_ms ({post_roll}): a turn ends after its pause"
+    )]
+    Turn { confirm: u32, post_roll: u32 },
 }
 
 /// One detected utterance. Sample indices count 16 kHz samples from the start of the stream.
@@ -107,6 +121,10 @@ pub enum SegmentEvent {
         onset: u64,
         continued: bool,
     },
+    /// The voice of the utterance that started at `start` has lasted long enough, and been tonal enough, to be
+    /// kept as speech (`min_voiced_ms`, `min_tonal_ms`): from here on it is the user speaking, not a click or a
+    /// cough. Reported once per utterance, while the voice goes on.
+    Confirmed { start: u64, onset: u64 },
     /// The open utterance has been silent for its post-roll: if no voice comes back before the hangover is over,
     /// it ends with exactly this utterance (the same start, end of speech and audio). Only utterances that would be
     /// kept are reported (enough voiced and tonal frames), so speech that will be dropped never pauses.
@@ -117,8 +135,13 @@ pub enum SegmentEvent {
     /// An utterance ended by silence (or the length cap).
     Ended(Utterance),
     /// What started at `start` was too short (or too noisy) to be speech and is dropped; its last voiced frame
-    /// ended at `speech_end`.
-    Dropped { start: u64, speech_end: u64 },
+    /// ended at `speech_end`. `confirmed` when it had been reported as `Confirmed` (enough voice, but the
+    /// utterance as a whole failed a test, which cannot happen with the defaults).
+    Dropped {
+        start: u64,
+        speech_end: u64,
+        confirmed: bool,
+    },
 }
 
 enum State {
@@ -132,7 +155,23 @@ enum State {
         silent_frames: u32,
         /// A `Paused` was reported for the current silence (so voice coming back must withdraw it).
         paused: bool,
+        /// What decides the end of the current silence.
+        turn: TurnHold,
+        /// The first voiced frame (without the pre-roll), and whether `Confirmed` was reported.
+        onset: u64,
+        confirmed: bool,
     },
+}
+
+/// What ends the silence of an open utterance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TurnHold {
+    /// The ordinary hangover: nobody is judging this pause.
+    Hangover,
+    /// A transcript of the pause is being decoded: wait up to `turn_wait_ms` for its verdict.
+    Deciding,
+    /// The transcript's verdict.
+    Judged(Turn),
 }
 
 /// Spectral flatness of 20 ms frames (geometric over arithmetic mean of the power spectrum).
@@ -194,6 +233,8 @@ pub struct Segmenter {
     onset: VecDeque<bool>,
     onset_tonal: VecDeque<bool>,
     flatness: Flatness,
+    /// While the agent's own speech plays, the level a frame must exceed to be the user (`echo::EchoGate`).
+    echo_floor_dbfs: Option<f32>,
 }
 
 impl std::fmt::Debug for Segmenter {
@@ -214,6 +255,18 @@ fn samples(ms: u32) -> usize {
     ms as usize * RATE as usize / 1000
 }
 
+/// The silence that ends an utterance whose pause stands as `turn`.
+fn hangover_of(cfg: &SegmenterConfig, turn: TurnHold) -> u32 {
+    match turn {
+        TurnHold::Hangover | TurnHold::Judged(Turn::Unknown) => cfg.hangover_ms,
+        // Never shorter than the ordinary hangover: judging a pause only ever ends it earlier when complete.
+        TurnHold::Deciding | TurnHold::Judged(Turn::Incomplete) => {
+            cfg.turn_wait_ms.max(cfg.hangover_ms)
+        }
+        TurnHold::Judged(Turn::Complete) => cfg.turn_confirm_ms,
+    }
+}
+
 impl Segmenter {
     /// A segmenter starting at sample 0.
     pub fn new(cfg: SegmenterConfig) -> Result<Self, SegmenterError> {
@@ -230,6 +283,12 @@ impl Segmenter {
                 window: cfg.onset_ms,
             });
         }
+        if cfg.turn_confirm_ms < cfg.post_roll_ms {
+            return Err(SegmenterError::Turn {
+                confirm: cfg.turn_confirm_ms,
+                post_roll: cfg.post_roll_ms,
+            });
+        }
         Ok(Self {
             vad: Vad::new_with_rate_and_mode(SampleRate::Rate16kHz, mode),
             cfg,
@@ -240,6 +299,7 @@ impl Segmenter {
             onset: VecDeque::new(),
             onset_tonal: VecDeque::new(),
             flatness: Flatness::new(),
+            echo_floor_dbfs: None,
         })
     }
 
@@ -251,6 +311,11 @@ impl Segmenter {
     /// Index of the next sample the segmenter expects.
     pub fn position(&self) -> u64 {
         self.position + self.partial.len() as u64
+    }
+
+    /// Sets the own-voice floor for the frames that follow (`None`: the agent is silent).
+    pub fn set_echo_floor(&mut self, floor_dbfs: Option<f32>) {
+        self.echo_floor_dbfs = floor_dbfs;
     }
 
     /// True while an utterance is open.
@@ -298,6 +363,38 @@ impl Segmenter {
         self.position = position;
     }
 
+    /// A transcript of the pause that ended speech at `speech_end` in the utterance starting at `start` is being
+    /// decoded (`None`) or has been judged (`Some`). While it is decoded, the end waits up to `turn_wait_ms` for
+    /// the verdict; a complete turn then ends once the silence holds `turn_confirm_ms` (at once if it already
+    /// does), an incomplete one is held open for `turn_wait_ms`, and an unknown one ends after the ordinary
+    /// hangover. Ignored when the utterance is no longer at that pause (the voice resumed, or it ended).
+    pub fn turn(
+        &mut self,
+        start: u64,
+        speech_end: u64,
+        verdict: Option<Turn>,
+        events: &mut Vec<SegmentEvent>,
+    ) {
+        let State::Speech {
+            start: open,
+            speech_end: open_end,
+            silent_frames,
+            paused: true,
+            turn,
+            ..
+        } = &mut self.state
+        else {
+            return;
+        };
+        if *open != start || *open_end != speech_end {
+            return;
+        }
+        *turn = verdict.map_or(TurnHold::Deciding, TurnHold::Judged);
+        if *silent_frames >= frames(hangover_of(&self.cfg, *turn)) {
+            self.close(false, events);
+        }
+    }
+
     /// Whether the frame is voiced, and whether it is also tonal.
     fn classify(&mut self, frame: &[f32]) -> (bool, bool) {
         let voiced = self.voiced(frame);
@@ -314,7 +411,12 @@ impl Segmenter {
             .collect();
         // A frame of the right length at a supported rate is always accepted by the detector.
         let vad_says = self.vad.is_voice_segment(&pcm).unwrap_or(false);
-        vad_says && dbfs >= self.cfg.energy_floor_dbfs
+        let floor = self
+            .echo_floor_dbfs
+            .map_or(self.cfg.energy_floor_dbfs, |echo| {
+                echo.max(self.cfg.energy_floor_dbfs)
+            });
+        vad_says && dbfs >= floor
     }
 
     fn frame(&mut self, frame: &[f32], events: &mut Vec<SegmentEvent>) {
@@ -361,6 +463,9 @@ impl Segmenter {
                         tonal_frames,
                         silent_frames: 0,
                         paused: false,
+                        turn: TurnHold::Hangover,
+                        onset: onset_at,
+                        confirmed: false,
                     };
                     events.push(SegmentEvent::Started {
                         start,
@@ -377,6 +482,9 @@ impl Segmenter {
                 tonal_frames,
                 silent_frames,
                 paused,
+                turn,
+                onset,
+                confirmed,
             } => {
                 audio.extend_from_slice(frame);
                 if voiced {
@@ -387,11 +495,23 @@ impl Segmenter {
                     *voiced_frames += 1;
                     *tonal_frames += u32::from(tonal);
                     *silent_frames = 0;
+                    // Whatever was judged was the speech before this voice.
+                    *turn = TurnHold::Hangover;
+                    if !*confirmed
+                        && *voiced_frames >= frames(self.cfg.min_voiced_ms)
+                        && *tonal_frames >= frames(self.cfg.min_tonal_ms)
+                    {
+                        *confirmed = true;
+                        events.push(SegmentEvent::Confirmed {
+                            start: *start,
+                            onset: *onset,
+                        });
+                    }
                 } else {
                     *silent_frames += 1;
                 }
                 let too_long = audio.len() >= samples(self.cfg.max_utterance_ms);
-                if *silent_frames >= frames(self.cfg.hangover_ms) {
+                if *silent_frames >= frames(hangover_of(&self.cfg, *turn)) {
                     self.close(false, events);
                 } else if too_long {
                     self.close(true, events);
@@ -421,6 +541,7 @@ impl Segmenter {
             speech_end,
             voiced_frames,
             tonal_frames,
+            confirmed,
             ..
         } = std::mem::replace(&mut self.state, State::Idle)
         else {
@@ -429,7 +550,11 @@ impl Segmenter {
         if voiced_frames < frames(self.cfg.min_voiced_ms)
             || tonal_frames < frames(self.cfg.min_tonal_ms)
         {
-            events.push(SegmentEvent::Dropped { start, speech_end });
+            events.push(SegmentEvent::Dropped {
+                start,
+                speech_end,
+                confirmed,
+            });
             return;
         }
         let keep = (speech_end - start) as usize + samples(self.cfg.post_roll_ms);
@@ -450,6 +575,10 @@ impl Segmenter {
                 tonal_frames: 0,
                 silent_frames: 0,
                 paused: false,
+                turn: TurnHold::Hangover,
+                onset: end,
+                // The voice never stopped: it was confirmed in the piece before the cut.
+                confirmed: true,
             };
             events.push(SegmentEvent::Started {
                 start: end,
@@ -613,6 +742,7 @@ mod tests {
         ev.iter()
             .map(|(at, e)| match e {
                 SegmentEvent::Started { .. } => "started".to_owned(),
+                SegmentEvent::Confirmed { .. } => "confirmed".to_owned(),
                 SegmentEvent::Paused(_) => "paused".to_owned(),
                 SegmentEvent::Resumed { .. } => "resumed".to_owned(),
                 SegmentEvent::Ended(u) if u.forced => format!("cut at {at}"),
@@ -673,14 +803,24 @@ mod tests {
         let ev = run_timed(SegmenterConfig::default(), &audio);
         assert_eq!(
             kinds(&ev),
-            ["started", "paused", "resumed", "paused", "ended"]
+            [
+                "started",
+                "confirmed",
+                "paused",
+                "resumed",
+                "paused",
+                "ended"
+            ]
         );
         let pauses = paused(&ev);
         let utts = ended(&ev.iter().map(|(_, e)| e.clone()).collect::<Vec<_>>())
             .into_iter()
             .cloned()
             .collect::<Vec<_>>();
-        let SegmentEvent::Resumed { start } = ev[2].1 else {
+        let Some(start) = ev.iter().find_map(|(_, e)| match e {
+            SegmentEvent::Resumed { start } => Some(*start),
+            _ => None,
+        }) else {
             panic!("{:?}", kinds(&ev))
         };
         assert_eq!(start, utts[0].start);
@@ -689,6 +829,199 @@ mod tests {
         assert!(pauses[0].1.speech_end < utts[0].speech_end);
         assert!(pauses[0].1.audio.len() < utts[0].audio.len());
         assert_eq!(pauses[1].1, &utts[0]);
+    }
+
+    /// Runs `audio` 20 ms at a time; at each pause the satellite's side answers with `judge` (what `turn` gets:
+    /// `None` for a decode still running), or stays silent when `judge` gives `Err`.
+    fn run_judged(
+        cfg: SegmenterConfig,
+        audio: &[f32],
+        judge: impl Fn(usize) -> Result<Option<Turn>, ()>,
+    ) -> Vec<(u64, SegmentEvent)> {
+        let mut seg = Segmenter::new(cfg).expect("valid config");
+        let mut out = Vec::new();
+        let mut ev = Vec::new();
+        let mut pauses = 0;
+        for chunk in audio.chunks(FRAME) {
+            seg.push(chunk, &mut ev);
+            let pause = ev.iter().find_map(|e| match e {
+                SegmentEvent::Paused(u) => Some((u.start, u.speech_end)),
+                _ => None,
+            });
+            out.extend(ev.drain(..).map(|e| (seg.position(), e)));
+            if let Some((start, speech_end)) = pause {
+                if let Ok(verdict) = judge(pauses) {
+                    seg.turn(start, speech_end, verdict, &mut ev);
+                    out.extend(ev.drain(..).map(|e| (seg.position(), e)));
+                }
+                pauses += 1;
+            }
+        }
+        seg.finish(&mut ev);
+        out.extend(ev.drain(..).map(|e| (seg.position(), e)));
+        out
+    }
+
+    fn ends(ev: &[(u64, SegmentEvent)]) -> Vec<(u64, &Utterance)> {
+        ev.iter()
+            .filter_map(|(at, e)| match e {
+                SegmentEvent::Ended(u) => Some((*at, u)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_complete_turn_ends_at_its_pause_with_the_audio_it_paused_with() {
+        let cfg = SegmenterConfig::default();
+        let audio = [silence(500), voice(1200), silence(1000)].concat();
+        let ev = run_judged(cfg.clone(), &audio, |_| Ok(Some(Turn::Complete)));
+        assert_eq!(kinds(&ev), ["started", "confirmed", "paused", "ended"]);
+        let (paused_at, p) = paused(&ev)[0];
+        let (ended_at, e) = ends(&ev)[0];
+        assert_eq!(p, e);
+        // Judged at once, the turn ends when the silence holds the confirmation (the pause already held the
+        // post-roll), long before the hangover.
+        let confirm = u64::from(frames(cfg.turn_confirm_ms).max(frames(cfg.post_roll_ms)));
+        assert_eq!(ended_at - e.speech_end, confirm * FRAME as u64);
+        assert!(ended_at >= paused_at);
+        assert!(confirm < u64::from(frames(cfg.hangover_ms)));
+    }
+
+    #[test]
+    fn an_incomplete_turn_is_held_open_across_a_pause_longer_than_the_hangover() {
+        let cfg = SegmenterConfig::default();
+        // "What time ... is it?": 400 ms of silence inside the sentence, more than the 300 ms hangover.
+        let audio = [
+            silence(500),
+            voice(700),
+            silence(400),
+            voice(600),
+            silence(1500),
+        ]
+        .concat();
+        let unjudged = run_judged(cfg.clone(), &audio, |_| Err(()));
+        assert_eq!(ends(&unjudged).len(), 2, "{:?}", kinds(&unjudged));
+        let judged = run_judged(cfg.clone(), &audio, |n| {
+            Ok(Some(if n == 0 {
+                Turn::Incomplete
+            } else {
+                Turn::Complete
+            }))
+        });
+        assert_eq!(
+            kinds(&judged),
+            [
+                "started",
+                "confirmed",
+                "paused",
+                "resumed",
+                "paused",
+                "ended"
+            ]
+        );
+        let (_, whole) = ends(&judged)[0];
+        assert!(whole.audio.len() >= samples(1600), "{}", whole.audio.len());
+    }
+
+    #[test]
+    fn a_pause_waits_for_its_verdict_but_not_for_ever() {
+        let cfg = SegmenterConfig::default();
+        let audio = [silence(500), voice(1000), silence(2000)].concat();
+        let ev = run_judged(cfg.clone(), &audio, |_| Ok(None));
+        let (ended_at, e) = ends(&ev)[0];
+        assert_eq!(
+            ended_at - e.speech_end,
+            u64::from(frames(cfg.turn_wait_ms)) * FRAME as u64
+        );
+        // An unknown verdict is the ordinary hangover.
+        let ev = run_judged(cfg.clone(), &audio, |_| Ok(Some(Turn::Unknown)));
+        let (ended_at, e) = ends(&ev)[0];
+        assert_eq!(
+            ended_at - e.speech_end,
+            u64::from(frames(cfg.hangover_ms)) * FRAME as u64
+        );
+    }
+
+    #[test]
+    fn a_verdict_on_a_pause_the_voice_has_left_is_ignored() {
+        let cfg = SegmenterConfig::default();
+        let audio = [
+            silence(500),
+            voice(800),
+            silence(200),
+            voice(800),
+            silence(1000),
+        ]
+        .concat();
+        let mut seg = Segmenter::new(cfg.clone()).expect("valid config");
+        let mut ev = Vec::new();
+        let mut first_pause = None;
+        let mut judged_late = false;
+        for chunk in audio.chunks(FRAME) {
+            let mut step = Vec::new();
+            seg.push(chunk, &mut step);
+            let mut after = Vec::new();
+            for e in &step {
+                match e {
+                    SegmentEvent::Paused(u) => {
+                        first_pause.get_or_insert((u.start, u.speech_end));
+                    }
+                    // Judged complete only once the voice is back: nothing may end early.
+                    SegmentEvent::Resumed { .. } => {
+                        let (start, speech_end) = first_pause.expect("a pause before");
+                        seg.turn(start, speech_end, Some(Turn::Complete), &mut after);
+                        judged_late = true;
+                    }
+                    _ => {}
+                }
+            }
+            ev.extend(step);
+            ev.extend(after);
+        }
+        assert!(judged_late);
+        let utts = ended(&ev);
+        assert_eq!(utts.len(), 1);
+        assert!(utts[0].speech_end > first_pause.expect("a pause").1);
+    }
+
+    #[test]
+    fn a_confirmation_shorter_than_the_post_roll_is_refused() {
+        let cfg = SegmenterConfig {
+            turn_confirm_ms: 100,
+            post_roll_ms: 150,
+            ..SegmenterConfig::default()
+        };
+        assert!(matches!(
+            Segmenter::new(cfg),
+            Err(SegmenterError::Turn { .. })
+        ));
+    }
+
+    #[test]
+    fn voice_is_confirmed_once_it_has_lasted_the_minimum_voiced_time() {
+        let cfg = SegmenterConfig::default();
+        let ev = run_timed(
+            cfg.clone(),
+            &[silence(500), voice(1500), silence(1000)].concat(),
+        );
+        let confirmed: Vec<(u64, u64)> = ev
+            .iter()
+            .filter_map(|(at, e)| match e {
+                SegmentEvent::Confirmed { onset, .. } => Some((*at, *onset)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(confirmed.len(), 1, "{:?}", kinds(&ev));
+        let (at, onset) = confirmed[0];
+        // Within two frames of the onset plus the minimum voiced time: the user has been speaking for 200 ms.
+        let after = at - onset;
+        let min = samples(cfg.min_voiced_ms) as u64;
+        assert!(
+            after >= min - FRAME as u64 && after <= min + 2 * FRAME as u64,
+            "{after}"
+        );
+        assert_eq!(kinds(&ev)[..2], ["started", "confirmed"]);
     }
 
     #[test]
@@ -702,6 +1035,13 @@ mod tests {
         ] {
             let ev = run_timed(SegmenterConfig::default(), &audio);
             assert!(paused(&ev).is_empty(), "{:?}", kinds(&ev));
+            // Nor is it ever taken for the user speaking (no barge-in on a click or a cough).
+            assert!(
+                !ev.iter()
+                    .any(|(_, e)| matches!(e, SegmentEvent::Confirmed { .. })),
+                "{:?}",
+                kinds(&ev)
+            );
             assert!(
                 !ev.iter().any(|(_, e)| matches!(e, SegmentEvent::Ended(_))),
                 "{:?}",

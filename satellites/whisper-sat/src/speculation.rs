@@ -74,6 +74,20 @@ impl<R> Hold<R> {
         &self.utterance
     }
 
+    /// True once the utterance has ended (no more pauses or resumptions come).
+    pub fn is_ended(&self) -> bool {
+        self.ended
+    }
+
+    /// The result decoded from the pause the utterance stands at, while it waits for its end: what the end of turn
+    /// is judged on.
+    pub fn paused_result(&self) -> Option<&R> {
+        if self.ended || self.stale {
+            return None;
+        }
+        self.result.as_ref().map(|(result, _)| result)
+    }
+
     /// True while a decode of this hold is in flight.
     pub fn is_decoding(&self) -> bool {
         self.decoding.is_some()

@@ -9,8 +9,10 @@
 
 use std::collections::VecDeque;
 
+use crate::echo::{EchoConfig, EchoGate};
 use crate::resample::{ResampleError, StreamResampler, pcm_s16le_to_f32};
 use crate::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig, SegmenterError, Utterance};
+use crate::turn::Turn;
 
 /// The hub's audio rate (`Agent.audio`).
 pub const HUB_RATE: u32 = 22_050;
@@ -51,6 +53,12 @@ pub enum StreamEvent {
         onset_us: u64,
         continued: bool,
     },
+    /// The voice of the utterance that starts at `start_us` is speech, not a click (`SegmentEvent::Confirmed`); it
+    /// began at `onset_us`.
+    Confirmed {
+        start_us: u64,
+        onset_us: u64,
+    },
     /// The open utterance paused for its post-roll: if the voice does not resume before the hangover is over, the
     /// `Utterance` that follows is exactly this one (see `SegmentEvent::Paused`).
     Paused(ClockedUtterance),
@@ -61,9 +69,11 @@ pub enum StreamEvent {
     },
     Utterance(ClockedUtterance),
     /// Speech that started was too short or too noisy to transcribe; its voice ended at `speech_end_us`.
+    /// `confirmed` when it had been reported as `Confirmed`.
     Dropped {
         start_us: u64,
         speech_end_us: u64,
+        confirmed: bool,
     },
     /// The stream restarted or jumped; anything open was closed first.
     Restarted,
@@ -93,6 +103,11 @@ pub struct AudioStream {
     scratch: Vec<f32>,
     resampled: Vec<f32>,
     events: Vec<SegmentEvent>,
+    /// The agent's own speech as it plays, for own-voice suppression.
+    echo: EchoGate,
+    /// The last pause reported, as the satellite names it (id, end of speech on the hub clock) and as the
+    /// segmenter knows it (start and end of speech in samples), for verdicts on it.
+    last_pause: Option<(String, u64, u64, u64)>,
 }
 
 impl AudioStream {
@@ -109,6 +124,8 @@ impl AudioStream {
             scratch: Vec::new(),
             resampled: Vec::new(),
             events: Vec::new(),
+            echo: EchoGate::new(EchoConfig::default()),
+            last_pause: None,
         })
     }
 
@@ -144,9 +161,24 @@ impl AudioStream {
         self.received += self.scratch.len() as u64;
         self.resampled.clear();
         self.resampler.push(&self.scratch, &mut self.resampled)?;
+        // The message was captured just before the hub stamped it: frames of it the agent's echo could be in are
+        // held to the own-voice floor of that moment.
+        let floor = self.echo.heard(msg.ts_us, crate::echo::level_dbfs(msg.pcm));
+        self.segmenter.set_echo_floor(floor);
         self.segmenter.push(&self.resampled, &mut self.events);
         self.emit(out);
         Ok(())
+    }
+
+    /// One chunk of the agent's own speech (`Agent.speech`, s16le 22050 Hz) that reached the hub at `ts_us`, with
+    /// its utterance and offset when framed: what the microphone may hear back while it plays.
+    pub fn reference(&mut self, ts_us: u64, framing: Option<(u32, u32)>, pcm: &[u8]) {
+        self.echo.reference(ts_us, framing, pcm);
+    }
+
+    /// The agent's speech was stopped at `ts_us` (`speech_stop` on `Agent.avatar`).
+    pub fn reference_stopped(&mut self, ts_us: u64) {
+        self.echo.stopped(ts_us);
     }
 
     /// Ends the stream: flushes the resampler and closes an open utterance.
@@ -164,7 +196,30 @@ impl AudioStream {
         self.received = 0;
         self.last_seq = None;
         self.marks.clear();
+        self.last_pause = None;
         Ok(())
+    }
+
+    /// A transcript of the pause of utterance `id` that ended speech at `speech_end_us` is being decoded (`None`)
+    /// or was judged (`Some`); see `Segmenter::turn`. A verdict on any other pause is ignored.
+    pub fn turn(
+        &mut self,
+        id: &str,
+        speech_end_us: u64,
+        verdict: Option<Turn>,
+        out: &mut Vec<StreamEvent>,
+    ) {
+        let Some((_, _, start, speech_end)) = self
+            .last_pause
+            .as_ref()
+            .filter(|(pid, end_us, ..)| pid == id && *end_us == speech_end_us)
+        else {
+            return;
+        };
+        let (start, speech_end) = (*start, *speech_end);
+        self.segmenter
+            .turn(start, speech_end, verdict, &mut self.events);
+        self.emit(out);
     }
 
     /// Hub time of a 16 kHz sample index: the last message mark at or before it plus the offset.
@@ -193,7 +248,13 @@ impl AudioStream {
                     onset_us: self.clock_of(onset),
                     continued,
                 }),
-                SegmentEvent::Paused(u) => out.push(StreamEvent::Paused(self.locate(u))),
+                SegmentEvent::Paused(u) => {
+                    let (start, speech_end) = (u.start, u.speech_end);
+                    let located = self.locate(u);
+                    self.last_pause =
+                        Some((located.id.clone(), located.speech_end_us, start, speech_end));
+                    out.push(StreamEvent::Paused(located));
+                }
                 SegmentEvent::Resumed { start } => {
                     let start_us = self.clock_of(start);
                     out.push(StreamEvent::Resumed {
@@ -202,9 +263,18 @@ impl AudioStream {
                     });
                 }
                 SegmentEvent::Ended(u) => out.push(StreamEvent::Utterance(self.locate(u))),
-                SegmentEvent::Dropped { start, speech_end } => out.push(StreamEvent::Dropped {
+                SegmentEvent::Confirmed { start, onset } => out.push(StreamEvent::Confirmed {
+                    start_us: self.clock_of(start),
+                    onset_us: self.clock_of(onset),
+                }),
+                SegmentEvent::Dropped {
+                    start,
+                    speech_end,
+                    confirmed,
+                } => out.push(StreamEvent::Dropped {
                     start_us: self.clock_of(start),
                     speech_end_us: self.clock_of(speech_end),
+                    confirmed,
                 }),
             }
         }

@@ -1,7 +1,7 @@
 //! The `Agent.transcript` messages a satellite publishes: the types are the contract's
 //! (`agent_contract::transcript`); this is where the satellite's voice activity becomes one.
 
-pub use agent_contract::transcript::{TranscriptMessage, VadKind, VadMessage};
+pub use agent_contract::transcript::{TranscriptMessage, TurnVerdict, VadKind, VadMessage};
 
 use crate::activity::VoiceActivity;
 
@@ -60,6 +60,7 @@ mod tests {
             is_final: true,
             speculative: false,
             full_window_retry: false,
+            turn: None,
         };
         let v: serde_json::Value = serde_json::to_value(&t)?;
         assert_eq!(v["final"], true);
@@ -81,6 +82,13 @@ mod tests {
         let v = serde_json::to_value(&retried)?;
         assert_eq!(v["full_window_retry"], true);
         assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, retried);
+        let judged = TranscriptMessage {
+            turn: Some(TurnVerdict::Complete),
+            ..retried
+        };
+        let v = serde_json::to_value(&judged)?;
+        assert_eq!(v["turn"], "complete");
+        assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, judged);
         Ok(())
     }
 }

@@ -180,7 +180,10 @@ impl Tts {
                 if target == CancelTarget::All {
                     // The page may still be playing audio already sent; it stops on this command.
                     self.avatar
-                        .send(&AvatarCommand::SpeechStop { utterance: None })
+                        .send(&AvatarCommand::SpeechStop {
+                            utterance: None,
+                            barge_in: false,
+                        })
                         .await;
                 }
                 Ok(wire::cancelled(&stopped))
@@ -195,7 +198,10 @@ impl Tts {
                 if self.barge_in && self.speaker.is_audible(Instant::now()) {
                     let stopped = self.speaker.cancel(CancelTarget::All);
                     self.avatar
-                        .send(&AvatarCommand::SpeechStop { utterance: None })
+                        .send(&AvatarCommand::SpeechStop {
+                            utterance: None,
+                            barge_in: true,
+                        })
                         .await;
                     Counters::bump(&self.counters.barge_ins);
                     info!(?stopped, "tts: barge-in, the user speaks");

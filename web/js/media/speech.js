@@ -20,6 +20,17 @@ export class SpeechPlayer {
     this.current = null;
     this.lastEnd = 0;
     this.chunks = 0;
+    /** The gain node speech plays through; replaced after a fade so the next reply starts at full level. */
+    this.gain = null;
+  }
+
+  /** The node sources connect to: a gain node in front of the destination, for fading out on a barge-in. */
+  output(ctx) {
+    if (!this.gain) {
+      this.gain = ctx.createGain();
+      this.gain.connect(ctx.destination);
+    }
+    return this.gain;
   }
 
   /** Schedules one chunk of `utterance` starting at sample `offset`. */
@@ -45,7 +56,7 @@ export class SpeechPlayer {
     for (let i = 0; i < pcm.length; i++) data[i] = pcm[i] / 32768;
     const src = ctx.createBufferSource();
     src.buffer = buffer;
-    src.connect(ctx.destination);
+    src.connect(this.output(ctx));
     src.onended = () => this.sources.delete(src);
     src.start(start);
     this.sources.add(src);
@@ -60,11 +71,26 @@ export class SpeechPlayer {
     return this.anchors.get(utterance);
   }
 
-  /** Stops everything now (barge-in). */
-  stop() {
+  /**
+   * Stops everything: at once, or fading out over `fadeS` seconds (a barge-in: the user is talking, and a fade
+   * sounds like yielding where a cut sounds like a fault).
+   */
+  stop(fadeS = 0) {
+    const ctx = this.sources.size > 0 && fadeS > 0 && this.gain ? audioContext() : null;
+    const at = ctx ? ctx.currentTime + fadeS : 0;
+    if (ctx && this.gain) {
+      const g = this.gain.gain;
+      g.cancelScheduledValues(ctx.currentTime);
+      g.setValueAtTime(g.value, ctx.currentTime);
+      g.linearRampToValueAtTime(0, at);
+      // The faded node goes with the sources it carries; the next reply gets a fresh one at full level.
+      const faded = this.gain;
+      this.gain = null;
+      setTimeout(() => faded.disconnect(), Math.ceil(fadeS * 1000) + 50);
+    }
     for (const s of this.sources) {
       try {
-        s.stop();
+        s.stop(at);
       } catch {
         // Already stopped: nothing to do.
       }

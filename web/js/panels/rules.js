@@ -22,6 +22,8 @@ export class RuleTrace {
     rule.textContent = String(data.rule ?? "?");
     li.append(rule);
     if (data.action) li.append(` → ${String(data.action)}`);
+    // A barge-in entry: the reply the user cut off by speaking over it.
+    if (typeof data.interrupted === "string") li.classList.add("r-interrupted");
     if (Array.isArray(data.because) && data.because.length > 0) {
       const because = document.createElement("span");
       because.className = "r-because";

@@ -11,6 +11,7 @@
 //! Options: `--runs N` (default 20), `--threads N` (satellite inference threads, default 2), `--hangover-ms N`
 //! (default: the satellite's), `--write PATH` (a Markdown report).
 
+mod barge_in;
 mod report;
 mod rig;
 mod speech_clip;
@@ -26,16 +27,26 @@ use tokio::sync::{mpsc, oneshot};
 
 use crate::report::Figures;
 use crate::rig::Rig;
-use crate::speech_clip::{Clip, Say};
+use crate::speech_clip::{Clip, Ending, Say};
 use crate::watch::Watcher;
 
-/// Short real utterances from the shared fixtures (22050 Hz mono), said in turn: a whole sentence, and the first
-/// phrases of two longer ones, cut inside the pause after them (the satellite's own segmentation splits those
-/// sentences there, so the cut keeps one utterance per run).
-const CLIPS: [(&str, Option<f64>); 3] = [
+/// Whole turns, said in turn: two real recorded sentences from the shared fixtures (22050 Hz mono; JFK's last
+/// phrase, from 8.0 s) and three questions and commands said by espeak-ng.
+const FIXTURE_TURNS: [(&str, Option<f64>); 2] = [
     ("audio/LJ001-0002.wav", None),
-    ("audio/LJ001-0004.wav", Some(1.65)),
-    ("audio/LJ001-0001.wav", Some(4.2)),
+    ("audio/derived/jfk_22050.wav", Some(8.0)),
+];
+const SPOKEN_TURNS: [&str; 3] = [
+    "What time is it?",
+    "Turn left.",
+    "How many people do you see?",
+];
+/// Every this many runs one is a phrase cut inside a longer recorded sentence, at the pause after it (the
+/// satellite's segmentation splits those sentences there): the speaker is not done, and the agent should wait.
+const MID_SENTENCE_EVERY: usize = 6;
+const MID_SENTENCE: [(&str, f64); 2] = [
+    ("audio/LJ001-0004.wav", 1.65),
+    ("audio/LJ001-0001.wav", 4.2),
 ];
 /// How long one run may take from the end of speech to the reply before it counts as lost.
 const RUN_PATIENCE: Duration = Duration::from_secs(60);
@@ -45,6 +56,7 @@ struct Options {
     threads: u32,
     hangover_ms: Option<u32>,
     write: Option<PathBuf>,
+    barge_ins: usize,
 }
 
 fn options() -> anyhow::Result<Options> {
@@ -53,6 +65,7 @@ fn options() -> anyhow::Result<Options> {
         threads: 2,
         hangover_ms: None,
         write: None,
+        barge_ins: 8,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -64,8 +77,11 @@ fn options() -> anyhow::Result<Options> {
                 o.hangover_ms = Some(value("--hangover-ms")?.parse().context("--hangover-ms N")?);
             }
             "--write" => o.write = Some(PathBuf::from(value("--write")?)),
+            "--barge-ins" => {
+                o.barge_ins = value("--barge-ins")?.parse().context("--barge-ins N")?
+            }
             other => bail!(
-                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --write PATH)"
+                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --barge-ins N, --write PATH)"
             ),
         }
     }
@@ -86,13 +102,29 @@ fn fixtures() -> PathBuf {
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> anyhow::Result<()> {
     let opts = options()?;
-    let clips: Vec<Clip> = CLIPS
+    let mut turns: Vec<Clip> = FIXTURE_TURNS
         .iter()
-        .map(|(path, cut)| Clip::load(&fixtures().join(path), *cut))
+        .map(|(path, start)| Clip::load(&fixtures().join(path), *start, None, Ending::Turn))
         .collect::<anyhow::Result<_>>()
         .context(
             "loading the fixture clips (set AGENT_FIXTURES to the shared fixtures directory)",
         )?;
+    let scratch = tempfile::tempdir()?;
+    for text in SPOKEN_TURNS {
+        turns.push(Clip::espeak(text, scratch.path())?);
+    }
+    let mid_sentence: Vec<Clip> = MID_SENTENCE
+        .iter()
+        .map(|(path, cut)| {
+            Clip::load(
+                &fixtures().join(path),
+                None,
+                Some(*cut),
+                Ending::MidSentence,
+            )
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let clips: Vec<&Clip> = turns.iter().chain(&mid_sentence).collect();
     let bins = rig::bin_dir()?;
     println!(
         "voice-to-voice latency: {} runs, whisper-sat tiny.en with {} threads, binaries from {}",
@@ -102,8 +134,9 @@ async fn main() -> anyhow::Result<()> {
     );
     for c in &clips {
         println!(
-            "  clip {}: {:.2} s, speech ends at {:.2} s",
+            "  clip {} ({}): {:.2} s, speech ends at {:.2} s",
             c.name,
+            c.ending.label(),
             c.seconds(),
             c.voiced_end as f64 / f64::from(speech_clip::RATE)
         );
@@ -149,13 +182,21 @@ async fn main() -> anyhow::Result<()> {
 
     let mut figures = Figures::default();
     let load_before = report::load_average();
+    let (mut next_turn, mut next_mid) = (0, 0);
     for run in 0..opts.runs {
-        let clip = &clips[run % clips.len()];
+        let clip = if (run + 1) % MID_SENTENCE_EVERY == 0 {
+            next_mid += 1;
+            &mid_sentence[(next_mid - 1) % mid_sentence.len()]
+        } else {
+            next_turn += 1;
+            &turns[(next_turn - 1) % turns.len()]
+        };
         let (spoken_tx, spoken_rx) = oneshot::channel();
         say_tx
             .send(Say {
                 clip: clip.clone(),
                 spoken: spoken_tx,
+                onset: None,
             })
             .await
             .context("the microphone stopped")?;
@@ -164,7 +205,8 @@ async fn main() -> anyhow::Result<()> {
             .follow(end_of_speech, end_of_speech + RUN_PATIENCE)
             .await
         {
-            Ok(run_figures) => {
+            Ok(mut run_figures) => {
+                run_figures.ending = clip.ending;
                 println!(
                     "  run {:>2} {:<12} {}",
                     run + 1,
@@ -180,6 +222,17 @@ async fn main() -> anyhow::Result<()> {
         }
         // Let the reply play out, so the next utterance does not barge in on it.
         watcher.until_quiet(Duration::from_millis(800)).await?;
+    }
+    if opts.barge_ins > 0 {
+        println!(
+            "barge-in: {} runs, talking over a long reply, each followed by a 150 ms burst",
+            opts.barge_ins
+        );
+        let hm = Clip::espeak("hm", scratch.path())?;
+        let burst = Clip::burst(&hm, 150);
+        let rig = barge_in::Rig::start(&watcher_client, &say_tx).await?;
+        let talkers: Vec<&Clip> = turns.iter().collect();
+        figures.barge_ins = barge_in::measure(&rig, &talkers, &burst, opts.barge_ins).await?;
     }
     drop(say_tx);
     mic.await.context("the microphone task")??;

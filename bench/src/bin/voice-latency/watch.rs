@@ -10,6 +10,7 @@ use flow::{Client, Subscription};
 use serde_json::Value;
 
 use crate::report::{Decode, RunFigures};
+use crate::speech_clip::Ending;
 
 /// Subscriptions to what the agent says about an utterance.
 pub struct Watcher {
@@ -105,6 +106,7 @@ impl Watcher {
                                 full_window_retry: v["full_window_retry"]
                                     .as_bool()
                                     .unwrap_or(false),
+                                turn: v["turn"].as_str().map(str::to_owned),
                             },
                         ));
                     }
@@ -135,9 +137,10 @@ impl Watcher {
                             rules,
                             first_pcm: at,
                             processing_ms: *processing_ms,
-                            decode: *decode,
+                            decode: decode.clone(),
                             vad_end_vs_ours_ms: *vad_ms as f64 - wall_ms(end_of_speech),
                             text: text.clone(),
+                            ending: Ending::Turn,
                         });
                     }
                 }

@@ -29,6 +29,10 @@ pub struct Args {
     /// it has ended (slower by up to the hangover less the post-roll; no decode is ever thrown away).
     #[arg(long)]
     no_speculate: bool,
+    /// Do not judge the end of the turn from the transcript of a pause: every utterance ends after the hangover
+    /// (see docs/asr.md, "End of turn").
+    #[arg(long)]
+    no_turn_detection: bool,
     #[command(flatten)]
     recognition: RecognitionArgs,
 }
@@ -48,6 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         segmenter: args.recognition.segmenter(),
         claim_retention: Duration::from_secs(30),
         speculate: !args.no_speculate,
+        judge_turns: !args.no_speculate && !args.no_turn_detection,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

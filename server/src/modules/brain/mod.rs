@@ -79,6 +79,8 @@ struct Mind {
     client: Client,
     utc_offset_s: i32,
     counters: Counters,
+    /// The last reply asked of the TTS module, for the trace entry of a barge-in that cuts it off.
+    saying: Option<String>,
 }
 
 async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
@@ -117,6 +119,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
             .utc_offset_minutes
             .map_or_else(wire::local_utc_offset_s, |minutes| minutes * 60),
         counters: Counters::default(),
+        saying: None,
     };
     mind.refresh_db().await;
     mind.step().await;
@@ -267,11 +270,41 @@ impl Mind {
             .chunk(Instant::now(), data.payload.len(), framed);
     }
 
-    /// A barge-in on `Agent.avatar` (`speech_stop`) ends speech at once.
+    /// A `speech_stop` on `Agent.avatar` ends speech at once; one from a barge-in while the agent was audible
+    /// is recorded in the rule trace with the reply it cut off.
     fn avatar(&mut self, data: &Data) {
-        if wire::is_speech_stop(&data.payload) {
-            self.playout.stop();
+        let Some(stop) = wire::speech_stop(&data.payload) else {
+            return;
+        };
+        let audible = self.playout.speaking_until(Instant::now()).is_some();
+        if stop.barge_in
+            && audible
+            && let Some(said) = self.saying.clone()
+        {
+            let now = self.now();
+            let active: Vec<String> = self
+                .brain
+                .active()
+                .iter()
+                .map(ToString::to_string)
+                .collect();
+            let active = if active.is_empty() {
+                "(none)".to_owned()
+            } else {
+                active.join(" > ")
+            };
+            info!(said, "brain: the user barged in");
+            let message = wire::interruption_message(
+                now.clock.unix_ms,
+                self.brain.program().origin(),
+                &active,
+                &said,
+            );
+            if let Ok(false) = self.rules.try_publish(message) {
+                debug!("brain: the barge-in entry was dropped, the link is busy");
+            }
         }
+        self.playout.stop();
     }
 
     fn outcome(&mut self, outcome: Outcome) {
@@ -350,6 +383,7 @@ impl Mind {
                 &effect
             {
                 self.echo.said(now.at, text);
+                self.saying = Some(text.clone());
             }
             if matches!(effect, Effect::Fire(Action::Cancel)) {
                 self.playout.stop();

@@ -2,6 +2,7 @@
 //! commands it reads, pair-database values, and the local time zone.
 
 use agent_brain::{Trace, Value};
+use agent_contract::avatar::AvatarCommand;
 use agent_contract::rules::RuleChange;
 
 /// The `Agent.rules` message for one rule change: the fields the page shows (`ts_ms`, `program`, `rule`,
@@ -35,8 +36,28 @@ pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
         action: actions.join("; "),
         because,
         trace: serde_json::to_value(trace).unwrap_or_default(),
+        interrupted: None,
     };
     // Plain data with string keys always serialises.
+    serde_json::to_vec(&message).unwrap_or_default()
+}
+
+/// The `Agent.rules` entry a barge-in adds: `said` was cut off by the user speaking over it while `active`
+/// (the brain's current rule path, as `trace_message` writes it) held.
+pub fn interruption_message(unix_ms: i64, origin: &str, active: &str, said: &str) -> Vec<u8> {
+    let program = std::path::Path::new(origin)
+        .file_name()
+        .map_or(origin.into(), |name| name.to_string_lossy());
+    let message = RuleChange {
+        ts_ms: unix_ms,
+        program: program.into_owned(),
+        rule: active.to_owned(),
+        index: 0,
+        action: format!("interrupted say({said:?})"),
+        because: vec!["the user spoke over it".to_owned()],
+        trace: serde_json::Value::Null,
+        interrupted: Some(said.to_owned()),
+    };
     serde_json::to_vec(&message).unwrap_or_default()
 }
 
@@ -48,10 +69,17 @@ pub fn speech_is_framed(header: &str) -> bool {
 }
 
 /// Whether an `Agent.avatar` command is a barge-in `speech_stop`.
-pub fn is_speech_stop(payload: &[u8]) -> bool {
-    serde_json::from_slice::<serde_json::Value>(payload).is_ok_and(|command| {
-        command.get("cmd").and_then(serde_json::Value::as_str) == Some("speech_stop")
-    })
+pub fn speech_stop(payload: &[u8]) -> Option<SpeechStop> {
+    match serde_json::from_slice::<AvatarCommand>(payload).ok()? {
+        AvatarCommand::SpeechStop { barge_in, .. } => Some(SpeechStop { barge_in }),
+        _ => None,
+    }
+}
+
+/// A `speech_stop` on `Agent.avatar`: speech was cancelled, or the user barged in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SpeechStop {
+    pub barge_in: bool,
 }
 
 /// A pair-database value as the rule engine sees it (JSON `null` becomes an empty text).
@@ -131,9 +159,19 @@ mod tests {
             r#"{"rate":22050,"framing":"utterance-offset"}"#
         ));
         assert!(!speech_is_framed(r#"{"rate":22050}"#));
-        assert!(is_speech_stop(br#"{"cmd":"speech_stop","utterance":3}"#));
-        assert!(!is_speech_stop(br#"{"cmd":"blink"}"#));
-        assert!(!is_speech_stop(b"not json"));
+        assert_eq!(
+            speech_stop(br#"{"cmd":"speech_stop","utterance":3}"#),
+            Some(SpeechStop { barge_in: false })
+        );
+        assert_eq!(
+            speech_stop(br#"{"cmd":"speech_stop","barge_in":true}"#),
+            Some(SpeechStop { barge_in: true })
+        );
+        assert_eq!(
+            speech_stop(br#"{"cmd":"blink","close_ms":1,"hold_ms":1,"open_ms":1}"#),
+            None
+        );
+        assert_eq!(speech_stop(b"not json"), None);
     }
 
     #[test]

@@ -290,6 +290,7 @@ async fn play(job: Job, speaker: &Speaker, out: &Outputs) {
             out.avatar
                 .send(&AvatarCommand::SpeechStop {
                     utterance: Some(id),
+                    barge_in: false,
                 })
                 .await;
             speaker.state().audible_until = None;

@@ -216,6 +216,8 @@ pub enum AvatarCommand {
     },
     SpeechStop {
         utterance: Option<u64>,
+        /// The user spoke over the agent.
+        barge_in: bool,
     },
     /// The caption shown while the agent speaks.
     Say {
@@ -256,8 +258,12 @@ impl AvatarCommand {
                     })
                     .collect(),
             },
-            AvatarCommand::SpeechStop { utterance } => avatar::AvatarCommand::SpeechStop {
+            AvatarCommand::SpeechStop {
+                utterance,
+                barge_in,
+            } => avatar::AvatarCommand::SpeechStop {
                 utterance: *utterance,
+                barge_in: *barge_in,
             },
             AvatarCommand::Say { text } => avatar::AvatarCommand::Say { text: text.clone() },
         }
@@ -378,7 +384,11 @@ mod tests {
             json!({"cmd":"visemes","items":[{"t_ms":0.0,"v":"sil"},{"t_ms":62.4,"v":"U"}],"utterance":2})
         );
         assert_eq!(
-            AvatarCommand::SpeechStop { utterance: None }.to_json(),
+            AvatarCommand::SpeechStop {
+                utterance: None,
+                barge_in: false
+            }
+            .to_json(),
             r#"{"cmd":"speech_stop"}"#
         );
     }

@@ -22,6 +22,7 @@ use tokio::sync::{broadcast, mpsc, watch};
 use whisper_sat::activity::{self, VoiceActivity};
 use whisper_sat::segmenter::SegmenterConfig;
 use whisper_sat::stream::{AudioMessage, AudioStream, ClockedUtterance, StreamEvent};
+use whisper_sat::turn::Turn;
 
 /// Messages the segmentation thread may fall behind by before new ones are dropped.
 const QUEUE: usize = 1024;
@@ -43,6 +44,23 @@ pub enum Feed {
     Flush,
     /// ASR was switched off: forget everything.
     Discard,
+    /// A chunk of the agent's own speech (`Agent.speech`), for own-voice suppression (`whisper_sat::echo`).
+    Reference {
+        ts_us: u64,
+        framing: Option<(u32, u32)>,
+        pcm: Bytes,
+    },
+    /// The agent's speech was stopped (`speech_stop` on `Agent.avatar`).
+    ReferenceStopped {
+        ts_us: u64,
+    },
+    /// This satellite is decoding the pause of utterance `id` that ended speech at `speech_end_us` (`verdict`
+    /// `None`), or has judged its transcript: the end of the turn follows the verdict (`Segmenter::turn`).
+    Turn {
+        id: String,
+        speech_end_us: u64,
+        verdict: Option<Turn>,
+    },
 }
 
 /// What the segmentation thread found, for the claiming side.
@@ -128,7 +146,12 @@ fn segment(
                 Err(_) => return,
             }
         };
-        flowing = matches!(item, Feed::Audio { .. });
+        // A verdict is not audio: the stream is still flowing (or not) as before it.
+        flowing = match item {
+            Feed::Audio { .. } => true,
+            Feed::Turn { .. } | Feed::Reference { .. } | Feed::ReferenceStopped { .. } => flowing,
+            Feed::Flush | Feed::Discard => false,
+        };
         // Switched off: open speech still ends for the listeners, but nothing is transcribed.
         let discard = matches!(item, Feed::Discard);
         let result = match item {
@@ -142,6 +165,26 @@ fn segment(
             ),
             Feed::Flush => stream.finish(&mut events),
             Feed::Discard => stream.finish(&mut events),
+            Feed::Turn {
+                id,
+                speech_end_us,
+                verdict,
+            } => {
+                stream.turn(&id, speech_end_us, verdict, &mut events);
+                Ok(())
+            }
+            Feed::Reference {
+                ts_us,
+                framing,
+                pcm,
+            } => {
+                stream.reference(ts_us, framing, &pcm);
+                Ok(())
+            }
+            Feed::ReferenceStopped { ts_us } => {
+                stream.reference_stopped(ts_us);
+                Ok(())
+            }
         };
         if let Err(e) = result {
             tracing::error!("audio pipeline: {e}");
@@ -171,6 +214,10 @@ fn segment(
                 }
                 StreamEvent::Started { start_us, .. } => {
                     tracing::trace!(start_us, "speech started");
+                    None
+                }
+                StreamEvent::Confirmed { start_us, .. } => {
+                    tracing::trace!(start_us, "speech confirmed");
                     None
                 }
                 StreamEvent::Dropped { start_us, .. } => {
@@ -221,6 +268,52 @@ pub async fn follow_audio(
         drop(sub);
         listener.send(Feed::Discard);
         tracing::info!("ASR disabled: stopped listening");
+    }
+}
+
+/// Follows the agent's own speech on `Agent.speech`, and its stops on `Agent.avatar`, for the listener's own-voice
+/// suppression. Speech payloads start with the `[utterance u32][offset u32]` header when the channel header
+/// announces `framing` (docs/browser-link.md).
+pub async fn follow_speech(client: Client, listener: Listener) -> anyhow::Result<()> {
+    let sub = client.subscribe(channels::SPEECH.name).await?;
+    let avatar = client.subscribe(channels::AVATAR.name).await?;
+    loop {
+        let d = tokio::select! {
+            d = sub.recv() => d,
+            a = avatar.recv() => {
+                let Some(a) = a else { return Ok(()) };
+                if matches!(
+                    serde_json::from_slice::<agent_contract::avatar::AvatarCommand>(&a.payload),
+                    Ok(agent_contract::avatar::AvatarCommand::SpeechStop { utterance: None, .. })
+                ) {
+                    listener.send(Feed::ReferenceStopped { ts_us: a.ts_us });
+                }
+                continue;
+            }
+        };
+        let Some(d) = d else { return Ok(()) };
+        let framed = sub.info().is_some_and(|info| {
+            serde_json::from_str::<serde_json::Value>(&info.header)
+                .is_ok_and(|h| h.get("framing").is_some())
+        });
+        let (framing, pcm) = if framed && d.payload.len() >= 8 {
+            let word = |i: usize| {
+                u32::from_le_bytes([
+                    d.payload[i],
+                    d.payload[i + 1],
+                    d.payload[i + 2],
+                    d.payload[i + 3],
+                ])
+            };
+            (Some((word(0), word(4))), d.payload.slice(8..))
+        } else {
+            (None, d.payload.clone())
+        };
+        listener.send(Feed::Reference {
+            ts_us: d.ts_us,
+            framing,
+            pcm,
+        });
     }
 }
 

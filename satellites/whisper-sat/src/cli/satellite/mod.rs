@@ -31,6 +31,7 @@ use whisper_sat::speculation::{Action, Hold};
 use whisper_sat::stream::ClockedUtterance;
 use whisper_sat::transcriber::{Outcome, TranscribeError, Transcriber};
 use whisper_sat::transcript::TranscriptMessage;
+use whisper_sat::turn::{self, Turn};
 
 /// Settings of one satellite.
 #[derive(Debug, Clone)]
@@ -41,6 +42,9 @@ pub struct Settings {
     pub claim_retention: Duration,
     /// Claim and decode utterances when they pause, before the hangover ends them.
     pub speculate: bool,
+    /// End an utterance early when the transcript of its pause reads as a complete turn, and hold it open longer
+    /// when the transcript trails off (speculation only).
+    pub judge_turns: bool,
 }
 
 /// After a holder's claim vanishes, wait this long for its transcript before claiming the utterance again (the
@@ -65,6 +69,8 @@ struct Decoding {
 struct Held {
     hold: Hold<Decode>,
     claim: Publisher,
+    /// The last verdict given on a pause of this utterance (it ended at that pause if it ended unchanged).
+    verdict: Option<Turn>,
 }
 
 /// A claim whose utterance is done with: its transcript (or why there is none) goes out and the claim is marked
@@ -74,6 +80,8 @@ struct Finished {
     utterance: ClockedUtterance,
     outcome: Decode,
     speculative: bool,
+    /// The verdict on the pause the utterance ended at, if one was judged.
+    turn: Option<Turn>,
 }
 
 /// The transcriber and its work: at most one claim held and at most one decode in flight. A decode can outlive
@@ -130,6 +138,8 @@ impl Worker {
                 speculative,
             } => self.held.take().map(|h| Finished {
                 claim: h.claim,
+                // A verdict is on a pause; an utterance that ended elsewhere (it resumed and ended unjudged) has none.
+                turn: h.verdict.filter(|_| speculative),
                 utterance,
                 outcome: result,
                 speculative,
@@ -186,8 +196,47 @@ impl Satellite {
         let (pending, claim) =
             try_claim(&self.client, &mut self.ledger, &self.settings.name, now).await?;
         let (hold, first) = Hold::claimed(pending.utterance, pending.ended);
-        self.worker.held = Some(Held { hold, claim });
-        self.worker.carry_out(Some(first))
+        self.worker.held = Some(Held {
+            hold,
+            claim,
+            verdict: None,
+        });
+        self.act(Some(first))
+    }
+
+    /// Carries out what the hold asks and keeps the segmenter told about the end of the turn: a decode of a pause
+    /// holds the end for its verdict, and a result of one gives the verdict (`whisper_sat::turn`).
+    fn act(&mut self, action: Option<Action<Decode>>) -> Option<Finished> {
+        if !self.settings.judge_turns {
+            return self.worker.carry_out(action);
+        }
+        let Some(held) = self.worker.held.as_mut() else {
+            return self.worker.carry_out(action);
+        };
+        let feed = match (&action, held.hold.paused_result()) {
+            (Some(Action::Decode(u)), _) if !held.hold.is_ended() => {
+                held.verdict = None;
+                Some((u.clone(), None))
+            }
+            (None, Some(result)) => {
+                let verdict = match result {
+                    Ok(Outcome::Speech(d)) => turn::judge(&d.text),
+                    Ok(Outcome::Rejected(..)) | Err(_) => Turn::Unknown,
+                };
+                tracing::debug!(id = %held.hold.id(), ?verdict, "end of turn judged");
+                held.verdict = Some(verdict);
+                Some((held.hold.utterance().clone(), Some(verdict)))
+            }
+            _ => None,
+        };
+        if let Some((u, verdict)) = feed {
+            self.listener.send(audio::Feed::Turn {
+                id: u.id,
+                speech_end_us: u.speech_end_us,
+                verdict,
+            });
+        }
+        self.worker.carry_out(action)
     }
 
     /// Lets go of retained claims and fairness marks that are old enough.
@@ -252,7 +301,7 @@ impl Satellite {
             },
             Heard::Abandoned { id } => return self.abandon(&id),
         };
-        self.worker.carry_out(action)
+        self.act(action)
     }
 
     /// Recognition was switched off during utterance `id`: forget it, and if it is ours, stop decoding and finish
@@ -269,6 +318,7 @@ impl Satellite {
             utterance: held.hold.utterance().clone(),
             outcome: Err(TranscribeError::Aborted),
             speculative: false,
+            turn: None,
         })
     }
 
@@ -288,7 +338,7 @@ impl Satellite {
             .held
             .as_mut()
             .and_then(|h| h.hold.decoded(outcome));
-        Ok(self.worker.carry_out(action))
+        Ok(self.act(action))
     }
 
     /// Someone's transcript: its utterance is done with.
@@ -376,6 +426,7 @@ pub async fn run(
             listener.clone(),
             enabled_rx.clone(),
         )),
+        tokio::spawn(audio::follow_speech(client.clone(), listener.clone())),
         tokio::spawn(relay::relay(
             client.clone(),
             settings.name.clone(),
@@ -532,8 +583,9 @@ async fn finish(client: &Client, satellite: &str, model: &str, f: &Finished, led
                 is_final: true,
                 speculative: f.speculative,
                 full_window_retry: d.full_window_retry,
+                turn: f.turn,
             };
-            tracing::info!(id = %u.id, ms = msg.processing_ms, speculative = f.speculative, text = %msg.text, "transcribed");
+            tracing::info!(id = %u.id, ms = msg.processing_ms, speculative = f.speculative, turn = ?f.turn, text = %msg.text, "transcribed");
             let payload = serde_json::to_vec(&msg).unwrap_or_default();
             let deadline = Instant::now() + Duration::from_secs(15);
             loop {
