@@ -34,6 +34,7 @@ bench: deps model-release build
 	$(CARGO) run --release -p agent-voice --bin voice-bench
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
 	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-vision --bin vision-bench -- --iterations 15 --rounds 3 --write-doc docs/bench-vision.md
+	$(CARGO) run --release -p agent-vision --bin vision-face-bench
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_avatar
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)

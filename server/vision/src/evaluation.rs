@@ -5,8 +5,8 @@
 use std::path::Path;
 
 use crate::error::ProcessError;
-use crate::geometry::BoxPx;
 use crate::fixtures::{FaceScore, FaceTotals, FaceTruth, score_faces};
+use crate::geometry::BoxPx;
 use crate::pipeline::VisionPipeline;
 
 /// The camera's frame period at 15 fps, in microseconds.
@@ -195,7 +195,8 @@ pub fn paste_face(
     use opencv::core::{Mat, MatTraitConst, Rect, Size, Vector, VectorToVec};
     use opencv::{imgcodecs, imgproc};
     let scale = f64::from(placement.face_px) / f64::from(patch.face.width.max(1));
-    let width = ((f64::from(patch.pixels.cols()) * scale).round() as i32).clamp(1, background.cols());
+    let width =
+        ((f64::from(patch.pixels.cols()) * scale).round() as i32).clamp(1, background.cols());
     let height =
         ((f64::from(patch.pixels.rows()) * scale).round() as i32).clamp(1, background.rows());
     let mut scaled = Mat::default();

@@ -91,6 +91,15 @@ pub struct FaceParams {
     /// every candidate). Two cascades trained apart rarely share a ghost: on the annotated fixtures `haar_alt`
     /// over `haar_default`'s candidates keeps 22 of 23 faces and drops every false one (docs/vision.md).
     pub verify: Option<Cascade>,
+    /// A third cascade whose confirmation also counts (`None`, the default: only `verify`'s). Tried against the
+    /// small faces `haar_alt` rejects on letterboxed frames; it did not pay off as the module runs it
+    /// (docs/vision.md has the figures).
+    pub verify_also: Option<Cascade>,
+    /// The budgeted cycle scans this many pyramids, each shifted by a fraction of `scale_factor` (1, the default:
+    /// the plain pyramid): a face whose size falls between two levels of one pyramid lies on a level of another.
+    /// The cost per frame stays the budget; the cycle grows by this factor. Tried, not the default: it finds more
+    /// faces and more ghosts (docs/vision.md).
+    pub pyramid_phases: u32,
     /// Scan where motion appears first, at every face size, before going on with the cycle (see
     /// [`FaceScanner::scan_with_motion`]): a face that comes into view moves, so its box is found within a few
     /// frames instead of within one cycle.
@@ -109,6 +118,8 @@ impl Default for FaceParams {
             equalize: true,
             scan_budget_px: Some(DEFAULT_SCAN_BUDGET_PX),
             verify: Some(Cascade::HaarAlt),
+            verify_also: None,
+            pyramid_phases: 1,
             motion_focus: true,
         }
     }
@@ -254,14 +265,30 @@ impl FaceDetector {
             first_row: 0,
             rows: i32::MAX,
             cost: 0,
+            phase: 0,
         };
         self.run_unit(&whole, factor)
     }
 
-    /// Shrinks and equalises the frame into `self.equalized`; returns the shrink factor.
+    /// The shrink factor of pyramid `phase` (0 = the plain pyramid) for a frame `width` pixels wide.
+    fn phase_factor(&self, width: u32, phase: u32) -> f64 {
+        let phases = self.params.pyramid_phases.max(1);
+        self.detection_scale(width)
+            * self
+                .params
+                .scale_factor
+                .powf(-f64::from(phase.min(phases - 1)) / f64::from(phases))
+    }
+
+    /// Shrinks and equalises the frame into `self.equalized` for the plain pyramid; returns the shrink factor.
     fn prepare(&mut self, frame: &GreyFrame) -> Result<f64, VisionError> {
+        self.prepare_phase(frame, 0)
+    }
+
+    /// Shrinks and equalises the frame into `self.equalized` for pyramid `phase`; returns the shrink factor.
+    fn prepare_phase(&mut self, frame: &GreyFrame, phase: u32) -> Result<f64, VisionError> {
         let size = frame.size();
-        let factor = self.detection_scale(size.width);
+        let factor = self.phase_factor(size.width, phase);
         let source = if factor < 1.0 {
             let target = Size::new(
                 (f64::from(size.width) * factor).round().max(1.0) as i32,
@@ -337,6 +364,8 @@ struct ScanUnit {
     rows: i32,
     /// Estimated pixels scanned.
     cost: u64,
+    /// The pyramid it belongs to (see [`FaceParams::pyramid_phases`]).
+    phase: u32,
 }
 
 /// Splits the scan of a `width` x `height` prepared image into units of at most about `budget` scanned pixels.
@@ -405,6 +434,7 @@ fn plan_units(
                 first_row,
                 rows,
                 cost: stripe_cost,
+                phase: 0,
             });
         }
         start = end + 1;
@@ -429,10 +459,8 @@ pub struct FaceScan {
 const FOCUS_MARGIN: f64 = 0.25;
 /// Regions waiting for a focus scan at most; further ones are dropped (motion that goes on comes back).
 const FOCUS_MAX_JOBS: usize = 4;
-/// A new motion region that lies this much inside a region being scanned, or scanned recently, is not queued again.
+/// A new motion region that lies this much inside a region waiting for its scan is not queued again.
 const FOCUS_COVERED: f64 = 0.7;
-/// How long a scanned region counts as recently scanned, in frames (1 s at 15 fps).
-const FOCUS_RECENT_FRAMES: u64 = 15;
 /// Consecutive frames the focus scans may take the whole budget before one frame goes to the cycle, so that
 /// motion that never stops cannot starve the faces that stand still.
 const FOCUS_MAX_STREAK: u32 = 6;
@@ -446,6 +474,9 @@ struct FocusJob {
     region: Rect,
     /// Units not scanned yet, largest windows first.
     pending: std::collections::VecDeque<ScanUnit>,
+    /// Whether its scan has begun: a region that moves again after that is queued anew, since what came into
+    /// view may be larger than the windows still to come.
+    started: bool,
     /// Faces found in the region so far, in frame pixels.
     found: Vec<BoxPx>,
 }
@@ -466,6 +497,7 @@ struct FocusHit {
 pub struct FaceScanner {
     detector: FaceDetector,
     verifier: Option<FaceVerifier>,
+    verifier_also: Option<FaceVerifier>,
     plan_for: Option<(i32, i32)>,
     units: Vec<ScanUnit>,
     latest: Vec<Vec<BoxPx>>,
@@ -473,11 +505,8 @@ pub struct FaceScanner {
     completed_cycles: u64,
     focus_jobs: std::collections::VecDeque<FocusJob>,
     focus_hits: Vec<FocusHit>,
-    /// Regions whose focus scan finished, with the frame number it finished on.
-    focus_done: Vec<(Rect, u64)>,
     /// Frames in a row on which the focus scans left nothing of the budget to the cycle.
     focus_streak: u32,
-    frames: u64,
 }
 
 impl FaceScanner {
@@ -486,9 +515,14 @@ impl FaceScanner {
             .verify
             .map(|c| FaceVerifier::new(c, &params.cascade_dir))
             .transpose()?;
+        let verifier_also = params
+            .verify_also
+            .map(|c| FaceVerifier::new(c, &params.cascade_dir))
+            .transpose()?;
         Ok(Self {
             detector: FaceDetector::new(params)?,
             verifier,
+            verifier_also,
             plan_for: None,
             units: Vec::new(),
             latest: Vec::new(),
@@ -496,9 +530,7 @@ impl FaceScanner {
             completed_cycles: 0,
             focus_jobs: std::collections::VecDeque::new(),
             focus_hits: Vec::new(),
-            focus_done: Vec::new(),
             focus_streak: 0,
-            frames: 0,
         })
     }
 
@@ -512,10 +544,21 @@ impl FaceScanner {
         frame: &GreyFrame,
         candidates: Vec<BoxPx>,
     ) -> Result<Vec<BoxPx>, VisionError> {
-        match &mut self.verifier {
-            Some(v) => v.filter(frame, candidates),
-            None => Ok(candidates),
+        let Some(first) = self.verifier.as_mut() else {
+            return Ok(candidates);
+        };
+        let mut kept = Vec::with_capacity(candidates.len());
+        for c in candidates {
+            let confirmed = first.confirms(frame, &c)?
+                || match self.verifier_also.as_mut() {
+                    Some(also) => also.confirms(frame, &c)?,
+                    None => false,
+                };
+            if confirmed {
+                kept.push(c);
+            }
         }
+        Ok(kept)
     }
 
     /// Scans the next units of the frame within the budget.
@@ -537,7 +580,6 @@ impl FaceScanner {
         frame: &GreyFrame,
         moving: &[BoxPx],
     ) -> Result<FaceScan, VisionError> {
-        self.frames += 1;
         let Some(budget) = self.detector.params.scan_budget_px else {
             let candidates = self.detector.detect(frame)?;
             let faces = self.verified(frame, candidates)?;
@@ -554,21 +596,32 @@ impl FaceScanner {
             self.detector.equalized.rows(),
         );
         if self.plan_for != Some(prepared) {
-            // A new frame size invalidates every stored result.
+            // A new frame size invalidates every stored result. The cycle runs the plain pyramid's units, then
+            // each shifted pyramid's.
             let params = &self.detector.params;
-            self.units = plan_units(
-                prepared.0,
-                prepared.1,
-                self.detector.window,
-                params.scale_factor,
-                budget,
-            );
+            let size = frame.size();
+            self.units = Vec::new();
+            for phase in 0..params.pyramid_phases.max(1) {
+                let f = self.detector.phase_factor(size.width, phase);
+                let width = (f64::from(size.width) * f).round().max(1.0) as i32;
+                let height = (f64::from(size.height) * f).round().max(1.0) as i32;
+                let mut units = plan_units(
+                    width,
+                    height,
+                    self.detector.window,
+                    params.scale_factor,
+                    budget,
+                );
+                for unit in &mut units {
+                    unit.phase = phase;
+                }
+                self.units.extend(units);
+            }
             self.latest = vec![Vec::new(); self.units.len()];
             self.next_unit = 0;
             self.plan_for = Some(prepared);
             self.focus_jobs.clear();
             self.focus_hits.clear();
-            self.focus_done.clear();
         }
         if self.detector.params.motion_focus {
             self.queue_focus(moving, factor, prepared, budget);
@@ -578,6 +631,7 @@ impl FaceScanner {
             spent = self.run_focus(factor, budget)?;
         }
         let mut ran = 0;
+        let (mut prepared_phase, mut phase_factor) = (0, factor);
         while ran < self.units.len() {
             let unit = &self.units[self.next_unit];
             if spent > 0 && spent + unit.cost > budget {
@@ -585,7 +639,11 @@ impl FaceScanner {
             }
             spent += unit.cost;
             let unit = unit.clone();
-            self.latest[self.next_unit] = self.detector.run_unit(&unit, factor)?;
+            if unit.phase != prepared_phase {
+                phase_factor = self.detector.prepare_phase(frame, unit.phase)?;
+                prepared_phase = unit.phase;
+            }
+            self.latest[self.next_unit] = self.detector.run_unit(&unit, phase_factor)?;
             ran += 1;
             self.next_unit += 1;
             if self.next_unit == self.units.len() {
@@ -612,12 +670,9 @@ impl FaceScanner {
         })
     }
 
-    /// Turns this frame's motion regions into focus jobs, skipping those already being scanned or scanned in the
-    /// last second.
+    /// Turns this frame's motion regions into focus jobs, skipping those that lie in a region still waiting for
+    /// its scan.
     fn queue_focus(&mut self, moving: &[BoxPx], factor: f64, prepared: (i32, i32), budget: u64) {
-        let frames = self.frames;
-        self.focus_done
-            .retain(|(_, done)| frames <= done + FOCUS_RECENT_FRAMES);
         let window = self.detector.window;
         for region in moving {
             let grow_x = f64::from(region.width) * FOCUS_MARGIN;
@@ -638,9 +693,8 @@ impl FaceScanner {
             let covered = self
                 .focus_jobs
                 .iter()
-                .map(|j| j.region)
-                .chain(self.focus_done.iter().map(|(r, _)| *r))
-                .any(|r| f64::from((r & grown).area()) >= FOCUS_COVERED * area);
+                .filter(|j| !j.started)
+                .any(|j| f64::from((j.region & grown).area()) >= FOCUS_COVERED * area);
             if covered || self.focus_jobs.len() >= FOCUS_MAX_JOBS {
                 continue;
             }
@@ -660,6 +714,7 @@ impl FaceScanner {
             self.focus_jobs.push_back(FocusJob {
                 region: grown,
                 pending: units.into(),
+                started: false,
                 found: Vec::new(),
             });
         }
@@ -680,12 +735,12 @@ impl FaceScanner {
             let unit = unit.clone();
             let found = self.detector.run_unit(&unit, factor)?;
             let cycle = self.completed_cycles;
-            self.focus_hits
-                .extend(found.iter().map(|&face| FocusHit {
-                    face,
-                    found_at_cycle: cycle,
-                }));
+            self.focus_hits.extend(found.iter().map(|&face| FocusHit {
+                face,
+                found_at_cycle: cycle,
+            }));
             job.found.extend(found);
+            job.started = true;
             job.pending.pop_front();
             if job.pending.is_empty() {
                 self.finish_focus(factor);
@@ -713,7 +768,6 @@ impl FaceScanner {
             boxes.retain(|b| !stale(b));
         }
         self.focus_hits.retain(|h| !stale(&h.face));
-        self.focus_done.push((job.region, self.frames));
     }
 }
 

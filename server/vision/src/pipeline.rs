@@ -143,7 +143,9 @@ impl VisionPipeline {
         };
         let (faces, face_cycles) = match self.faces.as_mut() {
             Some(scanner) => {
-                let scan = timed(&mut timings.faces, || scanner.scan_with_motion(frame, moving))?;
+                let scan = timed(&mut timings.faces, || {
+                    scanner.scan_with_motion(frame, moving)
+                })?;
                 (Some(scan.faces), scan.completed_cycles)
             }
             None => (None, 0),

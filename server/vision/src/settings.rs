@@ -52,6 +52,10 @@ pub struct FaceSettings {
     pub scan_budget_px: u64,
     /// The cascade that must confirm each candidate (one of the cascade names), or `none`.
     pub verify: String,
+    /// A further cascade whose confirmation also counts, or `none`.
+    pub verify_also: String,
+    /// Pyramids of the budgeted cycle, each shifted by a fraction of the scale step (1-4).
+    pub pyramid_phases: u32,
     /// Scan regions where motion appears first, at every face size (needs the motion detector).
     pub motion_focus: bool,
 }
@@ -122,6 +126,8 @@ impl Default for FaceSettings {
             equalize: face.equalize,
             scan_budget_px: face.scan_budget_px.unwrap_or(0),
             verify: face.verify.map_or("none", Cascade::name).to_owned(),
+            verify_also: face.verify_also.map_or("none", Cascade::name).to_owned(),
+            pyramid_phases: face.pyramid_phases,
             motion_focus: face.motion_focus,
         }
     }
@@ -238,8 +244,21 @@ impl VisionSettings {
                     invalid("faces.verify", format!("unknown cascade {name:?}; one of haar_default, haar_alt, haar_alt2, lbp, lbp_improved, or none"))
                 })?),
             };
+            let verify_also = match f.verify_also.as_str() {
+                "none" => None,
+                name => Some(Cascade::from_name(name).ok_or_else(|| {
+                    invalid("faces.verify_also", format!("unknown cascade {name:?}; one of haar_default, haar_alt, haar_alt2, lbp, lbp_improved, or none"))
+                })?),
+            };
+            check(
+                (1..=4).contains(&f.pyramid_phases),
+                "faces.pyramid_phases",
+                "must be 1-4",
+            )?;
             Some(FaceParams {
                 verify,
+                verify_also,
+                pyramid_phases: f.pyramid_phases,
                 cascade,
                 cascade_dir: f.cascade_dir.clone(),
                 scale_factor: f.scale_factor,
