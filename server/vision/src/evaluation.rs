@@ -319,3 +319,14 @@ pub fn appearance_trial(
 fn process_error(e: ProcessError) -> SceneError {
     SceneError::OpenCv(opencv::Error::new(opencv::core::StsError, e.to_string()))
 }
+
+/// Nearest-rank percentile; NaN for no samples. Shared by the benchmarks.
+pub fn percentile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
+}

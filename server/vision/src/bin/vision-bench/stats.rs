@@ -38,13 +38,4 @@ impl Samples {
     }
 }
 
-/// Nearest-rank percentile; NaN for no samples.
-pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
-}
+pub use agent_vision::evaluation::percentile;

@@ -4,7 +4,8 @@
 //! (the default) and without it (the plain budgeted scan) side by side in the same run. Prints `SUMMARY` lines.
 
 use agent_vision::evaluation::{
-    Appearance, FRAME_US, Placement, StillReport, appearance_trial, face_patch, read_colour,
+    Appearance, FRAME_US, Placement, StillReport, appearance_trial, face_patch, percentile,
+    read_colour,
 };
 use agent_vision::face::{Cascade, FaceParams};
 use agent_vision::fixtures::{FaceTruth, GroundTruth, fixtures_dir, letterbox};
@@ -273,15 +274,4 @@ fn time_to_box(outcomes: &[Appearance], max_frames: usize) -> (f64, f64, usize) 
 fn frame_cost(outcomes: &[Appearance]) -> (f64, f64) {
     let all: Vec<f64> = outcomes.iter().flat_map(|a| a.frame_ms.clone()).collect();
     (percentile(&all, 0.5), percentile(&all, 0.95))
-}
-
-/// Nearest-rank percentile; NaN for no samples.
-fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
 }
