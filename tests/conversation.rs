@@ -16,6 +16,10 @@ use serde_json::Value;
 /// Everything here runs on two shared cores, possibly beside a build: waits are generous, never timed.
 const PATIENCE: Duration = Duration::from_secs(180);
 
+/// One conversation at a time: each runs a server and a whisper satellite, whose inference threads spin on both
+/// cores, and the end of turn and the own-voice floor are about timing that a second conversation would distort.
+static ONE_CONVERSATION: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 /// What the test has seen so far, in the order it arrived.
 #[derive(Debug, Default)]
 struct Seen {
@@ -79,6 +83,7 @@ async fn next(sub: &Subscription) -> anyhow::Result<bytes::Bytes> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
+    let _one = ONE_CONVERSATION.lock().await;
     let dir = DataDir::new()?;
     // The shipped program; no camera here: the vision module stays off so that nothing but the voice moves the
     // brain.
@@ -246,6 +251,7 @@ async fn metrics_tell_the_same_turn(agent: &Agent) -> anyhow::Result<()> {
 /// after the short confirmation silence (the transcript says so in `turn`).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> anyhow::Result<()> {
+    let _one = ONE_CONVERSATION.lock().await;
     use agent_tests::spoken;
     let dir = DataDir::new()?;
     let program = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
@@ -403,6 +409,7 @@ fn caused_by_hearing(trace: &Value) -> bool {
 /// transcript, so it is the voice activity, not the words, that stopped the agent.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Result<()> {
+    let _one = ONE_CONVERSATION.lock().await;
     use agent_tests::spoken;
     let dir = DataDir::new()?;
     let program = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
@@ -547,6 +554,7 @@ struct Scene {
 /// does barge in and is transcribed.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_agent_does_not_hear_itself_but_hears_a_user_over_its_echo() -> anyhow::Result<()> {
+    let _one = ONE_CONVERSATION.lock().await;
     use agent_tests::spoken;
     const REPLY: &str = "Let me tell you about the weather today. In the morning it will be cloudy with a \
         chance of light rain, and the afternoon should be sunny and warm.";
@@ -643,7 +651,8 @@ async fn the_agent_does_not_hear_itself_but_hears_a_user_over_its_echo() -> anyh
 }
 
 /// Makes the agent say its reply and, as its first chunk arrives, plays `mic` into `Agent.audio` in real time;
-/// collects what the hub shows until the microphone has finished and two quiet seconds have passed.
+/// collects what the hub shows until the microphone has finished and three more seconds have passed, and when the
+/// voice activity started, until its transcript is in.
 #[allow(clippy::too_many_arguments)]
 async fn play_during_reply<F, Fut>(
     agent: &Agent,
@@ -691,9 +700,10 @@ where
         tokio::select! {
             done = &mut playing, if quiet_from.is_none() => {
                 done??.ok()?;
-                quiet_from = Some(tokio::time::Instant::now() + Duration::from_secs(2));
+                quiet_from = Some(tokio::time::Instant::now() + Duration::from_secs(3));
             }
-            () = quiet => break,
+            // Speech that started is waited for until its transcript is in, however long whisper takes.
+            () = quiet, if scene.vad_starts == 0 || !scene.finals.is_empty() => break,
             p = next(transcript) => {
                 if let Some(v) = json(&p?) {
                     if v["vad"] == "start" {

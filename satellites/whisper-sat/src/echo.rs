@@ -8,11 +8,13 @@
 //! tail all fall inside it), a microphone frame counts as voice only when it is louder than the echo that loudest
 //! reference level can make. How loud the echo comes back (the path from the digital signal through loudspeaker,
 //! room and microphone, and whatever the browser's own canceller takes off) depends on the room and the volume, so
-//! the gate learns it: for every microphone message heard while the agent was audible it notes how far the
-//! message's level was from the loudest recent reference level, and takes the 90th percentile of the last five
-//! seconds of such notes as the echo's gain. Most of that time the user is silent and the notes are the echo's, so
-//! the floor sits `margin_db` above the echo's loud end, and a user talking over the agent, louder than its echo,
-//! passes. Until a second of notes exists the gain is assumed to be `initial_gain_db`. This is a Geigel double-talk
+//! the gate learns it: for every microphone message heard while the agent was audible and judged to be echo (under
+//! the floor of the moment) it notes how far the message's level was from the loudest recent reference level, and
+//! takes the 90th percentile of the last five seconds of such notes as the echo's gain. Messages over the floor are
+//! the user talking over the agent and are not learned from, so double talk does not teach the gate to gate the
+//! user; with no echo at all (headphones, audio injected in tests) the notes are the microphone's silence and the
+//! floor drops away. The floor sits `margin_db` above the echo's loud end. Until a second of notes exists the gain
+//! is assumed to be `initial_gain_db`, a typical echo return loss with the browser's canceller on. This is a Geigel double-talk
 //! detector on 20 ms levels with a learned echo return loss: no adaptive filter, cheap enough for every frame.
 //! When the agent is silent there is no floor.
 //!
@@ -39,7 +41,7 @@ impl Default for EchoConfig {
     fn default() -> Self {
         Self {
             margin_db: 3.0,
-            initial_gain_db: -6.0,
+            initial_gain_db: -12.0,
             history: 250,
             window_ms: 700,
             jitter_ms: 60,
@@ -134,12 +136,14 @@ impl EchoGate {
     /// and learns the echo's gain from it.
     pub fn heard(&mut self, at_us: u64, mic_dbfs: f32) -> Option<f32> {
         let loudest = self.loudest_reference(at_us)?;
-        let gain = self.echo_gain();
-        self.notes.push_back(mic_dbfs - loudest);
-        while self.notes.len() > self.cfg.history {
-            self.notes.pop_front();
+        let floor = loudest + self.echo_gain() + self.cfg.margin_db;
+        if mic_dbfs < floor {
+            self.notes.push_back(mic_dbfs - loudest);
+            while self.notes.len() > self.cfg.history {
+                self.notes.pop_front();
+            }
         }
-        Some(loudest + gain + self.cfg.margin_db)
+        Some(floor)
     }
 
     /// The agent's speech was stopped at `at_us` (a cancel or a barge-in): the page plays nothing of what was sent
@@ -213,11 +217,11 @@ mod tests {
         // The first plays after the jitter buffer: before it, no floor.
         assert_eq!(gate.heard(t0 + 30_000, -30.0), None);
         // While it plays, before anything is learned, the floor is the reply's level (-6 dBFS for a square wave at
-        // half scale) with the initial gain (-6 dB) and the margin (3 dB).
+        // half scale) with the initial gain (-12 dB) and the margin (3 dB).
         let floor = gate
             .heard(t0 + 100_000, -30.0)
             .expect("a floor while playing");
-        assert!((floor - (-6.0 - 6.0 + 3.0)).abs() < 0.5, "{floor}");
+        assert!((floor - (-6.0 - 12.0 + 3.0)).abs() < 0.5, "{floor}");
         // It stays for the window after the last chunk played (60 + 200 ms), then lifts.
         assert!(gate.heard(t0 + 260_000 + 600_000, -30.0).is_some());
         assert_eq!(gate.heard(t0 + 260_000 + 800_000, -30.0), None);
@@ -243,6 +247,30 @@ mod tests {
         // The floor sits just above the echo: the echo stays under it, a user at the reply's level clears it.
         let floor = floor.expect("a floor");
         assert!(floor > -26.0 && floor < -20.0, "{floor}");
+        // A user talking over the agent for a while is not learned as echo: the floor stays.
+        for k in 140..150u64 {
+            gate.heard(t0 + 60_000 + k * 20_000, -8.0);
+        }
+        assert!(
+            (gate.echo_gain() - (-20.0)).abs() < 0.5,
+            "{}",
+            gate.echo_gain()
+        );
+    }
+
+    #[test]
+    fn without_an_echo_the_floor_drops_away() {
+        let mut gate = EchoGate::new(EchoConfig::default());
+        let t0 = 3_000_000_000;
+        for k in 0..150u32 {
+            gate.reference(t0, Some((2, k * 441)), &chunk(16_384));
+        }
+        // Headphones: the microphone hears silence while the agent speaks.
+        let mut floor = None;
+        for k in 0..100u64 {
+            floor = gate.heard(t0 + 60_000 + k * 20_000, -90.0);
+        }
+        assert!(floor.is_some_and(|f| f < -80.0), "{floor:?}");
     }
 
     #[test]

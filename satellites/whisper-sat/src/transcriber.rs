@@ -191,18 +191,21 @@ impl Transcriber {
     ) -> Result<Decoded, TranscribeError> {
         let started = Instant::now();
         let mut decoded = self.decode_with(audio, self.cfg.audio_context, abort)?;
-        if self.cfg.audio_context == AudioContext::Fit
+        let seconds = audio.len() as f32 / RATE as f32;
+        // The cut window's signature failure: the whole utterance said again, up to the token cap or only twice
+        // (nobody says one sentence twice in one breath; a phrase too short for the audio is not taken).
+        let repeated = (self.cfg.audio_context == AudioContext::Fit)
+            .then(|| repeated_utterance(&decoded.text, seconds))
+            .flatten();
+        if let Some(once) = repeated {
+            tracing::debug!(text = %decoded.text, "fitted window repeated the utterance; kept once");
+            decoded.text = once;
+        } else if self.cfg.audio_context == AudioContext::Fit
             && (decoded.tokens >= token_cap(audio.len()) || is_repetition_loop(&decoded.text))
         {
-            let seconds = audio.len() as f32 / RATE as f32;
-            if let Some(once) = repeated_utterance(&decoded.text, seconds) {
-                tracing::debug!(text = %decoded.text, "fitted window repeated the utterance; kept once");
-                decoded.text = once;
-            } else {
-                tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
-                decoded = self.decode_with(audio, AudioContext::Full, abort)?;
-                decoded.full_window_retry = true;
-            }
+            tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
+            decoded = self.decode_with(audio, AudioContext::Full, abort)?;
+            decoded.full_window_retry = true;
         }
         decoded.processing = started.elapsed();
         Ok(decoded)
