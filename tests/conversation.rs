@@ -578,7 +578,7 @@ async fn the_agent_does_not_hear_itself_but_hears_a_user_over_its_echo() -> anyh
             client
                 .call(ch::SAY.name, body.into_bytes(), PATIENCE)
                 .await
-                .context("Agent.say")
+                .with_context(|| format!("calling {}", ch::SAY.name))
         }
     };
 
