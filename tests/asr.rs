@@ -557,9 +557,9 @@ async fn a_pause_shorter_than_the_hangover_gives_one_transcript_with_the_whole_t
     let dir = DataDir::new()?;
     let agent = Agent::start(&dir).await?;
     let transcripts = Transcripts::collect(&agent).await?;
-    // With the fixed hangover: the first sentence reads as a complete turn, and the end-of-turn judgement would
-    // rightly answer it at the pause (tests/conversation.rs covers that); this test is about speculation.
-    let _sat = Satellite::start_with(&agent, "asr-pause", &["--no-turn-detection"]).await?;
+    // With the fixed hangover (the default): the first sentence reads as a complete turn, and the end-of-turn
+    // judgement would rightly answer it at the pause (tests/conversation.rs covers that); this is about speculation.
+    let _sat = start_satellite(&agent, "asr-pause").await?;
     // Two sentences without their own edges, 200 ms apart: the satellite's segmenter sees about 220 ms without
     // voice, past the 100 ms post-roll (the utterance pauses and may be decoded speculatively) but short of the
     // 300 ms hangover (it does not end). The voice resumes, so the speculative decode must not become the transcript.

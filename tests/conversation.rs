@@ -263,7 +263,7 @@ async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> an
     let watcher = agent.client("turn-test").await?;
     let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
     let rules = watcher.subscribe(ch::RULES.name).await?;
-    let _satellite = Satellite::start(&agent, "turn-asr").await?;
+    let _satellite = Satellite::start_with(&agent, "turn-asr", &["--turn-detection"]).await?;
     let (head, tail) = (
         spoken::say("What time", dir.path())?,
         spoken::say("is it?", dir.path())?,
@@ -329,10 +329,10 @@ async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> an
             "pause {pause_ms} ms: {answers:#?}"
         );
     }
-    // The control: with the fixed hangover, the same sentence with the longer pause is cut in two, so what held it
+    // The control: with the fixed hangover (no `--turn-detection`), the same sentence with the longer pause is cut in two, so what held it
     // together above was the end-of-turn judgement.
     drop(_satellite);
-    let _fixed = Satellite::start_with(&agent, "turn-asr-fixed", &["--no-turn-detection"]).await?;
+    let _fixed = Satellite::start(&agent, "turn-asr-fixed").await?;
     let wav = dir.path().join("what-time-fixed.wav");
     let sentence = [
         spoken::silence(400),
@@ -570,7 +570,7 @@ async fn the_agent_does_not_hear_itself_but_hears_a_user_over_its_echo() -> anyh
     let rules = watcher.subscribe(ch::RULES.name).await?;
     let speech = watcher.subscribe(ch::SPEECH.name).await?;
     let avatar = watcher.subscribe(ch::AVATAR.name).await?;
-    let _satellite = Satellite::start(&agent, "own-voice-asr").await?;
+    let _satellite = Satellite::start_with(&agent, "own-voice-asr", &["--echo-gate"]).await?;
     let say = || {
         let client = watcher.clone();
         async move {

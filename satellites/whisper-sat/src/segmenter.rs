@@ -77,8 +77,8 @@ impl Default for SegmenterConfig {
             energy_floor_dbfs: -50.0,
             tonal_flatness: 0.3,
             min_tonal_ms: 100,
-            turn_confirm_ms: 120,
-            turn_wait_ms: 900,
+            turn_confirm_ms: 250,
+            turn_wait_ms: 600,
         }
     }
 }

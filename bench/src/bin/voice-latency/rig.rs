@@ -119,6 +119,8 @@ impl Rig {
             .arg(&self.token)
             .arg("--name")
             .arg("bench-asr")
+            // As `make run` starts its satellite: judging the end of the turn.
+            .arg("--turn-detection")
             .arg("--threads")
             .arg(threads.to_string());
         if let Some(ms) = hangover_ms {

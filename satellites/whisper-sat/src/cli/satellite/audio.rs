@@ -274,7 +274,15 @@ pub async fn follow_audio(
 /// Follows the agent's own speech on `Agent.speech`, and its stops on `Agent.avatar`, for the listener's own-voice
 /// suppression. Speech payloads start with the `[utterance u32][offset u32]` header when the channel header
 /// announces `framing` (docs/browser-link.md).
-pub async fn follow_speech(client: Client, listener: Listener) -> anyhow::Result<()> {
+/// Does nothing unless `enabled` (`whisper-sat run --echo-gate`).
+pub async fn follow_speech(
+    client: Client,
+    listener: Listener,
+    enabled: bool,
+) -> anyhow::Result<()> {
+    if !enabled {
+        return Ok(());
+    }
     let sub = client.subscribe(channels::SPEECH.name).await?;
     let avatar = client.subscribe(channels::AVATAR.name).await?;
     loop {

@@ -45,6 +45,9 @@ pub struct Settings {
     /// End an utterance early when the transcript of its pause reads as a complete turn, and hold it open longer
     /// when the transcript trails off (speculation only).
     pub judge_turns: bool,
+    /// Hold the agent's own voice, heard back through loudspeakers, under a floor learned from `Agent.speech`
+    /// (`whisper_sat::echo`).
+    pub echo_gate: bool,
 }
 
 /// After a holder's claim vanishes, wait this long for its transcript before claiming the utterance again (the
@@ -426,7 +429,11 @@ pub async fn run(
             listener.clone(),
             enabled_rx.clone(),
         )),
-        tokio::spawn(audio::follow_speech(client.clone(), listener.clone())),
+        tokio::spawn(audio::follow_speech(
+            client.clone(),
+            listener.clone(),
+            settings.echo_gate,
+        )),
         tokio::spawn(relay::relay(
             client.clone(),
             settings.name.clone(),
