@@ -282,17 +282,7 @@ impl Mind {
             && let Some(said) = self.saying.clone()
         {
             let now = self.now();
-            let active: Vec<String> = self
-                .brain
-                .active()
-                .iter()
-                .map(ToString::to_string)
-                .collect();
-            let active = if active.is_empty() {
-                "(none)".to_owned()
-            } else {
-                active.join(" > ")
-            };
+            let active = wire::rule_path(&self.active_rules());
             info!(said, "brain: the user barged in");
             let message = wire::interruption_message(
                 now.clock.unix_ms,
@@ -392,14 +382,18 @@ impl Mind {
         }
     }
 
-    fn status(&self) -> serde_json::Value {
-        let c = &self.counters;
-        let active: Vec<String> = self
-            .brain
+    /// The active rules, outermost first, as traces name them.
+    fn active_rules(&self) -> Vec<String> {
+        self.brain
             .active()
             .iter()
             .map(ToString::to_string)
-            .collect();
+            .collect()
+    }
+
+    fn status(&self) -> serde_json::Value {
+        let c = &self.counters;
+        let active = self.active_rules();
         serde_json::json!({
             "program": self.file.path().display().to_string(),
             "active": active,

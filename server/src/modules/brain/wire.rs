@@ -8,16 +8,13 @@ use agent_contract::rules::RuleChange;
 /// The `Agent.rules` message for one rule change: the fields the page shows (`ts_ms`, `program`, `rule`,
 /// `action`, `because`) and the full trace for tools.
 pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
-    let rule = if trace.path.is_empty() {
-        "(none)".to_owned()
-    } else {
-        trace
+    let rule = rule_path(
+        &trace
             .path
             .iter()
             .map(ToString::to_string)
-            .collect::<Vec<_>>()
-            .join(" > ")
-    };
+            .collect::<Vec<_>>(),
+    );
     let mut actions: Vec<String> = trace.effects.iter().map(ToString::to_string).collect();
     actions.extend(trace.updates.iter().cloned());
     let because: Vec<String> = trace
@@ -40,6 +37,15 @@ pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
     };
     // Plain data with string keys always serialises.
     serde_json::to_vec(&message).unwrap_or_default()
+}
+
+/// A path of rules as `Agent.rules` shows it: `main.converse > answer.time`, or `(none)` when no rule holds.
+pub fn rule_path(rules: &[String]) -> String {
+    if rules.is_empty() {
+        "(none)".to_owned()
+    } else {
+        rules.join(" > ")
+    }
 }
 
 /// The `Agent.rules` entry a barge-in adds: `said` was cut off by the user speaking over it while `active`
