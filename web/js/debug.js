@@ -50,6 +50,10 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("overlayItems", () => overlay.items);
   define("rules", () => rules.count);
   define("speechChunks", () => speech.chunks);
+  // The speech playback route: "loopback" (through a peer connection the echo canceller covers) or "direct", the
+  // delay compensated in the viseme schedule, the measurements behind it (ms), RTP packets received, and why the
+  // loopback is not in use when it is not.
+  define("playback", () => speech.routeState());
   define("lastError", () => page.lastError);
   define("snapshot", () => {
     const out = {};

@@ -3,9 +3,10 @@
 import { createAvatar, DEFAULT_RENDERER } from "./avatar/renderer.js";
 import { decodeSpeech, KIND } from "./link/frames.js";
 import { Link, SEND_BACKLOG_LIMIT } from "./link/link.js";
-import { audioClock } from "./media/audio-context.js";
+import { audioClock, audioContext } from "./media/audio-context.js";
 import { Camera } from "./media/camera.js";
 import { Microphone } from "./media/microphone.js";
+import { LoopbackRoute } from "./media/playback-route.js";
 import { SpeechPlayer } from "./media/speech.js";
 import { Overlay } from "./panels/overlay.js";
 import { Latencies } from "./panels/latency.js";
@@ -43,6 +44,34 @@ const speech = new SpeechPlayer((utterance, startS) => {
     avatar.scheduleVisemes(utterance, startS, items);
   }
 });
+
+// Speech plays through a loopback peer connection so that Chrome's echo canceller removes it from the microphone
+// (loudspeakers, not headphones); `?playback=direct` keeps the plain Web Audio path. It opens once the microphone
+// runs: without a microphone there is no echo to cancel, and with its permission granted the browser offers the
+// loopback plain host addresses rather than mDNS names that might not resolve. A page the browser does not yet let
+// play sound (no user gesture) tries again on the first click or key.
+let playbackOpening = false; // opening or open: the route is set up once per page
+async function openEchoSafePlayback() {
+  if (playbackOpening || params.get("playback") === "direct") return;
+  playbackOpening = true;
+  try {
+    speech.useRoute(await LoopbackRoute.open(audioContext()));
+    speech.routeError = null;
+  } catch (e) {
+    speech.routeError = String(e?.message ?? e);
+    console.warn("speech plays straight to the output, which the echo canceller does not cover:", speech.routeError);
+    playbackOpening = false;
+    if (e?.name === "NotAllowedError") {
+      const retry = () => {
+        window.removeEventListener("pointerdown", retry);
+        window.removeEventListener("keydown", retry);
+        openEchoSafePlayback();
+      };
+      window.addEventListener("pointerdown", retry);
+      window.addEventListener("keydown", retry);
+    }
+  }
+}
 
 const page = {
   role: "none", // none | pending | holder | busy
@@ -120,6 +149,7 @@ async function startWanted() {
 async function startDevice(device, which) {
   try {
     await device.start();
+    if (which === "mic") openEchoSafePlayback();
   } catch (err) {
     if (which === "mic") page.wantMic = false;
     else page.wantCam = false;

@@ -2,21 +2,32 @@
 //
 // Each chunk becomes an AudioBuffer at 22050 Hz (WebAudio resamples to the device rate) scheduled right after the
 // previous one, with a 60 ms jitter buffer before the first chunk of an utterance. The audio-clock time of an
-// utterance's sample 0 is its anchor: viseme timelines are placed relative to it.
+// utterance's sample 0 is its anchor. What leaves the player goes through a playback route (playback-route.js):
+// the loopback one, which the echo canceller covers, is heard later than the audio clock says, so viseme
+// timelines are placed at the anchor plus the route's delay at the time the utterance starts.
 
 import { audioContext } from "./audio-context.js";
+import { DirectRoute } from "./playback-route.js";
 
 const RATE = 22050;
 const JITTER_S = 0.06;
 const NEW_UTTERANCE_GAP_S = 0.25; // for unframed PCM (utterance 0): a gap this long starts a new utterance
 
 export class SpeechPlayer {
-  /** `onAnchor(utterance, startS)` is called when an utterance's sample 0 gets its audio-clock time. */
+  /**
+   * `onAnchor(utterance, heardS)` is called when an utterance's sample 0 gets its audio-clock time: `heardS` is
+   * when it is heard, the time visemes are placed from.
+   */
   constructor(onAnchor) {
     this.onAnchor = onAnchor;
     this.playhead = 0;
     this.sources = new Set();
-    this.anchors = new Map(); // utterance -> audio time of sample 0
+    this.anchors = new Map(); // utterance -> audio time sample 0 enters the route
+    this.delays = new Map(); // utterance -> the route's delay when it started (seconds)
+    /** @type {DirectRoute | import("./playback-route.js").LoopbackRoute | null} */
+    this.route = null;
+    this.nextRoute = null;
+    this.routeError = null;
     this.current = null;
     this.lastEnd = 0;
     this.chunks = 0;
@@ -26,11 +37,38 @@ export class SpeechPlayer {
 
   /** The node sources connect to: a gain node in front of the destination, for fading out on a barge-in. */
   output(ctx) {
+    if (!this.route) this.route = new DirectRoute(ctx);
+    this.route.tagAt = (atS) => this.tagAt(atS);
     if (!this.gain) {
       this.gain = ctx.createGain();
-      this.gain.connect(ctx.destination);
+      this.gain.connect(this.route.input);
     }
     return this.gain;
+  }
+
+  /**
+   * Plays through `route` from the next utterance on: switching in the middle of one would shift the rest of
+   * it by the route's delay, out of step with its visemes.
+   */
+  useRoute(route) {
+    this.nextRoute = route;
+    if (!this.speaking) this.switchRoute();
+  }
+
+  switchRoute() {
+    if (!this.nextRoute) return;
+    this.route = this.nextRoute;
+    this.nextRoute = null;
+    if (this.gain) {
+      this.gain.disconnect();
+      this.gain.connect(this.route.input);
+    }
+  }
+
+  /** The playback route's state for the debug hook: which route, its delay and the measurements behind it. */
+  routeState() {
+    const state = this.route ? this.route.debugState() : { route: "direct", delayMs: 0, measuredMs: [], pairs: [], packetsReceived: 0 };
+    return { ...state, error: this.routeError };
   }
 
   /** Schedules one chunk of `utterance` starting at sample `offset`. */
@@ -39,14 +77,17 @@ export class SpeechPlayer {
     const ctx = audioContext();
     const now = ctx.currentTime;
     const fresh = this.playhead < now;
+    if (fresh) this.switchRoute();
+    const ctxOut = this.output(ctx);
     let start = fresh ? now + JITTER_S : this.playhead;
     let anchor = this.anchors.get(utterance);
     const unframedRestart = utterance === 0 && now - this.lastEnd > NEW_UTTERANCE_GAP_S && fresh;
     if (anchor === undefined || unframedRestart) {
       anchor = start - (utterance === 0 ? 0 : offset / RATE);
       this.anchors.set(utterance, anchor);
+      this.delays.set(utterance, this.route ? this.route.delayS : 0);
       this.trimAnchors();
-      this.onAnchor(utterance, anchor);
+      this.onAnchor(utterance, this.anchorOf(utterance));
     } else if (utterance !== 0) {
       // A chunk arriving late plays late, but never before its own position in the utterance.
       start = Math.max(start, anchor + offset / RATE);
@@ -54,9 +95,11 @@ export class SpeechPlayer {
     const buffer = ctx.createBuffer(1, pcm.length, RATE);
     const data = buffer.getChannelData(0);
     for (let i = 0; i < pcm.length; i++) data[i] = pcm[i] / 32768;
+    // The route matches what it was sent against what comes out of it.
+    this.route?.sent(data, start, RATE);
     const src = ctx.createBufferSource();
     src.buffer = buffer;
-    src.connect(this.output(ctx));
+    src.connect(ctxOut);
     src.onended = () => this.sources.delete(src);
     src.start(start);
     this.sources.add(src);
@@ -66,9 +109,19 @@ export class SpeechPlayer {
     this.chunks += 1;
   }
 
-  /** The audio time sample 0 of `utterance` plays at, if it has started. */
+  /** The utterance sent at audio time `atS` (the latest to start before it) and the shift of its visemes. */
+  tagAt(atS) {
+    let found = null;
+    for (const [utterance, anchor] of this.anchors) {
+      if (anchor <= atS && (!found || anchor > found.anchor)) found = { utterance, anchor };
+    }
+    return found ? { utterance: found.utterance, appliedS: this.delays.get(found.utterance) ?? 0 } : null;
+  }
+
+  /** The audio time sample 0 of `utterance` is heard at (its anchor plus the route's delay), if it has started. */
   anchorOf(utterance) {
-    return this.anchors.get(utterance);
+    const anchor = this.anchors.get(utterance);
+    return anchor === undefined ? undefined : anchor + (this.delays.get(utterance) ?? 0);
   }
 
   /**
@@ -98,6 +151,7 @@ export class SpeechPlayer {
     this.sources.clear();
     this.playhead = 0;
     this.anchors.clear();
+    this.delays.clear();
   }
 
   get speaking() {
@@ -108,6 +162,7 @@ export class SpeechPlayer {
     while (this.anchors.size > 16) {
       const oldest = this.anchors.keys().next().value;
       this.anchors.delete(oldest);
+      this.delays.delete(oldest);
     }
   }
 }

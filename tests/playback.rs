@@ -1,0 +1,179 @@
+//! The page's speech playback path in headless Chromium: speech from the real TTS module plays through the
+//! loopback peer connection that Chrome's echo canceller covers, and the viseme schedule is shifted by the delay
+//! that path adds, so that the mouth moves with what is heard (within 40 ms over every stretch of speech matched).
+//!
+//! Needs `chromium` and `ffmpeg` (Debian packages) and a built `robot-agent` (`cargo build -p robot-agent`).
+
+use agent_contract::channels as ch;
+use std::time::Duration;
+
+use agent_tests::browser_chromium::{Chromium, Tab};
+use agent_tests::browser_media::prepare;
+use agent_tests::{Agent, DataDir, PATIENCE};
+use anyhow::{Context, ensure};
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+/// How far the mouth may be from the sound it shows (the issue's bound for lip sync).
+const SYNC_MS: f64 = 40.0;
+
+/// One stretch of speech matched at the far end of the route: the delay the utterance's visemes were shifted by,
+/// and the delay the sound took.
+#[derive(Debug, Deserialize)]
+#[serde(rename_all = "camelCase")]
+struct Pair {
+    utterance: Option<u64>,
+    applied_ms: f64,
+    measured_ms: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(rename_all = "camelCase")]
+struct Playback {
+    route: String,
+    delay_ms: f64,
+    pairs: Vec<Pair>,
+    packets_received: u64,
+    error: Option<String>,
+}
+
+async fn playback(browser: &Chromium, tab: &Tab) -> anyhow::Result<Playback> {
+    Ok(serde_json::from_value(
+        browser.eval(tab, "agentDebug.playback").await?,
+    )?)
+}
+
+/// Speaks `text` through `Agent.say` and waits until its speech has played on the page (the page's chunk count
+/// stops growing for a second after it has grown).
+async fn speak_and_wait(
+    say: &flow::Client,
+    browser: &Chromium,
+    tab: &Tab,
+    text: &str,
+) -> anyhow::Result<()> {
+    let before: u64 = serde_json::from_value(browser.eval(tab, "agentDebug.speechChunks").await?)?;
+    let answer = say
+        .call(
+            ch::SAY.name,
+            json!({ "text": text }).to_string().into_bytes(),
+            PATIENCE,
+        )
+        .await
+        .with_context(|| format!("calling {}", ch::SAY.name))?;
+    let answer: Value = serde_json::from_slice(&answer)?;
+    ensure!(answer["utterance"].is_u64(), "Agent.say answered {answer}");
+    browser
+        .wait_for(
+            tab,
+            &format!("agentDebug.speechChunks > {before}"),
+            PATIENCE,
+        )
+        .await?;
+    let mut last = u64::MAX;
+    loop {
+        tokio::time::sleep(Duration::from_millis(1000)).await;
+        let now: u64 = serde_json::from_value(browser.eval(tab, "agentDebug.speechChunks").await?)?;
+        if now == last {
+            return Ok(());
+        }
+        last = now;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn speech_plays_through_the_echo_cancelled_loopback_with_the_mouth_in_step_with_what_is_heard()
+-> anyhow::Result<()> {
+    let media_dir = tempfile::Builder::new()
+        .prefix("playback-media-")
+        .tempdir()?;
+    let (speech_media, _) = prepare(media_dir.path())?;
+    let dir = DataDir::new()?;
+    // The TTS module speaks; no brain answers what the fake microphone plays and no vision module runs.
+    let agent = Agent::start_configured(
+        &dir,
+        "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n",
+        "tts: speaking on",
+    )
+    .await?;
+    let say = agent.client("playback-test").await?;
+    let browser = Chromium::launch(&speech_media).await?;
+    let tab = browser.open(&agent.page_url("autostart=1&aec=0")).await?;
+    browser
+        .wait_for(
+            &tab,
+            "window.agentDebug && agentDebug.role === 'holder' && agentDebug.playback.route !== 'direct' \
+             || window.agentDebug && agentDebug.playback.error !== null",
+            Duration::from_secs(60),
+        )
+        .await?;
+    let state = playback(&browser, &tab).await?;
+    ensure!(
+        state.route == "loopback",
+        "speech does not play through the loopback: {:?}",
+        state.error
+    );
+
+    // Three sentences, long enough together for several two-second stretches to be matched.
+    let lines = [
+        "Hello. I speak through a loopback connection, so the echo canceller can hear me.",
+        "One, two, three. The mouth moves with the sound you hear.",
+        "Yes. That is all for now.",
+    ];
+    for text in lines {
+        speak_and_wait(&say, &browser, &tab, text).await?;
+    }
+    browser
+        .wait_for(&tab, "agentDebug.playback.pairs.length >= 4", PATIENCE)
+        .await?;
+    let state = playback(&browser, &tab).await?;
+    ensure!(
+        state.packets_received > 0,
+        "no RTP packet arrived over the loopback"
+    );
+    for p in &state.pairs {
+        println!(
+            "utterance {:?}: visemes shifted {:.1} ms, sound delayed {:.1} ms (off by {:+.1} ms)",
+            p.utterance,
+            p.applied_ms,
+            p.measured_ms,
+            p.applied_ms - p.measured_ms
+        );
+    }
+    println!(
+        "loopback delay now {:.1} ms over {} stretches, {} packets",
+        state.delay_ms,
+        state.pairs.len(),
+        state.packets_received
+    );
+    // The loopback does add delay, and what the route measures is a delay it could have (a mismatched pair of
+    // stretches would show as hundreds of milliseconds).
+    for p in &state.pairs {
+        ensure!(
+            p.measured_ms > 1.0 && p.measured_ms < 300.0,
+            "implausible loopback delay {p:?}"
+        );
+    }
+    // Every utterance's mouth is within the bound of its sound, the first one's included (it starts on the
+    // receiver's own jitter-buffer figure).
+    // (A stretch matched before the first utterance's start names none: nothing was said there to be in step.)
+    let off: Vec<&Pair> = state
+        .pairs
+        .iter()
+        .filter(|p| p.utterance.is_some() && (p.applied_ms - p.measured_ms).abs() > SYNC_MS)
+        .collect();
+    ensure!(
+        off.is_empty(),
+        "visemes out of step with the heard sound by more than {SYNC_MS} ms: {off:?}"
+    );
+    ensure!(
+        state
+            .pairs
+            .iter()
+            .filter(|p| p.utterance.is_some())
+            .all(|p| p.applied_ms > 0.0),
+        "some visemes were not shifted at all: {:?}",
+        state.pairs
+    );
+    browser.quit().await;
+    Ok(())
+}

@@ -1,0 +1,81 @@
+//! The loopback playback route's delay measurement (web/js/media/playback-delay.js): the loudness envelope of what
+//! the player sends, matched against the envelope of what comes out of the route, gives the delay the viseme
+//! schedule is shifted by.
+
+import assert from "node:assert/strict";
+import { test } from "node:test";
+
+import { DelayEstimator, EnvelopeTrack, FRAME_S, MATCH_FRAMES, bestLag } from "../js/media/playback-delay.js";
+
+/** A speech-like signal: bursts of a 150 Hz tone of varying loudness and length, with pauses, `seconds` long. */
+function speechLike(rate, seconds, seed = 1) {
+  let x = seed;
+  const random = () => {
+    x = (x * 16807) % 2147483647;
+    return x / 2147483647;
+  };
+  const out = new Float32Array(Math.round(rate * seconds));
+  let i = 0;
+  while (i < out.length) {
+    const burst = Math.round(rate * (0.05 + 0.25 * random()));
+    const level = random() < 0.3 ? 0 : 0.1 + 0.5 * random();
+    for (let k = 0; k < burst && i < out.length; k++, i++) out[i] = level * Math.sin((2 * Math.PI * 150 * i) / rate);
+  }
+  return out;
+}
+
+test("an envelope frame is the mean magnitude of the samples that fall in it", () => {
+  const t = new EnvelopeTrack();
+  const rate = 1000; // 5 samples a frame
+  t.add([1, -1, 1, -1, 1, 0.5, -0.5, 0.5, -0.5, 0.5], 10 * FRAME_S, rate);
+  const f = t.frames(9, 4);
+  assert.equal(f[0], 0); // never seen: silence
+  assert.ok(Math.abs(f[1] - 1) < 1e-6);
+  assert.ok(Math.abs(f[2] - 0.5) < 1e-6);
+  assert.equal(f[3], 0);
+});
+
+test("a received envelope delayed by 23.5 frames is found at that lag", () => {
+  const rate = 8000;
+  const sig = speechLike(rate, 3);
+  const sent = new EnvelopeTrack();
+  const got = new EnvelopeTrack();
+  const delay = 23.5 * FRAME_S;
+  sent.add(sig, 1.0, rate);
+  // What comes out: the same sound later, quieter, with a little noise (a codec's changes).
+  const out = sig.map((v, i) => 0.7 * v + 0.01 * Math.sin(i * 1.7));
+  got.add(out, 1.0 + delay, rate);
+  const upTo = Math.floor((1.0 + delay + 2.8) / FRAME_S);
+  const from = upTo - MATCH_FRAMES + 1;
+  const m = bestLag(sent.frames(from - 60, MATCH_FRAMES + 60), got.frames(from, MATCH_FRAMES), 60);
+  assert.ok(m && m.score > 0.95, JSON.stringify(m));
+  assert.ok(Math.abs(m.lag - 23.5) < 0.6, `lag ${m.lag}`);
+});
+
+test("silence and unrelated sound give no match", () => {
+  const quiet = new Float32Array(MATCH_FRAMES);
+  const noise = Float32Array.from({ length: MATCH_FRAMES + 60 }, (_, i) => Math.abs(Math.sin(i * 12.9898) * 43758.5453) % 1);
+  assert.equal(bestLag(noise, quiet, 60), null);
+  const other = Float32Array.from({ length: MATCH_FRAMES }, (_, i) => Math.abs(Math.sin(i * 78.233) * 12345.678) % 1);
+  const m = bestLag(noise, other, 60);
+  assert.ok(!m || m.score < 0.8, JSON.stringify(m));
+});
+
+test("the estimator matches each stretch once and keeps the median, the initial guess before any", () => {
+  const rate = 8000;
+  const e = new DelayEstimator(0.06);
+  assert.equal(e.delayS, 0.06);
+  const sig = speechLike(rate, 8, 7);
+  e.sent.add(sig, 0, rate);
+  e.received.add(sig, 0.1, rate);
+  const second = Math.round(1 / FRAME_S);
+  const found = [];
+  for (let upTo = 3 * second; upTo < 8 * second; upTo += 20) {
+    const m = e.match(upTo);
+    if (m) found.push(m.delayS);
+  }
+  // One match per half window at most (400 frames of 5 ms: every second), each at the 100 ms delay.
+  assert.ok(found.length >= 3 && found.length <= 6, `${found.length} matches`);
+  for (const d of found) assert.ok(Math.abs(d - 0.1) < 0.003, `delay ${d}`);
+  assert.ok(Math.abs(e.delayS - 0.1) < 0.003);
+});
