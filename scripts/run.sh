@@ -17,7 +17,7 @@ for _ in $(seq 100); do
     sleep 0.1
 done
 if [[ -x "$bin/whisper-sat" ]]; then
-    "$bin/whisper-sat" run --data-dir data --turn-detection &
+    "$bin/whisper-sat" run --data-dir data &
     sat=$!
 fi
 wait "$agent"

@@ -557,9 +557,9 @@ async fn a_pause_shorter_than_the_hangover_gives_one_transcript_with_the_whole_t
     let dir = DataDir::new()?;
     let agent = Agent::start(&dir).await?;
     let transcripts = Transcripts::collect(&agent).await?;
-    // With the fixed hangover (the default): the first sentence reads as a complete turn, and the end-of-turn
-    // judgement would rightly answer it at the pause (tests/conversation.rs covers that); this is about speculation.
-    let _sat = start_satellite(&agent, "asr-pause").await?;
+    // With the fixed hangover: the first sentence reads as a complete turn, and the end-of-turn judgement (on by
+    // default) would rightly answer it at the pause (tests/conversation.rs covers that); this is about speculation.
+    let _sat = Satellite::start_with(&agent, "asr-pause", &["--no-turn-detection"]).await?;
     // Two sentences without their own edges, 200 ms apart: the satellite's segmenter sees about 220 ms without
     // voice, past the 100 ms post-roll (the utterance pauses and may be decoded speculatively) but short of the
     // 300 ms hangover (it does not end). The voice resumes, so the speculative decode must not become the transcript.
@@ -583,6 +583,104 @@ async fn a_pause_shorter_than_the_hangover_gives_one_transcript_with_the_whole_t
     assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&got));
     // One utterance for the listeners too: the pause is no end.
     transcripts.assert_one_start_and_end();
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_satellites_end_a_paused_sentence_together_on_the_verdict_of_the_one_decoding_it()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    let watcher = agent.client("asr-verdicts").await?;
+    // The verdicts claim headers carry, gathered as they change.
+    let verdicts = Arc::new(Mutex::new(Vec::<String>::new()));
+    let mut events = watcher.events();
+    let gathered = verdicts.clone();
+    let gathering = tokio::spawn(async move {
+        loop {
+            let header = match events.recv().await {
+                Ok(ClientEvent::HeaderChanged { name, header, .. })
+                    if name.starts_with(ch::ASR_CLAIM_PREFIX) =>
+                {
+                    header
+                }
+                Ok(ClientEvent::ChannelAdded(info))
+                    if info.name.starts_with(ch::ASR_CLAIM_PREFIX) =>
+                {
+                    info.header
+                }
+                Ok(_) | Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(_) => return,
+            };
+            // "deciding" while the pause is decoded, then the verdict.
+            if let Ok(h) = serde_json::from_str::<Value>(&header)
+                && h["pause"].is_object()
+                && let Ok(mut all) = gathered.lock()
+            {
+                all.push(
+                    h["pause"]["verdict"]
+                        .as_str()
+                        .unwrap_or("deciding")
+                        .to_owned(),
+                );
+            }
+        }
+    });
+    let _a = start_satellite(&agent, "asr-turn-a").await?;
+    let _b = start_satellite(&agent, "asr-turn-b").await?;
+    // "What time ... is it?" with a 400 ms pause, longer than the 300 ms hangover, twice: the satellite decoding
+    // the pause holds the utterance open for its verdict, and finds "What time" trailing off; the other must hold
+    // it too, or the relay's voice activity (which either may publish) would end an utterance at the pause that no
+    // transcript names. Fairness gives the second sentence to the other satellite, so each plays both roles.
+    let (head, tail) = (
+        agent_tests::spoken::say("What time", dir.path())?,
+        agent_tests::spoken::say("is it?", dir.path())?,
+    );
+    let sentence = [silence(400), head, silence(400), tail, silence(1500)].concat();
+    let wav = temp_wav(&dir, "what-time-twice.wav");
+    write_wav(&wav, &[sentence.clone(), sentence])?;
+    pub_wav(&agent, &wav).await?;
+    let got = transcripts.settle(&agent, 0, 2).await?;
+    println!("{got:#?}");
+    assert_eq!(got.len(), 2, "not one transcript per sentence: {got:?}");
+    for t in &got {
+        let text = t["text"].as_str().unwrap_or_default().to_lowercase();
+        assert!(
+            text.contains("time") && text.contains("is it"),
+            "cut at the pause: {t}"
+        );
+    }
+    let holders: HashSet<&str> = got.iter().filter_map(|t| t["satellite"].as_str()).collect();
+    println!("transcribed by {holders:?}");
+    // The end of the turn went through the claims' headers: each pause decoded was announced as being decided
+    // (and, when its decode came back before the voice resumed, judged).
+    gathering.abort();
+    let verdicts = verdicts.lock().map(|v| v.clone()).unwrap_or_default();
+    println!("verdicts in claim headers: {verdicts:?}");
+    assert!(
+        verdicts.iter().any(|v| v == "deciding"),
+        "no claim header announced a pause being decided: {verdicts:?}"
+    );
+    // One start and one end per sentence, each end naming the transcript of the whole sentence.
+    let activity = transcripts.activity();
+    let kinds: Vec<&str> = activity
+        .iter()
+        .filter_map(|(v, _)| v["vad"].as_str())
+        .collect();
+    assert_eq!(
+        kinds,
+        ["start", "end", "start", "end"],
+        "voice activity: {activity:?}"
+    );
+    let ends: Vec<&Value> = activity
+        .iter()
+        .map(|(v, _)| v)
+        .filter(|v| v["vad"] == "end")
+        .collect();
+    for (end, t) in ends.iter().zip(&got) {
+        assert_eq!(end["utterance"], t["utterance"], "{end} vs {t}");
+    }
     Ok(())
 }
 

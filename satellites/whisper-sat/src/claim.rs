@@ -6,6 +6,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::turn::Turn;
+
 /// Prefix of claim channels.
 pub const CLAIM_PREFIX: &str = agent_contract::channels::ASR_CLAIM_PREFIX;
 /// Prefix of the presence channels satellites keep while they run.
@@ -25,7 +27,8 @@ pub fn claimed_utterance(channel: &str) -> Option<&str> {
 /// see that an overlapping utterance is taken, and who holds it. `speculative` marks a claim made when the utterance
 /// paused, before it ended (its interval is then the speech so far); it is for people and tests reading the hub, the
 /// claim rules do not depend on it. `done` is set once the holder has finished with the utterance (transcript
-/// submitted, or none to give), so the others drop it.
+/// submitted, or none to give), so the others drop it. `pause` is where the holder stands on the end of the turn
+/// at the pause it decodes, so that every satellite's segmenter ends the turn where the holder's does.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ClaimHeader {
     pub start_us: u64,
@@ -37,6 +40,20 @@ pub struct ClaimHeader {
     pub speculative: bool,
     #[serde(default, skip_serializing_if = "is_false")]
     pub done: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pause: Option<PauseTurn>,
+}
+
+/// The end of the turn at one pause of a claimed utterance, as its holder judged it: `verdict` is `None` while the
+/// pause's transcript is being decoded (the others hold the end for it, as the holder does), then the verdict.
+/// Only the holder decodes, so without this the others would end the same turn on the plain hangover, and a
+/// resumed voice between the two ends would make their utterances differ from the holder's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PauseTurn {
+    /// Hub time of the end of speech before the pause: the pause's name, the same in every segmenter.
+    pub speech_end_us: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Turn>,
 }
 
 fn is_false(b: &bool) -> bool {
@@ -52,6 +69,7 @@ impl ClaimHeader {
             satellite: satellite.to_owned(),
             speculative,
             done: false,
+            pause: None,
         }
     }
 
@@ -124,7 +142,37 @@ mod tests {
                 satellite: String::new(),
                 speculative: false,
                 done: true,
+                pause: None,
             })
+        );
+    }
+
+    #[test]
+    fn a_pause_and_its_verdict_travel_in_the_header() {
+        let deciding = ClaimHeader {
+            pause: Some(PauseTurn {
+                speech_end_us: 9,
+                verdict: None,
+            }),
+            ..ClaimHeader::new(5, 9, "s1", true)
+        };
+        let json = deciding.to_json();
+        assert!(json.contains(r#""pause":{"speech_end_us":9}"#), "{json}");
+        assert_eq!(ClaimHeader::parse(&json), Some(deciding.clone()));
+        let judged = ClaimHeader {
+            pause: Some(PauseTurn {
+                speech_end_us: 9,
+                verdict: Some(Turn::Complete),
+            }),
+            ..deciding
+        };
+        let json = judged.to_json();
+        assert!(json.contains(r#""verdict":"complete""#), "{json}");
+        assert_eq!(ClaimHeader::parse(&json), Some(judged));
+        // A header from before verdicts were shared has none.
+        assert_eq!(
+            ClaimHeader::parse(r#"{"start_us":1,"end_us":2}"#).and_then(|h| h.pause),
+            None
         );
     }
 

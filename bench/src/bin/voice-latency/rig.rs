@@ -119,8 +119,7 @@ impl Rig {
             .arg(&self.token)
             .arg("--name")
             .arg("bench-asr")
-            // As `make run` starts its satellite: judging the end of the turn.
-            .arg("--turn-detection")
+            // As `make run` starts its satellite: judging the end of the turn (the default).
             .arg("--threads")
             .arg(threads.to_string());
         if let Some(ms) = hangover_ms {

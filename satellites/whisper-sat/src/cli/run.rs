@@ -29,12 +29,12 @@ pub struct Args {
     /// it has ended (slower by up to the hangover less the post-roll; no decode is ever thrown away).
     #[arg(long)]
     no_speculate: bool,
-    /// Judge the end of the turn from the transcript of a pause: a complete sentence ends after a short
-    /// confirmation, a trailing-off one is held open (docs/asr.md, "End of turn"). Off by default: only the
-    /// satellite decoding a pause knows its verdict, so with several satellites their segmentations can differ;
-    /// `make run` starts its one satellite with it.
+    /// Do not judge the end of the turn from the transcript of a pause; end every utterance after the fixed
+    /// hangover. By default a complete sentence ends after a short confirmation and a trailing-off one is held
+    /// open (docs/asr.md, "End of turn"); the satellite that decodes a pause tells the others its verdict in the
+    /// claim header, so all of them end the turn together. Satellites of one hub should agree on this flag.
     #[arg(long)]
-    turn_detection: bool,
+    no_turn_detection: bool,
     /// Hold the agent's own voice, heard back through loudspeakers, under a floor learned from `Agent.speech`
     /// (docs/asr.md, "Own voice"). Off by default: the browser's echo canceller is on, and the floor makes
     /// satellites' segmentation depend on when the reference arrives.
@@ -59,7 +59,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         segmenter: args.recognition.segmenter(),
         claim_retention: Duration::from_secs(30),
         speculate: !args.no_speculate,
-        judge_turns: !args.no_speculate && args.turn_detection,
+        judge_turns: !args.no_speculate && !args.no_turn_detection,
         echo_gate: args.echo_gate,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()

@@ -24,7 +24,7 @@ use flow::{Client, ClientEvent, ErrorCode, Publisher};
 use tokio::sync::{broadcast, watch};
 use tokio::task::JoinHandle;
 use whisper_sat::abort::AbortFlag;
-use whisper_sat::claim::{self, CLAIM_PREFIX, ClaimHeader, PRESENCE_PREFIX};
+use whisper_sat::claim::{self, CLAIM_PREFIX, ClaimHeader, PRESENCE_PREFIX, PauseTurn};
 use whisper_sat::ledger::{Ledger, Pending, Standing};
 use whisper_sat::segmenter::SegmenterConfig;
 use whisper_sat::speculation::{Action, Hold};
@@ -74,6 +74,10 @@ struct Held {
     claim: Publisher,
     /// The last verdict given on a pause of this utterance (it ended at that pause if it ended unchanged).
     verdict: Option<Turn>,
+    /// Where the end of the turn stands at the pause being decoded, and what the claim header last told the
+    /// other satellites of it: the loop writes the header when the two differ.
+    pause: Option<PauseTurn>,
+    announced: Option<PauseTurn>,
 }
 
 /// A claim whose utterance is done with: its transcript (or why there is none) goes out and the claim is marked
@@ -196,13 +200,22 @@ impl Satellite {
         if !self.worker.idle() {
             return None;
         }
-        let (pending, claim) =
-            try_claim(&self.client, &mut self.ledger, &self.settings.name, now).await?;
+        let judge = self.settings.judge_turns;
+        let (pending, claim, announced) = try_claim(
+            &self.client,
+            &mut self.ledger,
+            &self.settings.name,
+            judge,
+            now,
+        )
+        .await?;
         let (hold, first) = Hold::claimed(pending.utterance, pending.ended);
         self.worker.held = Some(Held {
             hold,
             claim,
             verdict: None,
+            pause: announced,
+            announced,
         });
         self.act(Some(first))
     }
@@ -233,6 +246,10 @@ impl Satellite {
             _ => None,
         };
         if let Some((u, verdict)) = feed {
+            held.pause = Some(PauseTurn {
+                speech_end_us: u.speech_end_us,
+                verdict,
+            });
             self.listener.send(audio::Feed::Turn {
                 id: u.id,
                 speech_end_us: u.speech_end_us,
@@ -240,6 +257,40 @@ impl Satellite {
             });
         }
         self.worker.carry_out(action)
+    }
+
+    /// Tells the other satellites, through the claim header, where the end of the turn stands at the pause this
+    /// one decodes, so that their segmenters end the turn where ours does.
+    async fn announce_pause(&mut self) {
+        let Some(held) = self.worker.held.as_mut() else {
+            return;
+        };
+        if held.pause == held.announced {
+            return;
+        }
+        let u = held.hold.utterance();
+        let header = ClaimHeader {
+            pause: held.pause,
+            ..ClaimHeader::new(u.start_us, u.speech_end_us, &self.settings.name, true)
+        };
+        match held.claim.set_header(&header.to_json()).await {
+            Ok(()) => held.announced = held.pause,
+            Err(e) => tracing::warn!(id = %u.id, "telling the others the end of the turn: {e}"),
+        }
+    }
+
+    /// Another satellite's claim says where the end of its turn stands at a pause: our segmenter follows it.
+    fn follow_pause(&self, id: &str, header: &ClaimHeader) {
+        if !self.settings.judge_turns || header.done || header.satellite == self.settings.name {
+            return;
+        }
+        if let Some(p) = header.pause {
+            self.listener.send(audio::Feed::Turn {
+                id: id.to_owned(),
+                speech_end_us: p.speech_end_us,
+                verdict: p.verdict,
+            });
+        }
     }
 
     /// Lets go of retained claims and fairness marks that are old enough.
@@ -359,6 +410,9 @@ impl Satellite {
                     self.peers.insert(info.name);
                 } else if let Some(id) = claim::claimed_utterance(&info.name) {
                     self.ledger.taken(id);
+                    if let Some(header) = ClaimHeader::parse(&info.header) {
+                        self.follow_pause(id, &header);
+                    }
                 }
             }
             Ok(ClientEvent::ChannelRemoved { name, .. }) => {
@@ -373,10 +427,13 @@ impl Satellite {
             Ok(ClientEvent::HeaderChanged { name, header, .. }) => {
                 if let (Some(id), Some(claim)) =
                     (claim::claimed_utterance(&name), ClaimHeader::parse(&header))
-                    && claim.done
                 {
-                    let (start, end) = claim.interval();
-                    self.ledger.finished(id, start, end);
+                    if claim.done {
+                        let (start, end) = claim.interval();
+                        self.ledger.finished(id, start, end);
+                    } else {
+                        self.follow_pause(id, &claim);
+                    }
                 }
             }
             Ok(ClientEvent::Disconnected(why)) => tracing::warn!("hub connection lost: {why}"),
@@ -501,6 +558,7 @@ pub async fn run(
             },
             Wake::Timer => None,
         };
+        sat.announce_pause().await;
         // A claim finished by the decode it started and one finished by this event are both sent out.
         for f in [claimed, finished].into_iter().flatten() {
             sat.on_finished(f).await;
@@ -519,13 +577,14 @@ pub async fn run(
 }
 
 /// Takes the next claimable utterance (paused or ended) and tries to claim it. Returns it with its claim channel on
-/// success.
+/// success, and, when turns are judged and it is paused, the pause its header names as being decided.
 async fn try_claim(
     client: &Client,
     ledger: &mut Ledger,
     name: &str,
+    judge_turns: bool,
     now: Instant,
-) -> Option<(Pending, Publisher)> {
+) -> Option<(Pending, Publisher, Option<PauseTurn>)> {
     while let Some(p) = ledger.next_claimable(now) {
         let u = &p.utterance;
         // A satellite whose segmentation differs slightly names the same speech differently: an overlapping claim
@@ -549,14 +608,24 @@ async fn try_claim(
             ledger.put_back(p, Standing::Taken, now);
             continue;
         }
-        let header = ClaimHeader::new(u.start_us, u.speech_end_us, name, !p.ended).to_json();
+        // A paused utterance is claimed to decode that pause: the others hold their end of the turn for its
+        // verdict from the moment they see the claim.
+        let pause = (judge_turns && !p.ended).then_some(PauseTurn {
+            speech_end_us: u.speech_end_us,
+            verdict: None,
+        });
+        let header = ClaimHeader {
+            pause,
+            ..ClaimHeader::new(u.start_us, u.speech_end_us, name, !p.ended)
+        }
+        .to_json();
         match client
             .publisher(&claim::claim_channel(&u.id), &header)
             .await
         {
             Ok(claim) => {
                 tracing::info!(id = %u.id, speculative = !p.ended, "claimed utterance");
-                return Some((p, claim));
+                return Some((p, claim, pause));
             }
             Err(e) if e.code() == Some(ErrorCode::Exists) => {
                 tracing::debug!(id = %u.id, "utterance taken by another satellite");
