@@ -81,18 +81,22 @@ async fn next(sub: &Subscription) -> anyhow::Result<bytes::Bytes> {
         .payload)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
-    let _one = ONE_CONVERSATION.lock().await;
-    let dir = DataDir::new()?;
-    // The shipped program; no camera here: the vision module stays off so that nothing but the voice moves the
-    // brain.
+/// A robot-agent with the shipped rule program, once the brain has loaded it. No camera here: the vision module
+/// stays off so that nothing but the voice moves the brain.
+async fn conversing_agent(dir: &DataDir) -> anyhow::Result<Agent> {
     let program = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
     let config = format!(
         "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
         program.display().to_string()
     );
-    let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
+    Agent::start_configured(dir, &config, "brain: program loaded").await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
+    let _one = ONE_CONVERSATION.lock().await;
+    let dir = DataDir::new()?;
+    let agent = conversing_agent(&dir).await?;
     let watcher = agent.client("conversation-test").await?;
     let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
     let rules = watcher.subscribe(ch::RULES.name).await?;
@@ -112,6 +116,7 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
     let publishing = tokio::spawn(run(publish, b"", PATIENCE));
 
     let mut seen = Seen::default();
+    let mut mid_turn = None;
     let waited = tokio::time::timeout(PATIENCE, async {
         while !seen.complete() {
             tokio::select! {
@@ -125,7 +130,14 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
                         seen.rule_trace(v);
                     }
                 }
-                p = next(&speech) => seen.speech_bytes += p?.len(),
+                p = next(&speech) => {
+                    seen.speech_bytes += p?.len();
+                    // Once, while the reply is being spoken: the exposition parses mid-turn too, and the
+                    // transcript that led to the reply is already counted.
+                    if mid_turn.is_none() {
+                        mid_turn = Some(agent_tests::metrics::parse(&agent_tests::metrics::scrape(&agent).await?).await?);
+                    }
+                }
                 p = next(&avatar) => {
                     if let Some(v) = json(&p?) {
                         seen.avatar_command(&v);
@@ -139,6 +151,16 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
     println!("{seen:#?}");
     waited.with_context(|| format!("the conversation stalled: {seen:#?}"))??;
     publishing.await??.ok()?;
+    let mid_turn = mid_turn.context("no scrape while the reply was spoken")?;
+    let heard_so_far = agent_tests::metrics::value(
+        &mid_turn,
+        "flow_channel_messages_total",
+        &[("channel", ch::TRANSCRIPT.name)],
+    );
+    assert!(
+        heard_so_far >= Some(1.0),
+        "transcript messages counted mid-turn: {heard_so_far:?}"
+    );
 
     let (start, end, heard) = (
         seen.vad_start.context("vad start")?,
@@ -254,16 +276,12 @@ async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> an
     let _one = ONE_CONVERSATION.lock().await;
     use agent_tests::spoken;
     let dir = DataDir::new()?;
-    let program = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
-    let config = format!(
-        "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
-        program.display().to_string()
-    );
-    let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
+    let agent = conversing_agent(&dir).await?;
     let watcher = agent.client("turn-test").await?;
     let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
     let rules = watcher.subscribe(ch::RULES.name).await?;
-    let _satellite = Satellite::start_with(&agent, "turn-asr", &["--turn-detection"]).await?;
+    // As `make run` starts it: the end of the turn is judged by default.
+    let _satellite = Satellite::start(&agent, "turn-asr").await?;
     let (head, tail) = (
         spoken::say("What time", dir.path())?,
         spoken::say("is it?", dir.path())?,
@@ -329,10 +347,10 @@ async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> an
             "pause {pause_ms} ms: {answers:#?}"
         );
     }
-    // The control: with the fixed hangover (no `--turn-detection`), the same sentence with the longer pause is cut in two, so what held it
-    // together above was the end-of-turn judgement.
+    // The control: with the fixed hangover (`--no-turn-detection`), the same sentence with the longer pause is
+    // cut in two, so what held it together above was the end-of-turn judgement.
     drop(_satellite);
-    let _fixed = Satellite::start(&agent, "turn-asr-fixed").await?;
+    let _fixed = Satellite::start_with(&agent, "turn-asr-fixed", &["--no-turn-detection"]).await?;
     let wav = dir.path().join("what-time-fixed.wav");
     let sentence = [
         spoken::silence(400),
@@ -412,12 +430,7 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
     let _one = ONE_CONVERSATION.lock().await;
     use agent_tests::spoken;
     let dir = DataDir::new()?;
-    let program = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
-    let config = format!(
-        "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
-        program.display().to_string()
-    );
-    let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
+    let agent = conversing_agent(&dir).await?;
     let watcher = agent.client("barge-in-test").await?;
     let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
     let rules = watcher.subscribe(ch::RULES.name).await?;
@@ -559,12 +572,7 @@ async fn the_agent_does_not_hear_itself_but_hears_a_user_over_its_echo() -> anyh
     const REPLY: &str = "Let me tell you about the weather today. In the morning it will be cloudy with a \
         chance of light rain, and the afternoon should be sunny and warm.";
     let dir = DataDir::new()?;
-    let program = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
-    let config = format!(
-        "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
-        program.display().to_string()
-    );
-    let agent = Agent::start_configured(&dir, &config, "brain: program loaded").await?;
+    let agent = conversing_agent(&dir).await?;
     let watcher = agent.client("own-voice-test").await?;
     let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
     let rules = watcher.subscribe(ch::RULES.name).await?;

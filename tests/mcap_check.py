@@ -2,15 +2,48 @@
 checks it). Mode `indexed` opens the file through its summary (`make_reader`, as Foxglove's tooling does) and fails
 on a file without one; mode `stream` reads records from the start and reports where the file is cut."""
 
+import base64
 import json
+import struct
 import sys
 
 from mcap.reader import NonSeekingReader, make_reader
 
 
+def jpeg_size(data: bytes):
+    """(width, height) from a JPEG's start-of-frame marker, or None when it is not a baseline/progressive JPEG."""
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 9 < len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        (length,) = struct.unpack(">H", data[i + 2 : i + 4])
+        if marker in (0xC0, 0xC1, 0xC2):
+            height, width = struct.unpack(">HH", data[i + 5 : i + 9])
+            return width, height
+        i += 2 + length
+    return None
+
+
+def first_image(message) -> dict:
+    """A foxglove.CompressedImage message (JSON encoding) decoded the way Foxglove does: format and the image."""
+    image = json.loads(message.data)
+    jpeg = base64.b64decode(image["data"])
+    size = jpeg_size(jpeg)
+    return {
+        "format": image.get("format"),
+        "frame_id": image.get("frame_id"),
+        "bytes": len(jpeg),
+        "width": size[0] if size else None,
+        "height": size[1] if size else None,
+    }
+
+
 def main() -> None:
     path, mode = sys.argv[1], sys.argv[2]
-    out = {"channels": {}, "schemas": {}, "messages": 0, "cut": None, "summary": None}
+    out = {"channels": {}, "schemas": {}, "messages": 0, "cut": None, "summary": None, "first_image": None}
     with open(path, "rb") as f:
         if mode == "indexed":
             reader = make_reader(f)
@@ -38,6 +71,8 @@ def main() -> None:
                     },
                 )
                 entry["count"] += 1
+                if schema is not None and schema.name == "foxglove.CompressedImage" and out["first_image"] is None:
+                    out["first_image"] = first_image(message)
                 if schema is not None:
                     out["schemas"][schema.name] = schema.encoding
                 out["messages"] += 1

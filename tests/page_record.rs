@@ -126,8 +126,27 @@ async fn a_session_recorded_from_the_page_opens_with_foxglove_types() -> anyhow:
         state["messages"], report["messages"],
         "the page shows what was written"
     );
+    // Each topic read is described in the summary (a channel re-created with a new header gets a second MCAP
+    // channel on its topic, so there may be more channels than topics, never fewer).
+    let topics = report["channels"].as_object().map_or(0, |c| c.len());
+    assert!(
+        report["summary"]["channels"].as_u64() >= Some(topics as u64),
+        "{report}"
+    );
+    assert!(
+        topics >= 4,
+        "camera, microphone, detections and annotations at least: {report}"
+    );
+    // Foxglove's reading of a camera message: the Python package decodes the page's own JPEG.
+    let image = &report["first_image"];
+    assert_eq!(image["format"], "jpeg", "{report}");
+    assert_eq!(
+        (image["width"].as_u64(), image["height"].as_u64()),
+        (Some(640), Some(360)),
+        "{report}"
+    );
 
-    // A camera message decodes to the page's own JPEG.
+    // The Rust reader agrees: a camera message decodes to the page's own JPEG.
     let contents = read(&file)?;
     let frame = contents
         .on(VIDEO.name)

@@ -265,3 +265,31 @@ pub async fn db(client: &Client, db: Option<&str>, op: DbOp) -> anyhow::Result<(
     }
     Ok(())
 }
+
+/// `flowctl serve`: answers each call on `name` with `reply` after `delay`, until Ctrl-C or SIGTERM. Calls are
+/// answered one at a time, in order, as a simple satellite would; "serving NAME" on stderr says it is offered.
+pub async fn serve(
+    client: &Client,
+    name: &str,
+    header: &str,
+    reply: String,
+    delay: Duration,
+) -> anyhow::Result<()> {
+    let mut service = client
+        .serve(name, header)
+        .await
+        .with_context(|| format!("offering {name}"))?;
+    eprintln!("serving {name}");
+    let reply = Bytes::from(reply);
+    let answer = async {
+        while let Some(call) = service.next().await {
+            tokio::time::sleep(delay).await;
+            call.respond(Ok(reply.clone())).await?;
+        }
+        anyhow::Ok(())
+    };
+    tokio::select! {
+        r = answer => r,
+        r = crate::signals::until_stopped(None) => r,
+    }
+}

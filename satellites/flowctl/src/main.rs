@@ -112,6 +112,20 @@ enum Cmd {
         #[arg(long, default_value_t = 10_000)]
         timeout_ms: u64,
     },
+    /// Offer a service that answers every call with a fixed JSON reply (after --delay-ms), until Ctrl-C: a
+    /// stand-in for a satellite that is not written yet, and a way to try a caller's timeouts.
+    Serve {
+        name: String,
+        /// The reply, as JSON.
+        #[arg(long, default_value = "{}")]
+        reply: String,
+        /// The service's header (JSON).
+        #[arg(long, default_value = "{}")]
+        header: String,
+        /// Wait this long before answering each call.
+        #[arg(long, default_value_t = 0)]
+        delay_ms: u64,
+    },
     /// Pair database commands.
     Db {
         /// Database to use (default: main).
@@ -157,6 +171,7 @@ async fn run(args: Args) -> anyhow::Result<()> {
             | Cmd::Record(_)
             | Cmd::Replay(_)
             | Cmd::Hz(_)
+            | Cmd::Serve { .. }
     );
     opts.queue = match args.command {
         Cmd::Record(_) => record::SUBSCRIPTION_QUEUE,
@@ -242,6 +257,23 @@ async fn dispatch(client: &Client, cmd: Cmd) -> anyhow::Result<()> {
                 .await?;
             commands::print_payload(&response);
             Ok(())
+        }
+        Cmd::Serve {
+            name,
+            reply,
+            header,
+            delay_ms,
+        } => {
+            serde_json::from_str::<serde_json::Value>(&reply)
+                .context("the reply is not valid JSON")?;
+            commands::serve(
+                client,
+                &name,
+                &header,
+                reply,
+                Duration::from_millis(delay_ms),
+            )
+            .await
         }
         Cmd::Db { db, op } => commands::db(client, db.as_deref(), op).await,
         Cmd::Record(args) => record::record(client, args).await,

@@ -435,6 +435,89 @@ def run_sketch(hub: Hub, pcm: bytes, seconds: float) -> dict:
                 p.join()
 
 
+# A satellite blocked in `for msg in sub` (or in `call`) on a channel nothing publishes; Ctrl-C must reach it as
+# KeyboardInterrupt, which it reports with the monotonic clock the parent read when it sent the signal.
+SIGINT_CHILD = """
+import sys, time
+from flow import Client
+c = Client.connect(sys.argv[1], data_dir=sys.argv[2], name="bench-sigint")
+mode = sys.argv[3]
+print("waiting", flush=True)
+try:
+    if mode == "recv":
+        for _ in c.subscribe("bench.sigint.silent"):
+            pass
+    else:
+        c.call("bench.sigint.sleepy", {}, timeout=600)
+except KeyboardInterrupt:
+    print("interrupted", time.monotonic(), flush=True)
+"""
+
+
+# The service the blocked call waits on, in a process of its own; it never answers.
+SLEEPY_SERVICE = """
+import sys, time
+from flow import Client
+c = Client.connect(sys.argv[1], data_dir=sys.argv[2], name="bench-sigint-service")
+svc = c.serve("bench.sigint.sleepy", lambda r: time.sleep(600))
+print("serving", flush=True)
+time.sleep(3600)
+"""
+
+
+def run_sigint(hub: Hub, tries: int) -> dict:
+    """Time from SIGINT to KeyboardInterrupt in a process blocked in recv or in a call, `tries` times each."""
+    out = {"recv": [], "call": []}
+    service = subprocess.Popen([sys.executable, "-c", SLEEPY_SERVICE, hub.addr, str(hub.data_dir)],
+                               stdout=subprocess.PIPE, text=True)
+    try:
+        if service.stdout.readline().strip() != "serving":
+            raise RuntimeError("the sleepy service did not start")
+        measure_sigint(hub, tries, out)
+    finally:
+        service.kill()
+        service.wait()
+    return out
+
+
+def measure_sigint(hub: Hub, tries: int, out: dict) -> None:
+    for mode in out:
+        for _ in range(tries):
+            proc = subprocess.Popen([sys.executable, "-c", SIGINT_CHILD, hub.addr, str(hub.data_dir), mode],
+                                    stdout=subprocess.PIPE, text=True)
+            try:
+                if proc.stdout.readline().strip() != "waiting":
+                    raise RuntimeError(f"the SIGINT child ({mode}) did not start")
+                time.sleep(0.3)  # let it block inside the wait
+                sent = time.monotonic()
+                proc.send_signal(signal.SIGINT)
+                line = proc.stdout.readline().split()
+                if not line or line[0] != "interrupted":
+                    raise RuntimeError(f"the SIGINT child ({mode}) said {line!r}")
+                out[mode].append((float(line[1]) - sent) * 1e3)
+            finally:
+                proc.kill()
+                proc.wait()
+
+
+def sigint_only() -> int:
+    work = Path(tempfile.mkdtemp(prefix="bench-python-sigint-"))
+    hub_proc = None
+    try:
+        hub = start_hub(work)
+        hub_proc = hub.proc
+        sig = run_sigint(hub, 10)
+    finally:
+        stop(hub_proc)
+        shutil.rmtree(work, ignore_errors=True)
+    every = sig["recv"] + sig["call"]
+    print(f"SUMMARY python-sigint KeyboardInterrupt after SIGINT recv p50={pct(sig['recv'], 0.5):.1f} ms "
+          f"max={max(sig['recv']):.1f} ms call p50={pct(sig['call'], 0.5):.1f} ms max={max(sig['call']):.1f} ms "
+          f"(target <= 100 ms)")
+    print(f"TARGET python-sigint every Ctrl-C within 100 ms: {'met' if max(every) <= 100.0 else 'MISSED'}")
+    return 0
+
+
 def pct(values: list[float], q: float) -> float:
     s = sorted(values)
     return s[min(len(s) - 1, max(0, math.ceil(q * len(s)) - 1))]
@@ -472,7 +555,11 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=3, help="rounds per payload, systems in turn (default 3)")
     ap.add_argument("--jitter-seconds", type=float, default=10.0, help="length of the Sketch run (default 10)")
     ap.add_argument("--write", type=Path, help="write the markdown report here (e.g. docs/bench-python.md)")
+    ap.add_argument("--sigint-only", action="store_true",
+                    help="only time Ctrl-C into blocked satellites (needs no Redis; writes no report)")
     args = ap.parse_args()
+    if args.sigint_only:
+        return sigint_only()
     args.load = os.getloadavg()[0]
 
     import redis  # noqa: F401  (fail early, before starting servers, if redis-py is missing)
@@ -517,6 +604,8 @@ def main() -> int:
 
         print(f"sketch: 100 Hz fast tick for {args.jitter_seconds} s, with a 50 Hz PCM subscription", flush=True)
         sk = run_sketch(hub, pcm, args.jitter_seconds)
+        print("sigint: Ctrl-C into a satellite blocked in recv and in call, 10 times each", flush=True)
+        sigint = run_sigint(hub, 10)
     except KeyboardInterrupt:
         print("bench_python: interrupted", file=sys.stderr)
         return 130
@@ -544,10 +633,17 @@ def main() -> int:
         f"max={max(late_ms):.3f} ms missed={sk['missed']} (target p99 <= 2.0 ms) "
         f"Events.jitter p50={rf['p50_us'] / 1e3:.3f} ms p99={rf['p99_us'] / 1e3:.3f} ms max={rf['max_us'] / 1e3:.3f} ms ticks={rf['ticks']}"
     )
+    sig_all = sigint["recv"] + sigint["call"]
+    summary.append(
+        f"SUMMARY python-sigint KeyboardInterrupt after SIGINT recv p50={pct(sigint['recv'], 0.5):.1f} ms "
+        f"max={max(sigint['recv']):.1f} ms call p50={pct(sigint['call'], 0.5):.1f} ms max={max(sigint['call']):.1f} ms "
+        f"(target <= 100 ms)"
+    )
     for line in summary:
         print(line)
     targets = [(f"python-sub {row.name} >= {row.target}x redis-py", ratio >= row.target) for row, _, _, ratio, _ in
-               table] + [("python-sketch fast_tick p99 <= 2 ms", p99 <= 2.0)]
+               table] + [("python-sketch fast_tick p99 <= 2 ms", p99 <= 2.0),
+                         ("python-sigint every Ctrl-C within 100 ms", max(sig_all) <= 100.0)]
     for name, ok in targets:
         print(f"TARGET {name}: {'met' if ok else 'MISSED'}")
 

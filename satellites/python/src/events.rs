@@ -22,6 +22,8 @@ use crate::subscription::{Feed, Subscription};
 
 /// How long before a pulse's deadline the runtime's (millisecond) timer wakes the thread that finishes the wait.
 const EARLY: Duration = Duration::from_millis(2);
+/// The longest tick period accepted: a year, far beyond any pulse, and far from overflowing the clock.
+const MAX_PERIOD: Duration = Duration::from_secs(365 * 86_400);
 
 /// One pulse: its period, its next deadline and how late it has fired.
 #[derive(Debug)]
@@ -125,6 +127,12 @@ fn period(ms: Option<f64>) -> PyResult<Option<Duration>> {
             Some(d) if d.is_zero() => Err(pyo3::exceptions::PyValueError::new_err(
                 "a tick period must be above zero (None turns the pulse off)",
             )),
+            // A deadline is the clock plus the period: a period the clock cannot add is refused here rather
+            // than overflowing there.
+            Some(d) if d > MAX_PERIOD => Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "a tick period must be at most {} days (None turns the pulse off)",
+                MAX_PERIOD.as_secs() / 86_400
+            ))),
             d => Ok(d),
         })
 }

@@ -221,7 +221,7 @@ impl Client {
         // The hub enforces the timeout and always answers; the margin only
         // covers a hub that has gone silent.
         match self
-            .request_timeout(cmd, None, timeout + Duration::from_secs(2))
+            .request_timeout(cmd, None, timeout.saturating_add(Duration::from_secs(2)))
             .await?
         {
             Reply::Payload(p) => Ok(p),
