@@ -31,17 +31,22 @@ export class DirectRoute {
   /** Nothing to measure here: the route adds no delay. */
   sent() {}
 
+  /** The debug state of a direct route, also the player's before any route exists. */
+  static idleState() {
+    return { route: "direct", delayMs: 0, measuredMs: [], pairs: [], packetsReceived: 0 };
+  }
+
   debugState() {
-    return { route: this.kind, delayMs: 0, measuredMs: [], pairs: [], packetsReceived: 0, error: null };
+    return DirectRoute.idleState();
   }
 }
 
 /** Speech through a loopback peer connection and an `<audio>` element. Build it with `LoopbackRoute.open`. */
 export class LoopbackRoute {
-  constructor(ctx, parts) {
+  constructor(parts) {
     this.kind = "loopback";
-    this.ctx = ctx;
     this.input = parts.input;
+    // Held for the route's life: the sound flows only while both connections and the element exist.
     this.sender = parts.sender;
     this.receiver = parts.receiver;
     this.element = parts.element;
@@ -118,7 +123,7 @@ export class LoopbackRoute {
       await ctx.audioWorklet.addModule(new URL("./envelope-probe-worklet.js", import.meta.url));
       const probe = new AudioWorkletNode(ctx, "envelope-probe", { numberOfInputs: 1, numberOfOutputs: 0 });
       ctx.createMediaStreamSource(stream).connect(probe);
-      return new LoopbackRoute(ctx, { input, sender, receiver, element, probe });
+      return new LoopbackRoute({ input, sender, receiver, element, probe });
     } catch (e) {
       close();
       throw e;
@@ -154,7 +159,6 @@ export class LoopbackRoute {
       measuredMs: this.estimator.measured.map((s) => s * 1000),
       pairs: this.pairs.slice(),
       packetsReceived: this.packetsReceived,
-      error: null,
     };
   }
 }

@@ -22,8 +22,9 @@ export class SpeechPlayer {
     this.onAnchor = onAnchor;
     this.playhead = 0;
     this.sources = new Set();
-    this.anchors = new Map(); // utterance -> audio time sample 0 enters the route
-    this.delays = new Map(); // utterance -> the route's delay when it started (seconds)
+    // utterance -> {at, delayS}: the audio time its sample 0 enters the route, and the route's delay when it
+    // started (what its visemes are shifted by).
+    this.anchors = new Map();
     /** @type {DirectRoute | import("./playback-route.js").LoopbackRoute | null} */
     this.route = null;
     this.nextRoute = null;
@@ -38,7 +39,6 @@ export class SpeechPlayer {
   /** The node sources connect to: a gain node in front of the destination, for fading out on a barge-in. */
   output(ctx) {
     if (!this.route) this.route = new DirectRoute(ctx);
-    this.route.tagAt = (atS) => this.tagAt(atS);
     if (!this.gain) {
       this.gain = ctx.createGain();
       this.gain.connect(this.route.input);
@@ -51,6 +51,7 @@ export class SpeechPlayer {
    * it by the route's delay, out of step with its visemes.
    */
   useRoute(route) {
+    route.tagAt = (atS) => this.tagAt(atS);
     this.nextRoute = route;
     if (!this.speaking) this.switchRoute();
   }
@@ -67,7 +68,7 @@ export class SpeechPlayer {
 
   /** The playback route's state for the debug hook: which route, its delay and the measurements behind it. */
   routeState() {
-    const state = this.route ? this.route.debugState() : { route: "direct", delayMs: 0, measuredMs: [], pairs: [], packetsReceived: 0 };
+    const state = this.route ? this.route.debugState() : DirectRoute.idleState();
     return { ...state, error: this.routeError };
   }
 
@@ -80,12 +81,11 @@ export class SpeechPlayer {
     if (fresh) this.switchRoute();
     const ctxOut = this.output(ctx);
     let start = fresh ? now + JITTER_S : this.playhead;
-    let anchor = this.anchors.get(utterance);
+    let anchor = this.anchors.get(utterance)?.at;
     const unframedRestart = utterance === 0 && now - this.lastEnd > NEW_UTTERANCE_GAP_S && fresh;
     if (anchor === undefined || unframedRestart) {
       anchor = start - (utterance === 0 ? 0 : offset / RATE);
-      this.anchors.set(utterance, anchor);
-      this.delays.set(utterance, this.route ? this.route.delayS : 0);
+      this.anchors.set(utterance, { at: anchor, delayS: this.route ? this.route.delayS : 0 });
       this.trimAnchors();
       this.onAnchor(utterance, this.anchorOf(utterance));
     } else if (utterance !== 0) {
@@ -112,16 +112,16 @@ export class SpeechPlayer {
   /** The utterance sent at audio time `atS` (the latest to start before it) and the shift of its visemes. */
   tagAt(atS) {
     let found = null;
-    for (const [utterance, anchor] of this.anchors) {
-      if (anchor <= atS && (!found || anchor > found.anchor)) found = { utterance, anchor };
+    for (const [utterance, a] of this.anchors) {
+      if (a.at <= atS && (!found || a.at > found.at)) found = { utterance, at: a.at, appliedS: a.delayS };
     }
-    return found ? { utterance: found.utterance, appliedS: this.delays.get(found.utterance) ?? 0 } : null;
+    return found ? { utterance: found.utterance, appliedS: found.appliedS } : null;
   }
 
   /** The audio time sample 0 of `utterance` is heard at (its anchor plus the route's delay), if it has started. */
   anchorOf(utterance) {
-    const anchor = this.anchors.get(utterance);
-    return anchor === undefined ? undefined : anchor + (this.delays.get(utterance) ?? 0);
+    const a = this.anchors.get(utterance);
+    return a === undefined ? undefined : a.at + a.delayS;
   }
 
   /**
@@ -151,7 +151,6 @@ export class SpeechPlayer {
     this.sources.clear();
     this.playhead = 0;
     this.anchors.clear();
-    this.delays.clear();
   }
 
   get speaking() {
@@ -162,7 +161,6 @@ export class SpeechPlayer {
     while (this.anchors.size > 16) {
       const oldest = this.anchors.keys().next().value;
       this.anchors.delete(oldest);
-      this.delays.delete(oldest);
     }
   }
 }
