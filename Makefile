@@ -14,9 +14,13 @@ endif
 
 .PHONY: run test bench fuzz deps model model-release build build-debug python clean
 
+# The Whisper model the satellite of `make run` uses and `make model` provisions: tiny.en (fast, English), or base
+# (multilingual, slower and more accurate; `make model MODEL=base`, `make run MODEL=base`). The tests use tiny.en.
+MODEL ?= tiny.en
+
 ## Start the agent on the embedded default configuration (release build) and print its URL.
 run: deps model-release build
-	scripts/run.sh $(TARGET_DIR)/release
+	WHISPER_SAT_MODEL=$(MODEL) scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting and lints and run every test: the page's JavaScript units (node's test
 ## runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
@@ -54,10 +58,10 @@ deps:
 	scripts/web-deps.sh
 
 model:
-	scripts/model.sh
+	MODEL=$(MODEL) scripts/model.sh
 
 model-release:
-	CARGO_PROFILE_FLAGS=--release scripts/model.sh
+	MODEL=$(MODEL) CARGO_PROFILE_FLAGS=--release scripts/model.sh
 
 build:
 	$(CARGO) build --release --workspace --bins

@@ -17,7 +17,8 @@ for _ in $(seq 100); do
     sleep 0.1
 done
 if [[ -x "$bin/whisper-sat" ]]; then
-    "$bin/whisper-sat" run --data-dir data &
+    # WHISPER_SAT_MODEL names a provisioned model (`make run MODEL=base`); the satellite's default is tiny.en.
+    "$bin/whisper-sat" run --data-dir data --model "${WHISPER_SAT_MODEL:-tiny.en}" &
     sat=$!
 fi
 wait "$agent"

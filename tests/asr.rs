@@ -1,6 +1,7 @@
 //! Whisper ASR satellites through a real hub: fixture speech streamed in real time with `flowctl pub-wav`,
-//! transcripts read from `Agent.transcript`; parallel satellites; a satellite killed mid-utterance (also while its
-//! claim is speculative); a pause inside an utterance; silence and noise.
+//! transcripts read from `Agent.transcript`; parallel satellites, and their sharing of the machine's cores; a
+//! satellite killed mid-utterance (also while its claim is speculative); a pause inside an utterance; silence and
+//! noise.
 //!
 //! Needs the binaries (`cargo build -p robot-agent -p flowctl -p whisper-sat`) and the model (`make model`);
 //! `make test` provides both.
@@ -359,6 +360,43 @@ async fn two_satellites_share_consecutive_utterances_each_once() -> anyhow::Resu
     );
     let (e, n) = word_errors(&reference, &joined(&got)).await?;
     assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&got));
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn satellites_of_one_machine_split_its_cores_and_a_killed_one_gives_its_share_back()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start(&dir).await?;
+    let transcripts = Transcripts::collect(&agent).await?;
+    // A core share of the test's own, so satellites of tests running beside it do not count; two cores whatever
+    // the machine has. Every other flag is the default.
+    let share = dir.path().join("cores").to_string_lossy().into_owned();
+    let flags = ["--core-share-dir", share.as_str(), "--cores", "2"];
+    let _a = Satellite::start_with(&agent, "cores-a", &flags).await?;
+    let mut b = Satellite::start_with(&agent, "cores-b", &flags).await?;
+    let wav = fixture("audio/LJ001-0002.wav")?;
+    pub_wav(&agent, &wav).await?;
+    let shared = transcripts.settle(&agent, 0, 1).await?;
+    println!("{shared:#?}");
+    assert!(
+        shared.iter().all(|t| t["threads"] == 1),
+        "two satellites on two cores should decode on one thread each: {shared:?}"
+    );
+    // SIGKILL leaves its member file behind, unlocked: the survivor's next count drops it and takes both cores.
+    b.child.start_kill()?;
+    b.child.wait().await?;
+    pub_wav(&agent, &wav).await?;
+    let alone = transcripts.settle(&agent, shared.len(), 1).await?;
+    println!("{alone:#?}");
+    assert!(
+        alone
+            .iter()
+            .all(|t| t["threads"] == 2 && t["satellite"] == "cores-a"),
+        "the satellite left alone should decode on both cores: {alone:?}"
+    );
+    let (e, n) = word_errors(&reference("LJ001-0002")?, &joined(&alone)).await?;
+    assert!(e / n <= 0.2, "WER {} for {:?}", e / n, joined(&alone));
     Ok(())
 }
 

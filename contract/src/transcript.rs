@@ -34,6 +34,10 @@ pub struct TranscriptMessage {
     /// of the sentence) or `unknown` (the ordinary hangover). Absent when no pause was judged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turn: Option<TurnVerdict>,
+    /// Inference threads the decode ran on: the satellite's share of its machine's cores, which it splits with
+    /// the other satellites there. Absent from satellites that do not say.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<u32>,
 }
 
 /// What a transcript says about the end of the user's turn (docs/asr.md, "End of turn").

@@ -7,6 +7,7 @@ pub mod abort;
 pub mod activity;
 pub mod claim;
 pub mod convert;
+pub mod cores;
 pub mod echo;
 pub mod ledger;
 pub mod model_path;

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use crate::abort::AbortFlag;
+use crate::cores::CoreShare;
 use whisper_rs::{
     FullParams, SamplingStrategy, WhisperContext, WhisperContextParameters, WhisperState,
 };
@@ -46,6 +47,8 @@ pub enum AudioContext {
 /// Inference and filter settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TranscriberConfig {
+    /// Most inference threads one decode runs; a satellite in a machine's core share runs its fair share of the
+    /// cores, up to this (see [`crate::cores`]).
     pub threads: usize,
     pub audio_context: AudioContext,
     /// Whisper's no-speech rule: reject when the no-speech probability exceeds this...
@@ -80,6 +83,11 @@ pub struct Decoded {
     pub processing: Duration,
     /// The fitted encoder window looped and the text comes from a second decode with the full 30 s window.
     pub full_window_retry: bool,
+    /// Inference threads the decode ran with (its lease of the machine's cores, when it shares them).
+    pub threads: usize,
+    /// Time spent waiting for a core before the decode could start (zero outside a core share), not counted in
+    /// `processing`.
+    pub core_wait: Duration,
 }
 
 /// Why an output was thrown away.
@@ -104,6 +112,8 @@ pub struct Transcriber {
     state: WhisperState,
     cfg: TranscriberConfig,
     model_name: String,
+    /// The machine's core share this transcriber's decodes lease their threads from, if it joined one.
+    cores: Option<CoreShare>,
 }
 
 impl std::fmt::Debug for Transcriber {
@@ -111,6 +121,7 @@ impl std::fmt::Debug for Transcriber {
         f.debug_struct("Transcriber")
             .field("model", &self.model_name)
             .field("cfg", &self.cfg)
+            .field("cores", &self.cores)
             .finish()
     }
 }
@@ -146,7 +157,18 @@ impl Transcriber {
             state,
             cfg,
             model_name,
+            cores: None,
         })
+    }
+
+    /// Runs every later decode on a lease from `share` instead of a fixed `threads` (see [`crate::cores`]).
+    pub fn share_cores(&mut self, share: CoreShare) {
+        self.cores = Some(share);
+    }
+
+    /// The core share joined, if any.
+    pub fn core_share(&self) -> Option<&CoreShare> {
+        self.cores.as_ref()
     }
 
     /// Short model name for transcripts ("tiny.en" for `ggml-tiny.en.bin`).
@@ -189,8 +211,20 @@ impl Transcriber {
         audio: &[f32],
         abort: &AbortFlag,
     ) -> Result<Decoded, TranscribeError> {
+        let waiting = Instant::now();
+        // The lease is held for the fitted decode and its full-window retry alike, and given back on return.
+        let lease = match &self.cores {
+            Some(share) => Some(
+                share
+                    .acquire(self.cfg.threads, abort)
+                    .ok_or(TranscribeError::Aborted)?,
+            ),
+            None => None,
+        };
+        let threads = lease.as_ref().map_or(self.cfg.threads, |l| l.threads());
+        let core_wait = waiting.elapsed();
         let started = Instant::now();
-        let mut decoded = self.decode_with(audio, self.cfg.audio_context, abort)?;
+        let mut decoded = self.decode_with(audio, self.cfg.audio_context, threads, abort)?;
         let seconds = audio.len() as f32 / RATE as f32;
         // The cut window's signature failure: the whole utterance said again, up to the token cap or only twice
         // (nobody says one sentence twice in one breath; a phrase too short for the audio is not taken).
@@ -204,10 +238,12 @@ impl Transcriber {
             && (decoded.tokens >= token_cap(audio.len()) || is_repetition_loop(&decoded.text))
         {
             tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
-            decoded = self.decode_with(audio, AudioContext::Full, abort)?;
+            decoded = self.decode_with(audio, AudioContext::Full, threads, abort)?;
             decoded.full_window_retry = true;
         }
+        drop(lease);
         decoded.processing = started.elapsed();
+        decoded.core_wait = core_wait;
         Ok(decoded)
     }
 
@@ -215,6 +251,7 @@ impl Transcriber {
         &mut self,
         audio: &[f32],
         context: AudioContext,
+        threads: usize,
         abort: &AbortFlag,
     ) -> Result<Decoded, TranscribeError> {
         let started = Instant::now();
@@ -228,7 +265,7 @@ impl Transcriber {
             audio
         };
         let mut params = FullParams::new(SamplingStrategy::Greedy { best_of: 1 });
-        params.set_n_threads(self.cfg.threads as i32);
+        params.set_n_threads(i32::try_from(threads).unwrap_or(i32::MAX));
         params.set_language(Some(&self.cfg.language));
         params.set_translate(false);
         params.set_no_context(true);
@@ -287,6 +324,8 @@ impl Transcriber {
             tokens,
             processing: started.elapsed(),
             full_window_retry: false,
+            threads,
+            core_wait: Duration::ZERO,
         })
     }
 }
@@ -421,6 +460,8 @@ mod tests {
             tokens: 3,
             processing: Duration::ZERO,
             full_window_retry: false,
+            threads: 2,
+            core_wait: Duration::ZERO,
         }
     }
 

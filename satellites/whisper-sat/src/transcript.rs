@@ -61,6 +61,7 @@ mod tests {
             speculative: false,
             full_window_retry: false,
             turn: None,
+            threads: None,
         };
         let v: serde_json::Value = serde_json::to_value(&t)?;
         assert_eq!(v["final"], true);
@@ -89,6 +90,13 @@ mod tests {
         let v = serde_json::to_value(&judged)?;
         assert_eq!(v["turn"], "complete");
         assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, judged);
+        let threaded = TranscriptMessage {
+            threads: Some(1),
+            ..judged
+        };
+        let v = serde_json::to_value(&threaded)?;
+        assert_eq!(v["threads"], 1);
+        assert_eq!(serde_json::from_value::<TranscriptMessage>(v)?, threaded);
         Ok(())
     }
 }

@@ -1,5 +1,6 @@
-//! `whisper-sat bench`: real-time factor, end-of-speech latency, 1 vs 2 satellite throughput and peak RSS, side by
-//! side with faster-whisper (int8 and float32) on the same CTranslate2 model, in the same run.
+//! `whisper-sat bench`: real-time factor, end-of-speech latency and peak RSS, side by side with faster-whisper (int8
+//! and float32) on the same CTranslate2 model, in the same run; and 1, 2 and 3 satellite processes sharing the
+//! machine (`fleet_bench`).
 //!
 //! The latency follows the satellite's pipeline: an utterance that paused with the audio it ended with is decoded
 //! from the pause on (speculation), so its transcript is ready at the later of the end (the hangover) and the pause
@@ -10,13 +11,15 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::Context;
 use whisper_sat::model_path::{FIXTURE_CLIPS, default_model, fixtures_dir, repo_root};
 use whisper_sat::resample::resample_clip;
 use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
 use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
+
+use super::fleet_bench::fleets;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -37,16 +40,19 @@ pub struct Args {
     /// Write the results as Markdown to this file (e.g. docs/bench-asr.md).
     #[arg(long)]
     write: Option<PathBuf>,
+    /// Measure only the 1, 2 and 3 satellite fleets (no faster-whisper needed).
+    #[arg(long)]
+    fleet_only: bool,
 }
 
-struct ClipAudio {
+pub(super) struct ClipAudio {
     name: String,
     path: PathBuf,
-    audio: Vec<f32>,
+    pub(super) audio: Vec<f32>,
 }
 
 impl ClipAudio {
-    fn seconds(&self) -> f64 {
+    pub(super) fn seconds(&self) -> f64 {
         self.audio.len() as f64 / f64::from(RATE)
     }
 }
@@ -224,46 +230,6 @@ fn faster_whisper(
     Ok((baselines, rss))
 }
 
-/// Seconds for `workers` transcribers to get through `jobs`, sharing one queue.
-fn throughput(
-    model: &Path,
-    cfg: &TranscriberConfig,
-    workers: usize,
-    jobs: &[Vec<f32>],
-) -> anyhow::Result<f64> {
-    let queue = std::sync::Mutex::new(jobs.iter());
-    let mut transcribers = Vec::new();
-    for _ in 0..workers {
-        let mut t = Transcriber::load(model, cfg.clone())?;
-        t.decode(&jobs[0])?;
-        transcribers.push(t);
-    }
-    let started = Instant::now();
-    std::thread::scope(|s| -> anyhow::Result<()> {
-        let handles: Vec<_> = transcribers
-            .iter_mut()
-            .map(|t| {
-                let queue = &queue;
-                s.spawn(move || -> anyhow::Result<()> {
-                    loop {
-                        let next = queue
-                            .lock()
-                            .map_err(|_| anyhow::anyhow!("queue poisoned"))?
-                            .next();
-                        let Some(job) = next else { return Ok(()) };
-                        t.decode(job)?;
-                    }
-                })
-            })
-            .collect();
-        for h in handles {
-            h.join().map_err(|_| anyhow::anyhow!("worker panicked"))??;
-        }
-        Ok(())
-    })?;
-    Ok(started.elapsed().as_secs_f64())
-}
-
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model = args.model.clone().unwrap_or_else(default_model);
     let ct2 = args.ct2_dir.clone().unwrap_or_else(|| {
@@ -274,6 +240,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| repo_root().join("models/bench-venv/bin/python"));
     let clips = load_clips()?;
+    if args.fleet_only {
+        let utterances: Vec<Vec<f32>> = clips
+            .iter()
+            .map(|c| segment(&c.audio))
+            .collect::<anyhow::Result<Vec<_>>>()?
+            .into_iter()
+            .flatten()
+            .map(|s| s.audio)
+            .collect();
+        for l in fleets(&model, &clips, &utterances, args.runs)?.summary() {
+            println!("{l}");
+        }
+        return Ok(());
+    }
     let cfg = TranscriberConfig {
         threads: args.threads,
         ..TranscriberConfig::default()
@@ -366,19 +346,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let total_audio: f64 = clips.iter().map(ClipAudio::seconds).sum();
     let sum = |v: &[f64]| v.iter().sum::<f64>();
-    let jobs: Vec<Vec<f32>> = utterances
-        .iter()
-        .chain(utterances.iter())
-        .cloned()
-        .collect();
-    let one = throughput(&model, &cfg, 1, &jobs)?;
-    let two = throughput(&model, &cfg, 2, &jobs)?;
-    // Two satellites sharing the cores instead of oversubscribing them.
-    let split_cfg = TranscriberConfig {
-        threads: (args.threads / 2).max(1),
-        ..cfg.clone()
-    };
-    let two_split = throughput(&model, &split_cfg, 2, &jobs)?;
+    let fleets = fleets(&model, &clips, &utterances, args.runs)?;
     line(String::new());
     line(format!(
         "SUMMARY asr rtf: {:.3} (baseline faster-whisper int8 {:.3}, ratio {:.2})",
@@ -411,22 +379,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         percentile(&latencies_short, 0.95) * 1000.0,
         percentile(&plain_short, 0.95) / percentile(&latencies_short, 0.95)
     ));
-    line(format!(
-        "SUMMARY asr throughput 2 satellites: {:.2} utterances/s (baseline 1 satellite {:.2}/s, ratio {:.2}; {} utterances, {} threads each)",
-        jobs.len() as f64 / two,
-        jobs.len() as f64 / one,
-        one / two,
-        jobs.len(),
-        args.threads
-    ));
-    line(format!(
-        "SUMMARY asr throughput 2 satellites x {} thread(s): {:.2} utterances/s (baseline 1 satellite x {} threads {:.2}/s, ratio {:.2})",
-        split_cfg.threads,
-        jobs.len() as f64 / two_split,
-        args.threads,
-        jobs.len() as f64 / one,
-        one / two_split
-    ));
+    for l in fleets.summary() {
+        line(l);
+    }
     line(format!(
         "SUMMARY asr peak rss one satellite: {rss_one:.0} MB (baseline faster-whisper process {fw_rss:.0} MB, ratio {:.2})",
         rss_one / fw_rss

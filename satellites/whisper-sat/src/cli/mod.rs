@@ -2,6 +2,8 @@
 
 mod bench;
 mod convert;
+mod fleet;
+mod fleet_bench;
 mod progress;
 mod recognition;
 mod run;
@@ -26,8 +28,11 @@ enum Action {
     Transcribe(transcribe::Args),
     /// Run as a satellite: segment Agent.audio, claim and transcribe utterances, publish Agent.transcript.
     Run(run::Args),
-    /// Benchmark against faster-whisper: RTF, end-of-speech latency, 1 vs 2 satellites, peak RSS.
+    /// Benchmark against faster-whisper: RTF, end-of-speech latency, 1, 2 and 3 satellites, peak RSS.
     Bench(bench::Args),
+    /// One satellite process of `bench`'s fleets (decodes the jobs it is handed on stdin).
+    #[command(hide = true)]
+    BenchWorker(fleet::WorkerArgs),
     /// Print the word error rate of a hypothesis against a reference (case and punctuation ignored).
     Wer {
         /// Reference transcript.
@@ -45,6 +50,7 @@ impl Command {
             Action::Transcribe(a) => transcribe::run(a),
             Action::Run(a) => run::run(a),
             Action::Bench(a) => bench::run(a),
+            Action::BenchWorker(a) => fleet::worker(a),
             Action::Wer {
                 reference,
                 hypothesis,

@@ -2,17 +2,35 @@
 
 use std::path::PathBuf;
 
+use whisper_sat::cores::{CoreShare, CoreShareError};
 use whisper_sat::segmenter::SegmenterConfig;
 use whisper_sat::transcriber::{AudioContext, TranscriberConfig};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct RecognitionArgs {
-    /// ggml model file (default: models/ggml-tiny.en.bin in the repository, or WHISPER_MODEL).
+    /// ggml model file, or the name of one `make model MODEL=<name>` provisions (`tiny.en`, `base`); default:
+    /// models/ggml-tiny.en.bin in the repository, or WHISPER_MODEL.
     #[arg(long)]
     model: Option<PathBuf>,
-    /// Inference threads.
-    #[arg(long, default_value_t = 2)]
-    threads: usize,
+    /// Language of the speech: a Whisper language code (`en`, `it`...), or `auto` to detect it per utterance.
+    /// English-only models (`tiny.en`) understand only `en`.
+    #[arg(long, default_value = "en")]
+    language: String,
+    /// Most inference threads per decode (default: the machine's cores, at most 4). Satellites on one machine
+    /// share its cores: each decode runs on its fair share, cores / satellites, up to this (docs/asr.md).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
+    /// Cores that the satellites of this machine share between them (default: the cores this process may use).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
+    cores: Option<u16>,
+    /// Directory of the machine's core share: satellites that name the same one share cores (default: per user,
+    /// under $XDG_RUNTIME_DIR or the temporary directory).
+    #[arg(long)]
+    core_share_dir: Option<PathBuf>,
+    /// Run --threads threads per decode whatever other satellites on the machine do. Satellites whose threads
+    /// together outnumber the cores then slow each other down many times over (whisper.cpp's threads spin).
+    #[arg(long)]
+    no_core_share: bool,
     /// End-of-speech hangover in milliseconds.
     #[arg(long, default_value_t = SegmenterConfig::default().hangover_ms)]
     hangover_ms: u32,
@@ -38,21 +56,40 @@ pub struct RecognitionArgs {
 
 impl RecognitionArgs {
     pub fn model(&self) -> PathBuf {
-        self.model
-            .clone()
-            .unwrap_or_else(whisper_sat::model_path::default_model)
+        self.model.as_deref().map_or_else(
+            whisper_sat::model_path::default_model,
+            whisper_sat::model_path::resolve_model,
+        )
     }
 
     pub fn transcriber(&self) -> TranscriberConfig {
         TranscriberConfig {
-            threads: self.threads,
+            threads: self
+                .threads
+                .map_or_else(|| whisper_sat::cores::machine_cores().min(4), usize::from),
             audio_context: if self.full_window {
                 AudioContext::Full
             } else {
                 AudioContext::Fit
             },
+            language: self.language.clone(),
             ..TranscriberConfig::default()
         }
+    }
+
+    /// The machine's core share to join, unless switched off.
+    pub fn core_share(&self) -> Result<Option<CoreShare>, CoreShareError> {
+        if self.no_core_share {
+            return Ok(None);
+        }
+        let dir = self
+            .core_share_dir
+            .clone()
+            .unwrap_or_else(whisper_sat::cores::default_dir);
+        let cores = self
+            .cores
+            .map_or_else(whisper_sat::cores::machine_cores, usize::from);
+        CoreShare::join(&dir, cores).map(Some)
     }
 
     pub fn segmenter(&self) -> SegmenterConfig {

@@ -53,7 +53,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .unwrap_or_else(|| format!("whisper-{}", std::process::id()));
     let model = args.recognition.model();
     // Load the model before connecting, so a bad path fails at once with a clear message.
-    let transcriber = Transcriber::load(&model, args.recognition.transcriber())?;
+    let mut transcriber = Transcriber::load(&model, args.recognition.transcriber())?;
+    if let Some(share) = args.recognition.core_share()? {
+        tracing::info!(
+            cores = share.cores(),
+            satellites = share.members(),
+            max_threads = transcriber.config().threads,
+            "sharing this machine's cores with its other whisper satellites"
+        );
+        transcriber.share_cores(share);
+    }
     let settings = Settings {
         name: name.clone(),
         segmenter: args.recognition.segmenter(),

@@ -24,6 +24,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let clip = whisper_sat::wav::read_mono(&args.file)?;
     let cfg = args.recognition.transcriber();
     let mut transcriber = Transcriber::load(&model, cfg)?;
+    // An offline transcription on a machine whose satellites are running takes its share of the cores too.
+    if let Some(share) = args.recognition.core_share()? {
+        transcriber.share_cores(share);
+    }
     if args.whole {
         let audio = whisper_sat::resample::resample_clip(&clip.samples, clip.rate, 16_000)?;
         let d = transcriber.decode(&audio)?;

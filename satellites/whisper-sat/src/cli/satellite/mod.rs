@@ -660,8 +660,9 @@ async fn finish(client: &Client, satellite: &str, model: &str, f: &Finished, led
                 speculative: f.speculative,
                 full_window_retry: d.full_window_retry,
                 turn: f.turn,
+                threads: u32::try_from(d.threads).ok(),
             };
-            tracing::info!(id = %u.id, ms = msg.processing_ms, speculative = f.speculative, turn = ?f.turn, text = %msg.text, "transcribed");
+            tracing::info!(id = %u.id, ms = msg.processing_ms, threads = d.threads, speculative = f.speculative, turn = ?f.turn, text = %msg.text, "transcribed");
             let payload = serde_json::to_vec(&msg).unwrap_or_default();
             let deadline = Instant::now() + Duration::from_secs(15);
             loop {
