@@ -58,6 +58,9 @@ pub struct TranscriberConfig {
     /// Reject any output from audio whose overall level is below this (dBFS).
     pub near_silence_dbfs: f32,
     pub language: String,
+    /// Beams of whisper.cpp's beam search; 1 decodes greedily (the default: the fastest, and on the fixtures as
+    /// accurate; docs/bench-asr.md has both).
+    pub beam_size: usize,
 }
 
 impl Default for TranscriberConfig {
@@ -69,6 +72,7 @@ impl Default for TranscriberConfig {
             logprob_threshold: -1.0,
             near_silence_dbfs: -45.0,
             language: "en".into(),
+            beam_size: 1,
         }
     }
 }
@@ -181,7 +185,7 @@ impl Transcriber {
         &self.cfg
     }
 
-    /// Runs greedy decoding on 16 kHz mono audio and applies the hallucination filter.
+    /// Decodes on 16 kHz mono audio and applies the hallucination filter.
     pub fn transcribe(&mut self, audio: &[f32]) -> Result<Outcome, TranscribeError> {
         self.transcribe_abortable(audio, &AbortFlag::new())
     }
@@ -196,7 +200,7 @@ impl Transcriber {
         Ok(judge(&self.cfg, audio, decoded))
     }
 
-    /// Runs greedy decoding without filtering. With a fitted encoder window, an output that runs into the token
+    /// Decodes without filtering. With a fitted encoder window, an output that runs into the token
     /// cap or loops on one phrase is decoded again with the full window: a cut window makes the decoder repeat
     /// itself, and the full window is what the model was trained on. The commonest failure, on short utterances, is
     /// the whole utterance transcribed and then said again and again; that output is kept, once, since the second
@@ -264,7 +268,15 @@ impl Transcriber {
         } else {
             audio
         };
-        let mut params = FullParams::new(SamplingStrategy::Greedy { best_of: 1 });
+        let strategy = if self.cfg.beam_size > 1 {
+            SamplingStrategy::BeamSearch {
+                beam_size: i32::try_from(self.cfg.beam_size).unwrap_or(i32::MAX),
+                patience: -1.0,
+            }
+        } else {
+            SamplingStrategy::Greedy { best_of: 1 }
+        };
+        let mut params = FullParams::new(strategy);
         params.set_n_threads(i32::try_from(threads).unwrap_or(i32::MAX));
         params.set_language(Some(&self.cfg.language));
         params.set_translate(false);
@@ -277,7 +289,7 @@ impl Transcriber {
         params.set_print_timestamps(false);
         params.set_suppress_blank(true);
         params.set_suppress_nst(true);
-        // Pure greedy decoding: no temperature fallback, so the result is deterministic and latency bounded.
+        // No temperature fallback, so the result is deterministic and latency bounded.
         params.set_temperature(0.0);
         params.set_temperature_inc(0.0);
         // Speech runs at about three tokens a second; a cap well above that stops a looping decoder early.

@@ -20,6 +20,7 @@ use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
 use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
 
 use super::fleet_bench::fleets;
+use super::wer_bench::{provisioned_models, wer_bench};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -43,11 +44,14 @@ pub struct Args {
     /// Measure only the 1, 2 and 3 satellite fleets (no faster-whisper needed).
     #[arg(long)]
     fleet_only: bool,
+    /// Measure only the word error rates (and each model's RTF, latency and memory).
+    #[arg(long)]
+    wer_only: bool,
 }
 
 pub(super) struct ClipAudio {
-    name: String,
-    path: PathBuf,
+    pub(super) name: String,
+    pub(super) path: PathBuf,
     pub(super) audio: Vec<f32>,
 }
 
@@ -112,8 +116,8 @@ fn time_clips(t: &mut Transcriber, clips: &[ClipAudio], runs: usize) -> anyhow::
 }
 
 /// One utterance of a clip as the satellite's segmenter reports it, with audio times from its end of speech.
-struct Segmented {
-    audio: Vec<f32>,
+pub(super) struct Segmented {
+    pub(super) audio: Vec<f32>,
     /// Until the segmenter ends it (the hangover).
     end_lag: Duration,
     /// Until it paused with exactly the audio it ended with, if it did: a speculative decode starts there.
@@ -122,7 +126,7 @@ struct Segmented {
 
 impl Segmented {
     /// End of speech to transcript for a decode taking `inference`: with speculation, and without.
-    fn latency(&self, inference: Duration) -> (Duration, Duration) {
+    pub(super) fn latency(&self, inference: Duration) -> (Duration, Duration) {
         let plain = self.end_lag + inference;
         let speculative = self
             .pause_lag
@@ -132,7 +136,7 @@ impl Segmented {
 }
 
 /// The utterances of a clip.
-fn segment(audio: &[f32]) -> anyhow::Result<Vec<Segmented>> {
+pub(super) fn segment(audio: &[f32]) -> anyhow::Result<Vec<Segmented>> {
     let mut seg = Segmenter::new(SegmenterConfig::default())?;
     let mut out = Vec::new();
     let mut events = Vec::new();
@@ -166,19 +170,34 @@ fn segment(audio: &[f32]) -> anyhow::Result<Vec<Segmented>> {
     Ok(out)
 }
 
-struct Baseline {
-    compute_type: String,
-    per_clip: Vec<f64>,
-    texts: Vec<String>,
+pub(super) struct Baseline {
+    pub(super) compute_type: String,
+    pub(super) beam: u64,
+    pub(super) per_clip: Vec<f64>,
+    pub(super) texts: Vec<String>,
 }
 
-fn faster_whisper(
-    python: &Path,
-    ct2: &Path,
+/// How faster-whisper is run: on which weights, in which language, with which compute types and beams.
+pub(super) struct FasterWhisper<'a> {
+    pub(super) python: &'a Path,
+    pub(super) ct2: &'a Path,
+    pub(super) language: &'a str,
+    pub(super) compute_types: &'a [&'a str],
+    pub(super) beams: &'a [usize],
+}
+
+pub(super) fn faster_whisper(
+    fw: &FasterWhisper<'_>,
     threads: usize,
     runs: usize,
     clips: &[ClipAudio],
 ) -> anyhow::Result<(Vec<Baseline>, f64)> {
+    let FasterWhisper {
+        python,
+        ct2,
+        language,
+        ..
+    } = *fw;
     let script = repo_root().join("bench/asr/faster_whisper_bench.py");
     let mut cmd = Command::new(python);
     cmd.arg(&script)
@@ -188,7 +207,14 @@ fn faster_whisper(
         .arg(threads.to_string())
         .arg("--runs")
         .arg(runs.to_string())
-        .args(["--compute-type", "int8", "--compute-type", "float32"])
+        .arg("--language")
+        .arg(language)
+        .args(fw.compute_types.iter().flat_map(|c| ["--compute-type", c]))
+        .args(
+            fw.beams
+                .iter()
+                .flat_map(|b| ["--beam-size".to_owned(), b.to_string()]),
+        )
         .args(clips.iter().map(|c| &c.path));
     let out = cmd.output().with_context(|| {
         format!(
@@ -210,18 +236,23 @@ fn faster_whisper(
             continue;
         }
         let ct = v["compute_type"].as_str().unwrap_or_default().to_owned();
+        let beam = v["beam"].as_u64().unwrap_or(1);
         let runs: Vec<f64> = v["runs_s"]
             .as_array()
             .map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect())
             .unwrap_or_default();
         let text = v["text"].as_str().unwrap_or_default().to_owned();
-        match baselines.iter_mut().find(|b| b.compute_type == ct) {
+        match baselines
+            .iter_mut()
+            .find(|b| b.compute_type == ct && b.beam == beam)
+        {
             Some(b) => {
                 b.per_clip.push(median(&runs));
                 b.texts.push(text);
             }
             None => baselines.push(Baseline {
                 compute_type: ct,
+                beam,
                 per_clip: vec![median(&runs)],
                 texts: vec![text],
             }),
@@ -250,6 +281,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map(|s| s.audio)
             .collect();
         for l in fleets(&model, &clips, &utterances, args.runs)?.summary() {
+            println!("{l}");
+        }
+        return Ok(());
+    }
+    let models = provisioned_models(&model, &ct2);
+    if args.wer_only {
+        let (table, summary) = wer_bench(&models, &python, args.threads, &clips)?;
+        for l in table.iter().chain(&summary) {
             println!("{l}");
         }
         return Ok(());
@@ -310,7 +349,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let ours_full = time_clips(&mut full, &clips, args.runs)?;
     drop(full);
 
-    let (baselines, fw_rss) = faster_whisper(&python, &ct2, args.threads, args.runs, &clips)?;
+    let fw = FasterWhisper {
+        python: &python,
+        ct2: &ct2,
+        language: "en",
+        compute_types: &["int8", "float32"],
+        beams: &[1],
+    };
+    let (baselines, fw_rss) = faster_whisper(&fw, args.threads, args.runs, &clips)?;
     let int8 = baselines
         .iter()
         .find(|b| b.compute_type == "int8")
@@ -380,6 +426,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         percentile(&plain_short, 0.95) / percentile(&latencies_short, 0.95)
     ));
     for l in fleets.summary() {
+        line(l);
+    }
+    let (table, summary) = wer_bench(&models, &python, args.threads, &clips)?;
+    line(String::new());
+    line("## Word error rate over the fixture clips".into());
+    line(String::new());
+    for l in table.into_iter().chain(summary) {
         line(l);
     }
     line(format!(

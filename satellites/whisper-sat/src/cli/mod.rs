@@ -9,6 +9,7 @@ mod recognition;
 mod run;
 mod satellite;
 mod transcribe;
+mod wer_bench;
 
 use clap::{Parser, Subcommand};
 

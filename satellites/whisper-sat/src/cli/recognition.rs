@@ -16,6 +16,10 @@ pub struct RecognitionArgs {
     /// English-only models (`tiny.en`) understand only `en`.
     #[arg(long, default_value = "en")]
     language: String,
+    /// Beams of the decoder's beam search; 1 decodes greedily (faster; docs/bench-asr.md has WER and latency of
+    /// both).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=16))]
+    beam: u16,
     /// Most inference threads per decode (default: the machine's cores, at most 4). Satellites on one machine
     /// share its cores: each decode runs on its fair share, cores / satellites, up to this (docs/asr.md).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..))]
@@ -73,6 +77,7 @@ impl RecognitionArgs {
                 AudioContext::Fit
             },
             language: self.language.clone(),
+            beam_size: usize::from(self.beam),
             ..TranscriberConfig::default()
         }
     }

@@ -1,0 +1,278 @@
+//! The accuracy part of `whisper-sat bench`: word error rate over every speech fixture, per model and decoder,
+//! through the satellite's path (the segmenter fed 20 ms messages, the fitted window, the filter) and on whole
+//! clips, side by side in the same run with faster-whisper on the very same CTranslate2 weights at beam 1 and 5.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use whisper_sat::model_path::repo_root;
+use whisper_sat::transcriber::{Outcome, Transcriber, TranscriberConfig};
+use whisper_sat::wer::word_errors;
+
+use super::bench::{Baseline, ClipAudio, FasterWhisper, faster_whisper, segment};
+use super::fleet::{Fleet, write_jobs};
+
+/// Peak RSS of one satellite process with `model` that has decoded every clip.
+fn satellite_rss_mb(model: &Path, clips: &[ClipAudio]) -> anyhow::Result<f64> {
+    let scratch = std::env::temp_dir().join(format!("whisper-sat-rss-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch)?;
+    let jobs = scratch.join("clips.f32");
+    let result = (|| {
+        write_jobs(
+            &jobs,
+            &clips.iter().map(|c| c.audio.clone()).collect::<Vec<_>>(),
+        )?;
+        let mut fleet = Fleet::start(1, model, &jobs, &scratch.join("cores"))?;
+        fleet.throughput(clips.len())?;
+        Ok(fleet.peak_rss_mb().first().copied().unwrap_or(f64::NAN))
+    })();
+    let _ = std::fs::remove_dir_all(&scratch);
+    result
+}
+
+/// A model under test: its ggml file and the CTranslate2 directory it was converted from.
+pub struct ModelUnderTest {
+    pub name: &'static str,
+    pub ggml: PathBuf,
+    pub ct2: PathBuf,
+}
+
+/// tiny.en, and base when `make model MODEL=base` has provisioned it.
+pub fn provisioned_models(tiny: &Path, tiny_ct2: &Path) -> Vec<ModelUnderTest> {
+    let mut models = vec![ModelUnderTest {
+        name: "tiny.en",
+        ggml: tiny.to_path_buf(),
+        ct2: tiny_ct2.to_path_buf(),
+    }];
+    let base = ModelUnderTest {
+        name: "base",
+        ggml: repo_root().join("models/ggml-base.bin"),
+        ct2: repo_root().join("models/cache/whisper-base-ct2"),
+    };
+    if base.ggml.is_file() && base.ct2.join("model.bin").is_file() {
+        models.push(base);
+    }
+    models
+}
+
+/// One decoder's result over every clip.
+struct Row {
+    decoder: String,
+    errors: usize,
+    words: usize,
+    /// Inference seconds per audio second.
+    rtf: f64,
+    /// End of speech to transcript (speculative), utterances of at most 5 s: median and p95, satellite path only.
+    latency: Option<(Duration, Duration)>,
+}
+
+impl Row {
+    fn wer(&self) -> f64 {
+        self.errors as f64 / self.words.max(1) as f64
+    }
+}
+
+fn percentile(v: &[Duration], p: f64) -> Duration {
+    let mut s = v.to_vec();
+    s.sort();
+    s.get(((s.len().saturating_sub(1)) as f64 * p).round() as usize)
+        .copied()
+        .unwrap_or_default()
+}
+
+/// Our decoder through the satellite's path: the clip segmented as the hub delivers it, each utterance decoded
+/// and filtered, the accepted texts joined.
+fn satellite_path(
+    t: &mut Transcriber,
+    clips: &[ClipAudio],
+    references: &[String],
+) -> anyhow::Result<Row> {
+    let (mut errors, mut words, mut processing, mut audio) = (0, 0, 0.0, 0.0);
+    let mut latencies = Vec::new();
+    for (c, reference) in clips.iter().zip(references) {
+        let mut texts = Vec::new();
+        for s in segment(&c.audio)? {
+            let outcome = t.transcribe(&s.audio)?;
+            let d = match &outcome {
+                Outcome::Speech(d) => {
+                    texts.push(d.text.clone());
+                    d
+                }
+                Outcome::Rejected(_, d) => d,
+            };
+            processing += d.processing.as_secs_f64();
+            if s.audio.len() <= 5 * 16_000 {
+                latencies.push(s.latency(d.processing).0);
+            }
+        }
+        audio += c.seconds();
+        let (e, n) = word_errors(reference, &texts.join(" "));
+        errors += e;
+        words += n;
+    }
+    Ok(Row {
+        decoder: String::new(),
+        errors,
+        words,
+        rtf: processing / audio,
+        latency: Some((percentile(&latencies, 0.5), percentile(&latencies, 0.95))),
+    })
+}
+
+/// Our decoder on each clip whole, as faster-whisper is run.
+fn whole_clips(
+    t: &mut Transcriber,
+    clips: &[ClipAudio],
+    references: &[String],
+) -> anyhow::Result<Row> {
+    let (mut errors, mut words, mut processing, mut audio) = (0, 0, 0.0, 0.0);
+    for (c, reference) in clips.iter().zip(references) {
+        let d = t.decode(&c.audio)?;
+        processing += d.processing.as_secs_f64();
+        audio += c.seconds();
+        let (e, n) = word_errors(reference, &d.text);
+        errors += e;
+        words += n;
+    }
+    Ok(Row {
+        decoder: String::new(),
+        errors,
+        words,
+        rtf: processing / audio,
+        latency: None,
+    })
+}
+
+fn baseline_row(b: &Baseline, clips: &[ClipAudio], references: &[String]) -> Row {
+    let (mut errors, mut words) = (0, 0);
+    for (text, reference) in b.texts.iter().zip(references) {
+        let (e, n) = word_errors(reference, text);
+        errors += e;
+        words += n;
+    }
+    let audio: f64 = clips.iter().map(ClipAudio::seconds).sum();
+    Row {
+        decoder: format!(
+            "faster-whisper {} beam {} (whole clips)",
+            b.compute_type, b.beam
+        ),
+        errors,
+        words,
+        rtf: b.per_clip.iter().sum::<f64>() / audio,
+        latency: None,
+    }
+}
+
+/// Runs every model and decoder; returns the Markdown table rows and the SUMMARY lines.
+pub fn wer_bench(
+    models: &[ModelUnderTest],
+    python: &Path,
+    threads: usize,
+    clips: &[ClipAudio],
+) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+    let references: Vec<String> = clips
+        .iter()
+        .map(|c| {
+            let txt = c.path.with_extension("txt");
+            std::fs::read_to_string(&txt)
+                .map(|s| s.trim().to_owned())
+                .map_err(|e| anyhow::anyhow!("{}: {e}", txt.display()))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut table = vec![
+        "| model | decoder | WER | errors / words | RTF | end of speech -> transcript, <= 5 s, median / p95 ms |".to_owned(),
+        "|---|---|---|---|---|---|".to_owned(),
+    ];
+    let mut summary = Vec::new();
+    for m in models {
+        let mut rows = Vec::new();
+        for beam in [1, 5] {
+            let mut t = Transcriber::load(
+                &m.ggml,
+                TranscriberConfig {
+                    threads,
+                    beam_size: beam,
+                    ..TranscriberConfig::default()
+                },
+            )?;
+            // A warm-up decode, so the first clip does not pay for the allocations.
+            t.decode(&clips[0].audio)?;
+            let mut row = satellite_path(&mut t, clips, &references)?;
+            row.decoder = format!("whisper-sat beam {beam} (satellite path)");
+            rows.push(row);
+            let mut row = whole_clips(&mut t, clips, &references)?;
+            row.decoder = format!("whisper-sat beam {beam} (whole clips)");
+            rows.push(row);
+        }
+        let fw = FasterWhisper {
+            python,
+            ct2: &m.ct2,
+            language: "en",
+            compute_types: &["int8"],
+            beams: &[1, 5],
+        };
+        let (baselines, _) = faster_whisper(&fw, threads, 1, clips)?;
+        rows.extend(
+            baselines
+                .iter()
+                .map(|b| baseline_row(b, clips, &references)),
+        );
+        for r in &rows {
+            table.push(format!(
+                "| {} | {} | {:.1}% | {} / {} | {:.3} | {} |",
+                m.name,
+                r.decoder,
+                r.wer() * 100.0,
+                r.errors,
+                r.words,
+                r.rtf,
+                r.latency.map_or("-".to_owned(), |(p50, p95)| format!(
+                    "{:.0} / {:.0}",
+                    p50.as_secs_f64() * 1000.0,
+                    p95.as_secs_f64() * 1000.0
+                ))
+            ));
+        }
+        let find = |name: &str| rows.iter().find(|r| r.decoder == name);
+        let (Some(ours), Some(ours5), Some(fw5)) = (
+            find("whisper-sat beam 1 (satellite path)"),
+            find("whisper-sat beam 5 (satellite path)"),
+            find("faster-whisper int8 beam 5 (whole clips)"),
+        ) else {
+            anyhow::bail!("a decoder of {} did not run", m.name);
+        };
+        let ratio = |a: &Row| {
+            if fw5.errors == 0 {
+                // No errors to compare against: equal when ours has none either.
+                if a.errors == 0 { 1.0 } else { f64::INFINITY }
+            } else {
+                a.wer() / fw5.wer()
+            }
+        };
+        let ms = |d: Duration| d.as_secs_f64() * 1000.0;
+        let rss = satellite_rss_mb(&m.ggml, clips)?;
+        summary.push(format!(
+            "SUMMARY asr model {}: peak rss of a satellite {rss:.0} MB, RTF {:.3}, WER {:.1}% (default decoder, satellite path)",
+            m.name,
+            ours.rtf,
+            ours.wer() * 100.0
+        ));
+        for (label, r) in [("beam 1, the default", ours), ("beam 5", ours5)] {
+            let (p50, p95) = r.latency.unwrap_or_default();
+            summary.push(format!(
+                "SUMMARY asr wer {} ({label}, satellite path): {:.1}% ({}/{} words; baseline faster-whisper int8 beam 5 {:.1}%, ratio {:.2}); RTF {:.3} (faster-whisper beam 5 {:.3}); end of speech -> transcript p50 {:.0} ms, p95 {:.0} ms (target 500 ms)",
+                m.name,
+                r.wer() * 100.0,
+                r.errors,
+                r.words,
+                fw5.wer() * 100.0,
+                ratio(r),
+                r.rtf,
+                fw5.rtf,
+                ms(p50),
+                ms(p95),
+            ));
+        }
+    }
+    Ok((table, summary))
+}
