@@ -75,7 +75,12 @@ fn percentile(v: &[f64], p: f64) -> f64 {
 }
 
 fn peak_rss_mb() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
+    process_peak_rss_mb("self")
+}
+
+/// Peak resident memory of process `pid` ("self" for this one) in MB, from Linux's `VmHWM`; NaN if unknown.
+pub(super) fn process_peak_rss_mb(pid: &str) -> f64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
         .ok()
         .and_then(|s| {
             s.lines()

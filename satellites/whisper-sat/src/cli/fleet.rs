@@ -238,20 +238,11 @@ impl Fleet {
 }
 
 impl Fleet {
-    /// Peak resident memory of each worker process so far, in MB (Linux's `VmHWM`).
+    /// Peak resident memory of each worker process so far, in MB.
     pub fn peak_rss_mb(&self) -> Vec<f64> {
         self.workers
             .iter()
-            .map(|w| {
-                std::fs::read_to_string(format!("/proc/{}/status", w.child.id()))
-                    .ok()
-                    .and_then(|s| {
-                        s.lines()
-                            .find(|l| l.starts_with("VmHWM:"))
-                            .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-                    })
-                    .map_or(f64::NAN, |kb| kb / 1024.0)
-            })
+            .map(|w| super::bench::process_peak_rss_mb(&w.child.id().to_string()))
             .collect()
     }
 }

@@ -72,6 +72,35 @@ impl Row {
     }
 }
 
+/// Word errors and inference time summed over clips.
+#[derive(Default)]
+struct Tally {
+    errors: usize,
+    words: usize,
+    processing: f64,
+    audio: f64,
+}
+
+impl Tally {
+    fn add(&mut self, reference: &str, hypothesis: &str, processing: f64, audio: f64) {
+        let (e, n) = word_errors(reference, hypothesis);
+        self.errors += e;
+        self.words += n;
+        self.processing += processing;
+        self.audio += audio;
+    }
+
+    fn row(&self, decoder: String, latency: Option<(Duration, Duration)>) -> Row {
+        Row {
+            decoder,
+            errors: self.errors,
+            words: self.words,
+            rtf: self.processing / self.audio,
+            latency,
+        }
+    }
+}
+
 fn percentile(v: &[Duration], p: f64) -> Duration {
     let mut s = v.to_vec();
     s.sort();
@@ -87,10 +116,11 @@ fn satellite_path(
     clips: &[ClipAudio],
     references: &[String],
 ) -> anyhow::Result<Row> {
-    let (mut errors, mut words, mut processing, mut audio) = (0, 0, 0.0, 0.0);
+    let mut tally = Tally::default();
     let mut latencies = Vec::new();
     for (c, reference) in clips.iter().zip(references) {
         let mut texts = Vec::new();
+        let mut processing = 0.0;
         for s in segment(&c.audio)? {
             let outcome = t.transcribe(&s.audio)?;
             let d = match &outcome {
@@ -105,18 +135,12 @@ fn satellite_path(
                 latencies.push(s.latency(d.processing).0);
             }
         }
-        audio += c.seconds();
-        let (e, n) = word_errors(reference, &texts.join(" "));
-        errors += e;
-        words += n;
+        tally.add(reference, &texts.join(" "), processing, c.seconds());
     }
-    Ok(Row {
-        decoder: String::new(),
-        errors,
-        words,
-        rtf: processing / audio,
-        latency: Some((percentile(&latencies, 0.5), percentile(&latencies, 0.95))),
-    })
+    Ok(tally.row(
+        String::new(),
+        Some((percentile(&latencies, 0.5), percentile(&latencies, 0.95))),
+    ))
 }
 
 /// Our decoder on each clip whole, as faster-whisper is run.
@@ -125,42 +149,31 @@ fn whole_clips(
     clips: &[ClipAudio],
     references: &[String],
 ) -> anyhow::Result<Row> {
-    let (mut errors, mut words, mut processing, mut audio) = (0, 0, 0.0, 0.0);
+    let mut tally = Tally::default();
     for (c, reference) in clips.iter().zip(references) {
         let d = t.decode(&c.audio)?;
-        processing += d.processing.as_secs_f64();
-        audio += c.seconds();
-        let (e, n) = word_errors(reference, &d.text);
-        errors += e;
-        words += n;
+        tally.add(reference, &d.text, d.processing.as_secs_f64(), c.seconds());
     }
-    Ok(Row {
-        decoder: String::new(),
-        errors,
-        words,
-        rtf: processing / audio,
-        latency: None,
-    })
+    Ok(tally.row(String::new(), None))
 }
 
 fn baseline_row(b: &Baseline, clips: &[ClipAudio], references: &[String]) -> Row {
-    let (mut errors, mut words) = (0, 0);
-    for (text, reference) in b.texts.iter().zip(references) {
-        let (e, n) = word_errors(reference, text);
-        errors += e;
-        words += n;
+    let mut tally = Tally::default();
+    for ((text, reference), (c, seconds)) in b
+        .texts
+        .iter()
+        .zip(references)
+        .zip(clips.iter().zip(&b.per_clip))
+    {
+        tally.add(reference, text, *seconds, c.seconds());
     }
-    let audio: f64 = clips.iter().map(ClipAudio::seconds).sum();
-    Row {
-        decoder: format!(
+    tally.row(
+        format!(
             "faster-whisper {} beam {} (whole clips)",
             b.compute_type, b.beam
         ),
-        errors,
-        words,
-        rtf: b.per_clip.iter().sum::<f64>() / audio,
-        latency: None,
-    }
+        None,
+    )
 }
 
 /// Runs every model and decoder; returns the Markdown table rows and the SUMMARY lines.
