@@ -12,20 +12,26 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: run test bench fuzz deps model model-release build build-debug python clean
+.PHONY: run test bench fuzz deps model model-base model-release build build-debug python clean
 
+# The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
+# and a satellite hearing Italian with the multilingual base model).
+LANGUAGE ?= en
 # The Whisper model the satellite of `make run` uses and `make model` provisions: tiny.en (fast, English), or base
-# (multilingual, slower and more accurate; `make model MODEL=base`, `make run MODEL=base`). The tests use tiny.en.
+# (multilingual, slower and more accurate; `make model MODEL=base`, `make run MODEL=base`). Italian needs base.
+ifeq ($(LANGUAGE),it)
+MODEL ?= base
+endif
 MODEL ?= tiny.en
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
 run: deps model-release build
-	WHISPER_SAT_MODEL=$(MODEL) scripts/run.sh $(TARGET_DIR)/release
+	WHISPER_SAT_MODEL=$(MODEL) AGENT_LANGUAGE=$(LANGUAGE) scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting and lints and run every test: the page's JavaScript units (node's test
 ## runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
 ## binaries.
-test: deps model build-debug python
+test: deps model model-base build-debug python
 	$(CARGO) fmt --all --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 	node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
@@ -59,6 +65,10 @@ deps:
 
 model:
 	MODEL=$(MODEL) scripts/model.sh
+
+# The tests hear Italian with the base model too.
+model-base:
+	MODEL=base scripts/model.sh
 
 model-release:
 	MODEL=$(MODEL) CARGO_PROFILE_FLAGS=--release scripts/model.sh

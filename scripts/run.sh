@@ -7,7 +7,13 @@ bin="${1:?usage: run.sh BIN_DIR}"
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
-"$bin/robot-agent" "${@:2}" &
+# AGENT_LANGUAGE=it (`make run LANGUAGE=it`) runs the agent on config/italian.toml and the satellite in Italian.
+language="${AGENT_LANGUAGE:-en}"
+config=()
+if [[ "$language" == it ]]; then
+    config=(--config config/italian.toml)
+fi
+"$bin/robot-agent" "${config[@]}" "${@:2}" &
 agent=$!
 trap 'kill $agent ${sat:-} 2>/dev/null; wait 2>/dev/null' EXIT INT TERM
 
@@ -18,7 +24,7 @@ for _ in $(seq 100); do
 done
 if [[ -x "$bin/whisper-sat" ]]; then
     # WHISPER_SAT_MODEL names a provisioned model (`make run MODEL=base`); the satellite's default is tiny.en.
-    "$bin/whisper-sat" run --data-dir data --model "${WHISPER_SAT_MODEL:-tiny.en}" &
+    "$bin/whisper-sat" run --data-dir data --model "${WHISPER_SAT_MODEL:-tiny.en}" --language "$language" &
     sat=$!
 fi
 wait "$agent"

@@ -8,7 +8,7 @@
 use agent_contract::channels as ch;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, Satellite, fixture, run};
+use agent_tests::{Agent, DataDir, Satellite, fixture, json_message, next_payload, run};
 use anyhow::Context;
 use flow::Subscription;
 use serde_json::Value;
@@ -69,18 +69,6 @@ impl Seen {
     }
 }
 
-fn json(payload: &[u8]) -> Option<Value> {
-    serde_json::from_slice(payload).ok()
-}
-
-async fn next(sub: &Subscription) -> anyhow::Result<bytes::Bytes> {
-    Ok(sub
-        .recv()
-        .await
-        .with_context(|| format!("{} ended", sub.name()))?
-        .payload)
-}
-
 /// A robot-agent with the shipped rule program, once the brain has loaded it. No camera here: the vision module
 /// stays off so that nothing but the voice moves the brain.
 async fn conversing_agent(dir: &DataDir) -> anyhow::Result<Agent> {
@@ -120,17 +108,17 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
     let waited = tokio::time::timeout(PATIENCE, async {
         while !seen.complete() {
             tokio::select! {
-                p = next(&transcript) => {
-                    if let Some(v) = json(&p?) {
+                p = next_payload(&transcript) => {
+                    if let Some(v) = json_message(&p?) {
                         seen.transcript_message(v);
                     }
                 }
-                p = next(&rules) => {
-                    if let Some(v) = json(&p?) {
+                p = next_payload(&rules) => {
+                    if let Some(v) = json_message(&p?) {
                         seen.rule_trace(v);
                     }
                 }
-                p = next(&speech) => {
+                p = next_payload(&speech) => {
                     seen.speech_bytes += p?.len();
                     // Once, while the reply is being spoken: the exposition parses mid-turn too, and the
                     // transcript that led to the reply is already counted.
@@ -138,8 +126,8 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
                         mid_turn = Some(agent_tests::metrics::parse(&agent_tests::metrics::scrape(&agent).await?).await?);
                     }
                 }
-                p = next(&avatar) => {
-                    if let Some(v) = json(&p?) {
+                p = next_payload(&avatar) => {
+                    if let Some(v) = json_message(&p?) {
                         seen.avatar_command(&v);
                     }
                 }
@@ -395,13 +383,13 @@ async fn gather(
 ) -> anyhow::Result<()> {
     while !done(finals) {
         tokio::select! {
-            p = next(transcript) => {
-                if let Some(v) = json(&p?) && v["final"] == true {
+            p = next_payload(transcript) => {
+                if let Some(v) = json_message(&p?) && v["final"] == true {
                     finals.push(v);
                 }
             }
-            p = next(rules) => {
-                if let Some(v) = json(&p?) && caused_by_hearing(&v) {
+            p = next_payload(rules) => {
+                if let Some(v) = json_message(&p?) && caused_by_hearing(&v) {
                     answers.push(v);
                 }
             }
@@ -494,7 +482,7 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
             tokio::select! {
                 d = transcript.recv() => {
                     let d = d.context("Agent.transcript ended")?;
-                    if let Some(v) = json(&d.payload) {
+                    if let Some(v) = json_message(&d.payload) {
                         if v["vad"] == "start" {
                             starts.push((d.ts_us, v));
                         } else if v["final"] == true && heard.is_none() {
@@ -504,16 +492,16 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
                 }
                 d = avatar.recv() => {
                     let d = d.context("Agent.avatar ended")?;
-                    if let Some(v) = json(&d.payload) && v["cmd"] == "speech_stop" && stop.is_none() {
+                    if let Some(v) = json_message(&d.payload) && v["cmd"] == "speech_stop" && stop.is_none() {
                         stop = Some((d.ts_us, v));
                     }
                 }
-                p = next(&rules) => {
-                    if let Some(v) = json(&p?) && v["interrupted"].is_string() {
+                p = next_payload(&rules) => {
+                    if let Some(v) = json_message(&p?) && v["interrupted"].is_string() {
                         interrupted = Some(v);
                     }
                 }
-                p = next(&speech) => { p?; }
+                p = next_payload(&speech) => { p?; }
             }
         }
         anyhow::Ok(())
@@ -712,8 +700,8 @@ where
             }
             // Speech that started is waited for until its transcript is in, however long whisper takes.
             () = quiet, if scene.vad_starts == 0 || !scene.finals.is_empty() => break,
-            p = next(transcript) => {
-                if let Some(v) = json(&p?) {
+            p = next_payload(transcript) => {
+                if let Some(v) = json_message(&p?) {
                     if v["vad"] == "start" {
                         scene.vad_starts += 1;
                     } else if v["final"] == true {
@@ -721,17 +709,17 @@ where
                     }
                 }
             }
-            p = next(avatar) => {
-                if let Some(v) = json(&p?) && v["cmd"] == "speech_stop" && v["barge_in"] == true {
+            p = next_payload(avatar) => {
+                if let Some(v) = json_message(&p?) && v["cmd"] == "speech_stop" && v["barge_in"] == true {
                     scene.barge_ins += 1;
                 }
             }
-            p = next(rules) => {
-                if let Some(v) = json(&p?) && caused_by_hearing(&v) {
+            p = next_payload(rules) => {
+                if let Some(v) = json_message(&p?) && caused_by_hearing(&v) {
                     scene.heard_rules += 1;
                 }
             }
-            p = next(speech) => { p?; }
+            p = next_payload(speech) => { p?; }
         }
     }
     // Whatever is still playing of the reply ends before the next scene.

@@ -585,6 +585,10 @@ async fn configuration_errors_name_the_file_the_key_and_the_reason() -> anyhow::
             "[server]\nhttp = \"0.0.0.0:0\"\n[http]\nopen_on_loopback = true\n",
             "test-config.toml: http.open_on_loopback: ",
         ),
+        (
+            "[agent]\nlanguage = \"fr\"\n",
+            "test-config.toml: agent.language: unknown language \"fr\" (expected \"en\" or \"it\")",
+        ),
     ] {
         let data = DataDir::new()?;
         let err = Agent::with_config(&data, toml)

@@ -27,6 +27,7 @@ pub struct Config {
     pub hub: HubSection,
     pub ticks: TickSection,
     pub http: HttpSection,
+    pub agent: AgentSection,
     /// `[modules.NAME]` tables, handed to each module as JSON parameters.
     #[serde(default)]
     pub modules: BTreeMap<String, toml::Table>,
@@ -73,6 +74,14 @@ pub struct HttpSection {
     pub open_on_loopback: bool,
     /// How long a page session cookie stays valid.
     pub cookie_days: u64,
+}
+
+/// `[agent]`: what the application running on the hub is about, read by its modules (the hub itself ignores it).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AgentSection {
+    /// The language the agent converses in, as an ISO 639-1 code; the application checks that it knows it.
+    pub language: String,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]

@@ -8,6 +8,7 @@ pub mod modules;
 // The hub's parts the modules build on, under the paths they have always used.
 pub use flow_hub::{Config, RunningServer, Shared, config, http, module};
 
+use agent_brain::Language;
 use flow_hub::Application;
 use flow_hub::module::Module;
 use tokio::sync::watch;
@@ -20,10 +21,15 @@ pub async fn start(config: Config) -> anyhow::Result<RunningServer> {
 
 /// The agent as an application of the hub: its modules and the page link.
 pub fn application(config: &Config) -> anyhow::Result<Application> {
+    let language: Language = config
+        .agent
+        .language
+        .parse()
+        .map_err(|e: agent_brain::UnknownLanguage| config.error("agent.language", e.to_string()))?;
     let shutdown = watch::channel(false).0;
     let browser = browser::BrowserLink::from_config(config, shutdown.subscribe())
         .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
-    let modules: Vec<Box<dyn Module>> = modules::builtin()
+    let modules: Vec<Box<dyn Module>> = modules::builtin(language)
         .into_iter()
         .chain(std::iter::once(browser.module()))
         .collect();

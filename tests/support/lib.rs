@@ -27,4 +27,4 @@ pub use wait::PATIENCE;
 pub fn artifacts_dir() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
 }
-pub use wait::{recv, until_subscribed, until_unsubscribed};
+pub use wait::{json_message, next_payload, recv, until_subscribed, until_unsubscribed};

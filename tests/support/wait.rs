@@ -35,3 +35,18 @@ pub async fn until_unsubscribed(publisher: &Publisher) -> anyhow::Result<()> {
         .context("client closed")?;
     Ok(())
 }
+
+/// The next payload of a subscription, unbounded: for loops that wait on several subscriptions inside a timeout of
+/// their own.
+pub async fn next_payload(sub: &Subscription) -> anyhow::Result<bytes::Bytes> {
+    Ok(sub
+        .recv()
+        .await
+        .with_context(|| format!("{} ended", sub.name()))?
+        .payload)
+}
+
+/// A payload read as JSON, if it is JSON.
+pub fn json_message(payload: &[u8]) -> Option<serde_json::Value> {
+    serde_json::from_slice(payload).ok()
+}

@@ -3,6 +3,8 @@
 
 use serde::Serialize;
 
+use crate::clock_it;
+use crate::language::Language;
 use crate::value::Value;
 
 /// A local civil time.
@@ -20,6 +22,8 @@ pub struct WallClock {
     pub hour: u32,
     pub minute: u32,
     pub second: u32,
+    /// The language of the words the clock gives (`time.spoken`, `date.month`...).
+    pub language: Language,
 }
 
 const WEEKDAYS: [&str; 7] = [
@@ -79,6 +83,28 @@ impl WallClock {
             hour: (second_of_day / 3600) as u32,
             minute: (second_of_day / 60 % 60) as u32,
             second: (second_of_day % 60) as u32,
+            language: Language::En,
+        }
+    }
+
+    /// The same time, told in `language`.
+    pub fn in_language(self, language: Language) -> Self {
+        Self { language, ..self }
+    }
+
+    fn weekday_name(&self) -> &'static str {
+        let i = self.weekday as usize % 7;
+        match self.language {
+            Language::En => WEEKDAYS[i],
+            Language::It => clock_it::WEEKDAYS[i],
+        }
+    }
+
+    fn month_name(&self) -> &'static str {
+        let i = (self.month as usize + 11) % 12;
+        match self.language {
+            Language::En => MONTHS[i],
+            Language::It => clock_it::MONTHS[i],
         }
     }
 
@@ -91,17 +117,23 @@ impl WallClock {
             ["time", "minute"] => Value::from(self.minute),
             ["time", "second"] => Value::from(self.second),
             ["time", "daypart"] => Value::from(self.daypart()),
-            ["time", "greeting"] => Value::from(self.greeting()),
-            ["time", "spoken"] => Value::Text(self.spoken_time()),
-            ["date", "weekday"] => Value::from(WEEKDAYS[self.weekday as usize % 7]),
+            ["time", "greeting"] => Value::from(match self.language {
+                Language::En => self.greeting(),
+                Language::It => clock_it::greeting(self.hour),
+            }),
+            ["time", "spoken"] => Value::Text(match self.language {
+                Language::En => self.spoken_time(),
+                Language::It => clock_it::spoken_time(self.hour, self.minute),
+            }),
+            ["date", "weekday"] => Value::from(self.weekday_name()),
             ["date", "day"] => Value::from(self.day),
-            ["date", "month"] => Value::from(MONTHS[(self.month as usize + 11) % 12]),
+            ["date", "month"] => Value::from(self.month_name()),
             ["date", "year"] => Value::Num(self.year as f64),
             ["date", "spoken"] => Value::Text(format!(
                 "{} {} {}",
-                WEEKDAYS[self.weekday as usize % 7],
+                self.weekday_name(),
                 self.day,
-                MONTHS[(self.month as usize + 11) % 12]
+                self.month_name()
             )),
             _ => return None,
         })
@@ -229,5 +261,16 @@ mod tests {
             Some(Value::from("Good afternoon"))
         );
         assert_eq!(field("time", "nope"), None);
+        let italian = clock.in_language(Language::It);
+        let field = |a: &str, b: &str| italian.field(&[a.to_owned(), b.to_owned()]);
+        assert_eq!(
+            field("date", "spoken"),
+            Some(Value::from("giovedì 29 febbraio"))
+        );
+        assert_eq!(field("time", "greeting"), Some(Value::from("Buongiorno")));
+        assert_eq!(
+            field("time", "spoken"),
+            Some(Value::from("È mezzogiorno e 34 minuti"))
+        );
     }
 }

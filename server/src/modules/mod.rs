@@ -1,5 +1,7 @@
 //! The built-in modules and the switch that picks them from the configuration.
 
+use agent_brain::Language;
+
 use crate::module::Module;
 
 pub mod audio_fft;
@@ -13,13 +15,13 @@ pub mod tts;
 pub mod video_y;
 pub mod vision;
 
-/// The built-in modules besides the browser link, in start order (the server starts those enabled). The
-/// TTS module starts before any other publisher of avatar commands: it owns
+/// The built-in modules besides the browser link, in start order (the server starts those enabled), conversing
+/// in `language`. The TTS module starts before any other publisher of avatar commands: it owns
 /// `Agent.avatar` (the behaviour controllers publish through it).
-pub fn builtin() -> Vec<Box<dyn Module>> {
+pub fn builtin(language: Language) -> Vec<Box<dyn Module>> {
     vec![
-        Box::new(tts::TtsModule),
-        Box::new(brain::BrainModule),
+        Box::new(tts::TtsModule { language }),
+        Box::new(brain::BrainModule { language }),
         Box::new(vision::VisionModule),
         Box::new(video_y::VideoY),
         Box::new(audio_fft::AudioFft),

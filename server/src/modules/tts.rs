@@ -12,6 +12,7 @@ pub mod wire;
 
 use std::sync::Arc;
 
+use agent_brain::Language;
 use agent_voice::{Synthesizer, SynthesizerConfig, VoiceSettings};
 use anyhow::Context;
 use bytes::Bytes;
@@ -27,9 +28,11 @@ use params::TtsParams;
 use speaker::{Counters, Outputs, Speaker};
 use wire::{AvatarCommand, CancelTarget, Hearing, SayRequest, VoiceChoice};
 
-/// The built-in TTS module (`[modules.tts]`).
+/// The built-in TTS module (`[modules.tts]`), speaking the agent's language unless its section names a voice.
 #[derive(Debug, Default)]
-pub struct TtsModule;
+pub struct TtsModule {
+    pub language: Language,
+}
 
 impl Module for TtsModule {
     fn name(&self) -> &'static str {
@@ -41,7 +44,7 @@ impl Module for TtsModule {
     }
 
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
-        Box::pin(run(ctx))
+        Box::pin(run(ctx, self.language))
     }
 }
 
@@ -56,7 +59,7 @@ struct Tts {
     counters: Arc<Counters>,
 }
 
-async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
+async fn run(ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     let params = TtsParams::from_json(&ctx.params)?;
     let engine_config = SynthesizerConfig {
         data_path: params.data_path.clone(),
@@ -108,7 +111,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
     });
     let tts = Tts {
         synth,
-        voice: params.voice_settings(),
+        voice: params.voice_settings(language),
         speaker,
         avatar,
         behaviour,

@@ -6,7 +6,8 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use agent_brain::{
-    Action, Brain, Capabilities, Effect, NoPairDb, Now, Program, Step, Trace, Value, WallClock,
+    Action, Brain, Capabilities, Effect, Language, NoPairDb, Now, Program, Step, Trace, Value,
+    WallClock,
 };
 
 /// 2024-02-29 15:15:00 UTC, a Thursday afternoon: "quarter past 3 in the afternoon".
@@ -33,6 +34,19 @@ pub fn default_program_source() -> String {
     std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()))
 }
 
+/// A program shipped in `config/`, loaded as the server loads it.
+pub fn shipped_program(name: &str) -> Program {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../config")
+        .join(name);
+    let source = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    match Program::load(&format!("config/{name}"), &source, &capabilities()) {
+        Ok(program) => program,
+        Err(error) => panic!("config/{name} does not load:\n{error}"),
+    }
+}
+
 pub fn default_program() -> Program {
     match Program::load(
         "config/brain.tr",
@@ -53,6 +67,8 @@ pub struct Sim {
     pub effects: Vec<(Duration, Effect)>,
     pub traces: Vec<Trace>,
     pub warnings: Vec<String>,
+    /// The language of the clock's words.
+    pub language: Language,
 }
 
 impl Sim {
@@ -64,8 +80,16 @@ impl Sim {
             effects: Vec::new(),
             traces: Vec::new(),
             warnings: Vec::new(),
+            language: Language::En,
         };
         sim.step();
+        sim
+    }
+
+    /// A brain whose clock speaks `language`.
+    pub fn in_language(program: Program, language: Language) -> Self {
+        let mut sim = Sim::new(program);
+        sim.language = language;
         sim
     }
 
@@ -73,7 +97,7 @@ impl Sim {
         let unix_ms = BASE_UNIX_MS + self.elapsed.as_millis() as i64;
         Now {
             at: self.start + self.elapsed,
-            clock: WallClock::from_unix_ms(unix_ms, 0),
+            clock: WallClock::from_unix_ms(unix_ms, 0).in_language(self.language),
         }
     }
 

@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use agent_brain::{
-    Action, Brain, Capabilities, EchoFilter, Effect, Now, PerceptError, Value, WallClock,
+    Action, Brain, Capabilities, EchoFilter, Effect, Language, Now, PerceptError, Value, WallClock,
 };
 use agent_contract::channels;
 use flow::tick::Tick;
@@ -29,9 +29,11 @@ use percepts::{Hearing, Percept};
 use program_file::{ProgramFile, Reload};
 use speech::{PlayoutClock, Speech};
 
-/// The built-in brain module (`[modules.brain]`).
+/// The built-in brain module (`[modules.brain]`), conversing in the agent's language.
 #[derive(Debug, Default)]
-pub struct BrainModule;
+pub struct BrainModule {
+    pub language: Language,
+}
 
 impl Module for BrainModule {
     fn name(&self) -> &'static str {
@@ -43,14 +45,14 @@ impl Module for BrainModule {
         let capabilities = Capabilities {
             commands: params.commands.keys().cloned().collect(),
         };
-        ProgramFile::new(params.program.clone(), capabilities)
+        ProgramFile::new(params.program(self.language), capabilities)
             .load()
             .map(drop)
             .map_err(|e| anyhow::anyhow!("[modules.brain] program: {e:#}"))
     }
 
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
-        Box::pin(run(ctx))
+        Box::pin(run(ctx, self.language))
     }
 }
 
@@ -78,17 +80,19 @@ struct Mind {
     db: BTreeMap<String, Value>,
     client: Client,
     utc_offset_s: i32,
+    /// The language of the clock's words.
+    language: Language,
     counters: Counters,
     /// The last reply asked of the TTS module, for the trace entry of a barge-in that cuts it off.
     saying: Option<String>,
 }
 
-async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
+async fn run(ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     let params = BrainParams::from_json(&ctx.params)?;
     let capabilities = Capabilities {
         commands: params.commands.keys().cloned().collect(),
     };
-    let mut file = ProgramFile::new(params.program.clone(), capabilities);
+    let mut file = ProgramFile::new(params.program(language), capabilities);
     let program = file.load()?;
     info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
 
@@ -118,6 +122,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
         utc_offset_s: params
             .utc_offset_minutes
             .map_or_else(wire::local_utc_offset_s, |minutes| minutes * 60),
+        language,
         counters: Counters::default(),
         saying: None,
     };
@@ -177,7 +182,7 @@ impl Mind {
             .map_or(0, |d| d.as_millis() as i64);
         Now {
             at: Instant::now().into_std(),
-            clock: WallClock::from_unix_ms(unix_ms, self.utc_offset_s),
+            clock: WallClock::from_unix_ms(unix_ms, self.utc_offset_s).in_language(self.language),
         }
     }
 

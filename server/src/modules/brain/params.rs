@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use agent_brain::Language;
 use serde::Deserialize;
 
 /// `[modules.brain]`.
@@ -13,9 +14,10 @@ pub struct BrainParams {
     /// Read by the server to switch the module off; accepted and ignored here.
     #[serde(default, rename = "enabled")]
     _enabled: serde::de::IgnoredAny,
-    /// The teleo-reactive program; a relative path is taken from the working directory.
-    #[serde(default = "default_program")]
-    pub program: PathBuf,
+    /// The teleo-reactive program; a relative path is taken from the working directory. By default the
+    /// program of the agent's language (`config/brain.tr`, `config/brain.it.tr`).
+    #[serde(default)]
+    pub program: Option<PathBuf>,
     /// The commands programs may `run`, by name: each a fixed command line (no shell).
     #[serde(default = "default_commands")]
     pub commands: BTreeMap<String, Vec<String>>,
@@ -40,10 +42,6 @@ pub struct BrainParams {
     /// The local time zone as minutes east of UTC, for `time.*`; by default the server's own.
     #[serde(default)]
     pub utc_offset_minutes: Option<i32>,
-}
-
-fn default_program() -> PathBuf {
-    PathBuf::from("config/brain.tr")
 }
 
 fn default_commands() -> BTreeMap<String, Vec<String>> {
@@ -127,6 +125,16 @@ impl BrainParams {
         Ok(())
     }
 
+    /// The program to run: the configured one, or the default of `language`.
+    pub fn program(&self, language: Language) -> PathBuf {
+        self.program.clone().unwrap_or_else(|| {
+            PathBuf::from(match language {
+                Language::En => "config/brain.tr",
+                Language::It => "config/brain.it.tr",
+            })
+        })
+    }
+
     pub fn command_timeout(&self) -> Duration {
         Duration::from_millis(self.command_timeout_ms)
     }
@@ -148,7 +156,14 @@ mod tests {
     #[test]
     fn defaults_apply_to_an_absent_section() -> anyhow::Result<()> {
         let params = BrainParams::from_json(&json!({}))?;
-        assert_eq!(params.program, PathBuf::from("config/brain.tr"));
+        assert_eq!(
+            params.program(Language::En),
+            PathBuf::from("config/brain.tr")
+        );
+        assert_eq!(
+            params.program(Language::It),
+            PathBuf::from("config/brain.it.tr")
+        );
         assert!(params.commands.contains_key("uptime"));
         Ok(())
     }

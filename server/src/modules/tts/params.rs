@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
+use agent_brain::Language;
 use agent_voice::VoiceSettings;
 use serde::Deserialize;
 
@@ -15,9 +16,9 @@ pub struct TtsParams {
     /// Read by the server to switch the module off; accepted and ignored here.
     #[serde(default, rename = "enabled")]
     _enabled: serde::de::IgnoredAny,
-    /// espeak-ng voice or language (`en`, `en-us`, `it`, `en+f3`).
-    #[serde(default = "default_voice")]
-    pub voice: String,
+    /// espeak-ng voice or language (`en`, `en-us`, `it`, `en+f3`); by default that of `agent.language`.
+    #[serde(default)]
+    pub voice: Option<String>,
     /// Words per minute, 80-450.
     #[serde(default = "default_rate")]
     pub rate_wpm: u32,
@@ -48,9 +49,6 @@ pub struct TtsParams {
     pub behaviour: BehaviourParams,
 }
 
-fn default_voice() -> String {
-    "en".to_owned()
-}
 fn default_rate() -> u32 {
     175
 }
@@ -76,7 +74,7 @@ impl TtsParams {
         let params: TtsParams = serde_path_to_error::deserialize(params)
             .map_err(|e| anyhow::anyhow!("[modules.tts] {}: {}", e.path(), e.inner()))?;
         params
-            .voice_settings()
+            .voice_settings(Language::En)
             .validate()
             .map_err(|e| anyhow::anyhow!("[modules.tts] {e}"))?;
         if !(10..=500).contains(&params.chunk_ms) {
@@ -98,10 +96,14 @@ impl TtsParams {
         Ok(params)
     }
 
-    /// The default voice of every utterance that does not choose its own.
-    pub fn voice_settings(&self) -> VoiceSettings {
+    /// The default voice of every utterance that does not choose its own: the configured one, or espeak-ng's
+    /// voice for the agent's language.
+    pub fn voice_settings(&self, language: Language) -> VoiceSettings {
         VoiceSettings {
-            voice: self.voice.clone(),
+            voice: self
+                .voice
+                .clone()
+                .unwrap_or_else(|| language.code().to_owned()),
             rate_wpm: self.rate_wpm,
             pitch: self.pitch,
             range: self.range,
@@ -121,7 +123,14 @@ mod tests {
     #[test]
     fn defaults_and_named_errors() {
         let params = TtsParams::from_json(&serde_json::json!({})).expect("defaults are valid");
-        assert_eq!(params.voice_settings(), VoiceSettings::default());
+        assert_eq!(
+            params.voice_settings(Language::En),
+            VoiceSettings::default()
+        );
+        // Without a voice of its own, the module speaks the agent's language.
+        assert_eq!(params.voice_settings(Language::It).voice, "it");
+        let chosen = TtsParams::from_json(&serde_json::json!({ "voice": "en+f3" })).expect("valid");
+        assert_eq!(chosen.voice_settings(Language::It).voice, "en+f3");
         let error = TtsParams::from_json(&serde_json::json!({ "rate_wpm": 9000 }))
             .expect_err("out of range");
         assert!(error.to_string().contains("rate_wpm"), "{error}");

@@ -1,0 +1,96 @@
+//! The Italian program `config/brain.it.tr` (`agent.language = "it"`): its answers to Italian phrases as Whisper
+//! writes them, with the clock's words in Italian.
+
+mod common;
+
+use agent_brain::{Action, Effect, Language, Value};
+use common::{Sim, ms, says, shipped_program};
+
+/// A brain on the Italian program, with the clock at 15:15 on Thursday 29 February and nobody in view.
+fn assistente() -> Sim {
+    Sim::in_language(shipped_program("brain.it.tr"), Language::It)
+}
+
+/// Hears `text` in the given scene and returns the one sentence said.
+fn risposta_in(scene: &[(&str, Vec<Value>)], text: &str) -> String {
+    let mut sim = assistente();
+    for (name, args) in scene {
+        sim.perceive(name, args.clone());
+    }
+    sim.advance(ms(1000));
+    let answer = says(&sim.hear(text));
+    assert_eq!(answer.len(), 1, "one sentence for {text:?}, got {answer:?}");
+    answer[0].clone()
+}
+
+fn risposta(text: &str) -> String {
+    risposta_in(&[], text)
+}
+
+#[test]
+fn the_italian_program_loads_with_the_rules_of_the_english_one() {
+    let italian = shipped_program("brain.it.tr");
+    let english = shipped_program("brain.tr");
+    assert!(italian.rule_count() >= english.rule_count());
+}
+
+#[test]
+fn the_time_and_the_date_are_told_in_italian() {
+    for asked in ["Che ore sono?", "che ora è", "Sai l'ora?"] {
+        assert_eq!(
+            risposta(asked),
+            "Sono le 3 e un quarto del pomeriggio.",
+            "{asked}"
+        );
+    }
+    assert_eq!(
+        risposta("Che giorno è oggi?"),
+        "Oggi è giovedì 29 febbraio."
+    );
+}
+
+#[test]
+fn people_codes_greetings_and_the_rest() {
+    let face = |n: f64| ("face", vec![Value::Num(n), Value::from("centre")]);
+    assert_eq!(
+        risposta_in(&[face(2.0)], "Quante persone vedi?"),
+        "Vedo 2 persone."
+    );
+    assert_eq!(
+        risposta("Quante persone ci sono?"),
+        "Non vedo nessuno in questo momento."
+    );
+    assert_eq!(
+        risposta_in(
+            &[("code", vec![Value::from("ciao mondo")])],
+            "Leggi il codice"
+        ),
+        "Il codice dice: ciao mondo."
+    );
+    assert_eq!(risposta("Ciao"), "Ciao! Come posso aiutarti?");
+    assert_eq!(risposta("Grazie mille"), "Prego.");
+    assert_eq!(
+        risposta("Parlami del tempo"),
+        "Scusa, non ho capito. Puoi chiedermi l'ora, o cosa vedo."
+    );
+}
+
+#[test]
+fn a_face_is_greeted_once_in_italian() {
+    let mut sim = assistente();
+    // A face seen at 5 frames a second for a second (one detection alone is not greeted).
+    for _ in 0..5 {
+        sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+        sim.advance(ms(200));
+    }
+    assert_eq!(
+        sim.said(),
+        ["Buongiorno! Piacere di vederti. Chiedimi pure."]
+    );
+}
+
+#[test]
+fn basta_stops_the_agent() {
+    let mut sim = assistente();
+    assert_eq!(sim.hear("Basta!"), vec![Effect::Fire(Action::Cancel)]);
+}
