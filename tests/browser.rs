@@ -457,6 +457,50 @@ async fn second_tab_is_refused_the_role_and_takes_over_when_the_first_leaves() -
     Ok(())
 }
 
+/// The page speaks the agent's language: with `agent.language = "it"` its controls read in Italian as soon as the
+/// welcome arrives, and `?lang=en` keeps them in English.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_shows_its_controls_in_the_agents_language_unless_the_address_asks_for_another()
+-> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let data = DataDir::new()?;
+    let opts = agent_tests::AgentOptions {
+        config: Some(format!(
+            "[agent]\nlanguage = \"it\"\n{}",
+            agent_tests::browser_link::LINK_ONLY_CONFIG
+        )),
+        ..Default::default()
+    };
+    let agent = Agent::start_with(&data, opts).await?;
+    let browser = Chromium::launch(&media().0).await?;
+    for (query, language, label, spectrum) in [
+        ("", "it", "Accendi il microfono", "Spettro del microfono"),
+        ("lang=en", "en", "Start microphone", "Microphone spectrum"),
+    ] {
+        let tab = browser.open(&agent.page_url(query)).await?;
+        browser
+            .wait_for(
+                &tab,
+                &format!("window.agentDebug && agentDebug.welcomes > 0 && agentDebug.language === {language:?}"),
+                PAGE_READY,
+            )
+            .await?;
+        let shown = browser
+            .eval(
+                &tab,
+                "[agentDebug.micLabel, document.documentElement.lang, document.querySelector('[data-words=spectrum]').textContent]",
+            )
+            .await?;
+        ensure!(
+            shown == json!([label, language, spectrum]),
+            "{query:?}: the page shows {shown}"
+        );
+        browser.close(&tab).await?;
+    }
+    browser.quit().await;
+    Ok(())
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn page_explains_denied_permission_and_missing_devices() -> anyhow::Result<()> {
     let _one = ONE_BROWSER.lock().await;

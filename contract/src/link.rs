@@ -54,6 +54,14 @@ pub struct Welcome {
     pub video: VideoFormat,
     pub fft: FftFormat,
     pub role: RoleInfo,
+    /// The language the agent converses in (`agent.language`, `en` or `it`): the page shows its controls in it
+    /// unless `?lang=` chooses. Absent from servers that predate it, which speak English.
+    #[serde(default = "english")]
+    pub language: String,
+}
+
+fn english() -> String {
+    "en".into()
 }
 
 /// Media counters of the last second.

@@ -253,6 +253,7 @@ pub fn link() -> serde_json::Value {
         role: RoleInfo {
             state: "free".into(),
         },
+        language: "it".into(),
     };
     let status = Status {
         kind: "status".into(),

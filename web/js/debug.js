@@ -27,6 +27,10 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   define("blinkLog", () => avatar.debugState().blinkLog ?? null);
   define("visemeSchedule", () => avatar.debugState().schedule ?? null);
   define("role", () => page.role);
+  // The language of the page's words, and the microphone button's label as shown (both follow the welcome).
+  define("language", () => page.language);
+  define("welcomes", () => page.welcomes);
+  define("micLabel", () => document.querySelector("#mic-btn .btn-label")?.textContent ?? null);
   // The recorder's last state (Agent.recording): recording, file, started_ms, messages, error.
   define("recording", () => ({ ...page.recording }));
   // The status strip's latencies: last and median of each, ms (null until measured).

@@ -13,11 +13,27 @@ import { Latencies } from "./panels/latency.js";
 import { RuleTrace } from "./panels/rules.js";
 import { Spectrum } from "./panels/spectrum.js";
 import { StatusStrip } from "./panels/status.js";
+import { fill, pickLanguage, wordsFor } from "./panels/words.js";
 import { installDebugHook } from "./debug.js";
 
 const params = new URLSearchParams(location.search);
 const autostart = params.get("autostart") === "1";
 const $ = (id) => document.getElementById(id);
+
+// The page's words: `?lang=` if it names a language the page knows, else the agent's (from the welcome).
+let language = pickLanguage(params.get("lang"), null);
+let words = wordsFor(language);
+function applyLanguage(next) {
+  language = next;
+  words = wordsFor(language);
+  document.documentElement.lang = language;
+  page.language = language;
+  for (const el of document.querySelectorAll("[data-words]")) el.textContent = words[el.dataset.words];
+  for (const el of document.querySelectorAll("[data-words-title]")) el.title = words[el.dataset.wordsTitle];
+  for (const el of document.querySelectorAll("[data-words-placeholder]")) {
+    el.placeholder = words[el.dataset.wordsPlaceholder];
+  }
+}
 
 const link = new Link({ autostart });
 // `?avatar=2d` or `?avatar=3d` picks the renderer; the 3D head falls back to the 2D face where it cannot run.
@@ -83,6 +99,10 @@ const page = {
   videoFps: 15,
   /** The recorder module's state, as Agent.recording last said. */
   recording: { recording: false, file: null, started_ms: null, messages: 0 },
+  /** The language of the page's words ("en" or "it"). */
+  language: "en",
+  /** Welcomes received on this page's sockets (the words follow the latest). */
+  welcomes: 0,
 };
 
 /** The status strip's "speech end -> reply audio" and "camera capture -> box drawn" figures. */
@@ -163,18 +183,18 @@ function reportMedia() {
   if (now.audio !== reported.audio || now.video !== reported.video) {
     if (link.sendJson({ type: "media", ...now })) reported = now;
   }
-  $("cam-meta").textContent = camera.running ? `${camera.fps} fps` : "off";
+  $("cam-meta").textContent = camera.running ? `${camera.fps} fps` : words.cameraOff;
   $("preview-empty").hidden = camera.running;
 }
 
 function refreshButtons() {
-  const set = (id, on, what) => {
+  const set = (id, on, start, stop) => {
     const b = $(id);
     b.dataset.on = String(on);
-    b.querySelector(".btn-label").textContent = `${on ? "Stop" : "Start"} ${what}`;
+    b.querySelector(".btn-label").textContent = on ? stop : start;
   };
-  set("mic-btn", page.wantMic, "microphone");
-  set("cam-btn", page.wantCam, "camera");
+  set("mic-btn", page.wantMic, words.startMicrophone, words.stopMicrophone);
+  set("cam-btn", page.wantCam, words.startCamera, words.stopCamera);
 }
 
 // Agent controls go to Agent.ctrl (docs/asr.md, docs/voice.md); the server accepts them only from the holder.
@@ -183,9 +203,12 @@ $("asr-btn").addEventListener("click", () => {
   if (link.sendJson({ type: "ctrl", data: { asr: !asrOn } })) {
     asrOn = !asrOn;
     $("asr-btn").dataset.on = String(asrOn);
-    $("asr-btn").textContent = `Listening: ${asrOn ? "on" : "off"}`;
+    showListening();
   }
 });
+function showListening() {
+  $("asr-btn").textContent = asrOn ? words.listeningOn : words.listeningOff;
+}
 $("hush-btn").addEventListener("click", () => link.sendJson({ type: "ctrl", data: { speech: "stop" } }));
 // The recorder module answers on Agent.recording; the button shows what it says, not what was asked.
 $("rec-btn").addEventListener("click", () => {
@@ -193,19 +216,22 @@ $("rec-btn").addEventListener("click", () => {
 });
 link.addEventListener("recording", (ev) => {
   page.recording = ev.detail.data;
+  showRecording();
+});
+function showRecording() {
   const r = page.recording;
   $("rec-btn").dataset.on = String(r.recording);
-  $("rec-btn").textContent = r.recording ? "Stop recording" : "Record";
+  $("rec-btn").textContent = r.recording ? words.stopRecording : words.record;
   const name = r.file ? r.file.split("/").pop() : "";
   $("rec-state").textContent = r.error
     ? r.error
     : r.recording
-      ? `● recording ${name}`
+      ? fill(words.recordingTo, { name })
       : r.file
-        ? `saved ${name} (${r.messages} messages)`
-        : "not recording";
+        ? fill(words.saved, { name, messages: r.messages })
+        : words.notRecording;
   $("rec-state").title = r.file ?? "";
-});
+}
 $("say-form").addEventListener("submit", (ev) => {
   ev.preventDefault();
   const text = $("say-text").value.trim();
@@ -215,7 +241,7 @@ $("say-form").addEventListener("submit", (ev) => {
 function refreshAgentControls() {
   const holder = page.role === "holder";
   for (const id of ["asr-btn", "hush-btn", "say-text", "say-btn", "rec-btn"]) $(id).disabled = !holder;
-  $("agent-meta").textContent = holder ? "you are talking to the agent" : "only while you hold the microphone";
+  $("agent-meta").textContent = holder ? words.holderMeta : words.notHolderMeta;
 }
 
 // ---- link events ---------------------------------------------------------------------------------------------
@@ -230,6 +256,13 @@ link.addEventListener("state", (ev) => {
 link.addEventListener("welcome", (ev) => {
   // Connected again: an earlier refusal shown in the banner no longer holds.
   showBanner(null);
+  applyLanguage(pickLanguage(params.get("lang"), ev.detail.language));
+  page.welcomes += 1;
+  refreshButtons();
+  refreshAgentControls();
+  showListening();
+  showRecording();
+  reportMedia();
   spectrum.configure(ev.detail.fft);
   if (autostart) {
     page.wantMic = true;

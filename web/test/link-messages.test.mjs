@@ -27,3 +27,8 @@ test("the status carries the counters the status strip shows", () => {
   assert.equal(typeof status.advice.video_fps, "number");
   assert.equal(typeof status.in.audio_fps, "number");
 });
+
+test("the welcome names the agent's language, one the page has words for", async () => {
+  const { WORDS } = await import("../js/panels/words.js");
+  assert.ok(Object.hasOwn(WORDS, welcome.language), welcome.language);
+});

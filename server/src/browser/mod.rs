@@ -102,6 +102,7 @@ impl BrowserLink {
                 pages: Mutex::new(HashMap::new()),
                 next_page: AtomicU64::new(1),
                 fft_hop,
+                language: config.agent.language.clone(),
                 shutdown,
             }),
         })

@@ -210,6 +210,7 @@ impl Conn {
             role: link::RoleInfo {
                 state: role.as_str().into(),
             },
+            language: self.shared.language.clone(),
         };
         self.send_json(serde_json::to_value(welcome).unwrap_or_default())
             .await;

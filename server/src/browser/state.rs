@@ -30,6 +30,8 @@ pub struct Shared {
     pub pages: Mutex<HashMap<PageId, mpsc::Sender<Notice>>>,
     pub next_page: AtomicU64,
     pub fft_hop: usize,
+    /// The agent's language (`agent.language`), told to the page in its welcome.
+    pub language: String,
     pub shutdown: watch::Receiver<bool>,
 }
 
