@@ -20,7 +20,7 @@ use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
 use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
 
 use super::fleet_bench::fleets;
-use super::wer_bench::{provisioned_models, wer_bench};
+use super::wer_bench::{Suite, provisioned_models, wer_bench};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -93,16 +93,18 @@ pub(super) fn process_peak_rss_mb(pid: &str) -> f64 {
 fn load_clips() -> anyhow::Result<Vec<ClipAudio>> {
     FIXTURE_CLIPS
         .iter()
-        .map(|name| {
-            let path = fixtures_dir().join(format!("audio/{name}.wav"));
-            let clip = whisper_sat::wav::read_mono(&path)?;
-            Ok(ClipAudio {
-                name: (*name).to_owned(),
-                audio: resample_clip(&clip.samples, clip.rate, RATE)?,
-                path,
-            })
-        })
+        .map(|name| clip_from(name, &fixtures_dir().join(format!("audio/{name}.wav"))))
         .collect()
+}
+
+/// A WAV file read and resampled to Whisper's rate.
+pub(super) fn clip_from(name: &str, path: &Path) -> anyhow::Result<ClipAudio> {
+    let clip = whisper_sat::wav::read_mono(path)?;
+    Ok(ClipAudio {
+        name: name.to_owned(),
+        audio: resample_clip(&clip.samples, clip.rate, RATE)?,
+        path: path.to_path_buf(),
+    })
 }
 
 /// Median seconds to transcribe each clip whole.
@@ -291,8 +293,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let models = provisioned_models(&model, &ct2);
+    let suites = |clips: &[ClipAudio]| -> anyhow::Result<Vec<Suite>> {
+        let mut suites = vec![Suite::fixtures(
+            clips
+                .iter()
+                .map(|c| clip_from(&c.name, &c.path))
+                .collect::<anyhow::Result<_>>()?,
+        )?];
+        suites.extend(Suite::italian_prompts()?);
+        Ok(suites)
+    };
     if args.wer_only {
-        let (table, summary) = wer_bench(&models, &python, args.threads, &clips)?;
+        let (table, summary) = wer_bench(&models, &python, args.threads, &suites(&clips)?)?;
         for l in table.iter().chain(&summary) {
             println!("{l}");
         }
@@ -433,9 +445,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for l in fleets.summary() {
         line(l);
     }
-    let (table, summary) = wer_bench(&models, &python, args.threads, &clips)?;
+    let (table, summary) = wer_bench(&models, &python, args.threads, &suites(&clips)?)?;
     line(String::new());
-    line("## Word error rate over the fixture clips".into());
+    line(
+        "## Word error rate: the fixture clips, and real Italian speech for multilingual models"
+            .into(),
+    );
     line(String::new());
     for l in table.into_iter().chain(summary) {
         line(l);

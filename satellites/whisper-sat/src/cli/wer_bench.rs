@@ -9,7 +9,7 @@ use whisper_sat::model_path::repo_root;
 use whisper_sat::transcriber::{Outcome, Transcriber, TranscriberConfig};
 use whisper_sat::wer::word_errors;
 
-use super::bench::{Baseline, ClipAudio, FasterWhisper, faster_whisper, segment};
+use super::bench::{Baseline, ClipAudio, FasterWhisper, clip_from, faster_whisper, segment};
 use super::fleet::{Fleet, write_jobs};
 
 /// Peak RSS of one satellite process with `model` that has decoded every clip.
@@ -35,7 +35,91 @@ pub struct ModelUnderTest {
     pub name: &'static str,
     pub ggml: PathBuf,
     pub ct2: PathBuf,
+    /// It hears languages other than English.
+    pub multilingual: bool,
 }
+
+/// Speech to score: clips with their reference transcripts, in one language.
+pub struct Suite {
+    pub name: &'static str,
+    /// The Whisper language code both decoders are given.
+    pub language: &'static str,
+    pub clips: Vec<ClipAudio>,
+    pub references: Vec<String>,
+}
+
+impl Suite {
+    /// The fixture clips, with the `.txt` transcript beside each.
+    pub fn fixtures(clips: Vec<ClipAudio>) -> anyhow::Result<Suite> {
+        let references = clips
+            .iter()
+            .map(|c| {
+                let txt = c.path.with_extension("txt");
+                std::fs::read_to_string(&txt)
+                    .map(|s| s.trim().to_owned())
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", txt.display()))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        Ok(Suite {
+            name: "English fixtures",
+            language: "en",
+            clips,
+            references,
+        })
+    }
+
+    /// Real Italian speech: Asterisk's Italian prompts, read by Carlo Flora (Debian's
+    /// `asterisk-core-sounds-it-wav`, CC-BY-3.0; 8 kHz telephone audio), with the transcripts the package ships.
+    /// `None` when the package is not installed.
+    pub fn italian_prompts() -> anyhow::Result<Option<Suite>> {
+        let dir = Path::new("/usr/share/asterisk/sounds/it_IT_m_Carlo");
+        let list = "/usr/share/doc/asterisk-core-sounds-it/core-sounds-it.txt.gz";
+        if !dir.is_dir() || !Path::new(list).is_file() {
+            return Ok(None);
+        }
+        let text = std::process::Command::new("zcat").arg(list).output()?;
+        let text = String::from_utf8_lossy(&text.stdout);
+        let mut clips = Vec::new();
+        let mut references = Vec::new();
+        for name in ITALIAN_PROMPTS {
+            let reference = text
+                .lines()
+                .find_map(|l| l.strip_prefix(&format!("{name}: ")))
+                .ok_or_else(|| anyhow::anyhow!("no transcript of {name} in {list}"))?;
+            clips.push(clip_from(name, &dir.join(format!("{name}.wav")))?);
+            references.push(reference.trim().to_owned());
+        }
+        Ok(Some(Suite {
+            name: "Italian prompts",
+            language: "it",
+            clips,
+            references,
+        }))
+    }
+}
+
+/// Prompts whose transcript is exactly what is said: those spelling numbers as digits, or with the package's
+/// misspellings ("Perpiacere"), are left out.
+const ITALIAN_PROMPTS: [&str; 18] = [
+    "all-circuits-busy-now",
+    "conf-extended",
+    "conf-getconfno",
+    "conf-getpin",
+    "conf-invalid",
+    "conf-leaderhasleft",
+    "conf-locked",
+    "conf-noempty",
+    "conf-onlyperson",
+    "from-unknown-caller",
+    "queue-periodic-announce",
+    "ss-noservice",
+    "vm-mailboxfull",
+    "vm-newpassword",
+    "vm-newuser",
+    "vm-nomore",
+    "privacy-unident",
+    "vm-enter-num-to-call",
+];
 
 /// tiny.en, and base when `make model MODEL=base` has provisioned it.
 pub fn provisioned_models(tiny: &Path, tiny_ct2: &Path) -> Vec<ModelUnderTest> {
@@ -43,11 +127,13 @@ pub fn provisioned_models(tiny: &Path, tiny_ct2: &Path) -> Vec<ModelUnderTest> {
         name: "tiny.en",
         ggml: tiny.to_path_buf(),
         ct2: tiny_ct2.to_path_buf(),
+        multilingual: false,
     }];
     let base = ModelUnderTest {
         name: "base",
         ggml: repo_root().join("models/ggml-base.bin"),
         ct2: repo_root().join("models/cache/whisper-base-ct2"),
+        multilingual: true,
     };
     if base.ggml.is_file() && base.ct2.join("model.bin").is_file() {
         models.push(base);
@@ -176,116 +262,137 @@ fn baseline_row(b: &Baseline, clips: &[ClipAudio], references: &[String]) -> Row
     )
 }
 
-/// Runs every model and decoder; returns the Markdown table rows and the SUMMARY lines.
+/// Runs every model and decoder on every suite it can hear; returns the Markdown table rows and the SUMMARY
+/// lines. Each model's memory is measured once, on the first suite.
 pub fn wer_bench(
     models: &[ModelUnderTest],
     python: &Path,
     threads: usize,
-    clips: &[ClipAudio],
+    suites: &[Suite],
 ) -> anyhow::Result<(Vec<String>, Vec<String>)> {
-    let references: Vec<String> = clips
-        .iter()
-        .map(|c| {
-            let txt = c.path.with_extension("txt");
-            std::fs::read_to_string(&txt)
-                .map(|s| s.trim().to_owned())
-                .map_err(|e| anyhow::anyhow!("{}: {e}", txt.display()))
-        })
-        .collect::<anyhow::Result<_>>()?;
     let mut table = vec![
-        "| model | decoder | WER | errors / words | RTF | end of speech -> transcript, <= 5 s, median / p95 ms |".to_owned(),
-        "|---|---|---|---|---|---|".to_owned(),
+        "| speech | model | decoder | WER | errors / words | RTF | end of speech -> transcript, <= 5 s, median / p95 ms |".to_owned(),
+        "|---|---|---|---|---|---|---|".to_owned(),
     ];
     let mut summary = Vec::new();
     for m in models {
-        let mut rows = Vec::new();
-        for beam in [1, 5] {
-            let mut t = Transcriber::load(
-                &m.ggml,
-                TranscriberConfig {
-                    threads,
-                    beam_size: beam,
-                    ..TranscriberConfig::default()
-                },
-            )?;
-            // A warm-up decode, so the first clip does not pay for the allocations.
-            t.decode(&clips[0].audio)?;
-            let mut row = satellite_path(&mut t, clips, &references)?;
-            row.decoder = format!("whisper-sat beam {beam} (satellite path)");
-            rows.push(row);
-            let mut row = whole_clips(&mut t, clips, &references)?;
-            row.decoder = format!("whisper-sat beam {beam} (whole clips)");
-            rows.push(row);
-        }
-        let fw = FasterWhisper {
-            python,
-            ct2: &m.ct2,
-            language: "en",
-            compute_types: &["int8"],
-            beams: &[1, 5],
-        };
-        let (baselines, _) = faster_whisper(&fw, threads, 1, clips)?;
-        rows.extend(
-            baselines
-                .iter()
-                .map(|b| baseline_row(b, clips, &references)),
-        );
-        for r in &rows {
-            table.push(format!(
-                "| {} | {} | {:.1}% | {} / {} | {:.3} | {} |",
-                m.name,
-                r.decoder,
-                r.wer() * 100.0,
-                r.errors,
-                r.words,
-                r.rtf,
-                r.latency.map_or("-".to_owned(), |(p50, p95)| format!(
-                    "{:.0} / {:.0}",
-                    p50.as_secs_f64() * 1000.0,
-                    p95.as_secs_f64() * 1000.0
-                ))
-            ));
-        }
-        let find = |name: &str| rows.iter().find(|r| r.decoder == name);
-        let (Some(ours), Some(ours5), Some(fw5)) = (
-            find("whisper-sat beam 1 (satellite path)"),
-            find("whisper-sat beam 5 (satellite path)"),
-            find("faster-whisper int8 beam 5 (whole clips)"),
-        ) else {
-            anyhow::bail!("a decoder of {} did not run", m.name);
-        };
-        let ratio = |a: &Row| {
-            if fw5.errors == 0 {
-                // No errors to compare against: equal when ours has none either.
-                if a.errors == 0 { 1.0 } else { f64::INFINITY }
-            } else {
-                a.wer() / fw5.wer()
+        for (i, suite) in suites.iter().enumerate() {
+            if suite.language != "en" && !m.multilingual {
+                continue;
             }
-        };
-        let ms = |d: Duration| d.as_secs_f64() * 1000.0;
-        let rss = satellite_rss_mb(&m.ggml, clips)?;
-        summary.push(format!(
-            "SUMMARY asr model {}: peak rss of a satellite {rss:.0} MB, RTF {:.3}, WER {:.1}% (default decoder, satellite path)",
-            m.name,
-            ours.rtf,
-            ours.wer() * 100.0
-        ));
-        for (label, r) in [("beam 1, the default", ours), ("beam 5", ours5)] {
-            let (p50, p95) = r.latency.unwrap_or_default();
-            summary.push(format!(
-                "SUMMARY asr wer {} ({label}, satellite path): {:.1}% ({}/{} words; baseline faster-whisper int8 beam 5 {:.1}%, ratio {:.2}); RTF {:.3} (faster-whisper beam 5 {:.3}); end of speech -> transcript p50 {:.0} ms, p95 {:.0} ms (target 500 ms)",
-                m.name,
-                r.wer() * 100.0,
-                r.errors,
-                r.words,
-                fw5.wer() * 100.0,
-                ratio(r),
-                r.rtf,
-                fw5.rtf,
-                ms(p50),
-                ms(p95),
-            ));
+            let rows = score(m, suite, python, threads)?;
+            report(m, suite, &rows, &mut table, &mut summary)?;
+            if i == 0 {
+                let rss = satellite_rss_mb(&m.ggml, &suite.clips)?;
+                summary.push(format!(
+                    "SUMMARY asr model {}: peak rss of a satellite {rss:.0} MB (model file {:.0} MB)",
+                    m.name,
+                    std::fs::metadata(&m.ggml).map_or(f64::NAN, |f| f.len() as f64 / 1e6)
+                ));
+            }
         }
     }
     Ok((table, summary))
+}
+
+/// Our decoders at beam 1 and 5 (satellite path and whole clips) and faster-whisper's on one suite.
+fn score(
+    m: &ModelUnderTest,
+    suite: &Suite,
+    python: &Path,
+    threads: usize,
+) -> anyhow::Result<Vec<Row>> {
+    let (clips, references) = (&suite.clips, &suite.references);
+    let mut rows = Vec::new();
+    for beam in [1, 5] {
+        let mut t = Transcriber::load(
+            &m.ggml,
+            TranscriberConfig {
+                threads,
+                beam_size: beam,
+                language: suite.language.to_owned(),
+                ..TranscriberConfig::default()
+            },
+        )?;
+        // A warm-up decode, so the first clip does not pay for the allocations.
+        t.decode(&clips[0].audio)?;
+        let mut row = satellite_path(&mut t, clips, references)?;
+        row.decoder = format!("whisper-sat beam {beam} (satellite path)");
+        rows.push(row);
+        let mut row = whole_clips(&mut t, clips, references)?;
+        row.decoder = format!("whisper-sat beam {beam} (whole clips)");
+        rows.push(row);
+    }
+    let fw = FasterWhisper {
+        python,
+        ct2: &m.ct2,
+        language: suite.language,
+        compute_types: &["int8"],
+        beams: &[1, 5],
+    };
+    let (baselines, _) = faster_whisper(&fw, threads, 1, clips)?;
+    rows.extend(baselines.iter().map(|b| baseline_row(b, clips, references)));
+    Ok(rows)
+}
+
+fn report(
+    m: &ModelUnderTest,
+    suite: &Suite,
+    rows: &[Row],
+    table: &mut Vec<String>,
+    summary: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    for r in rows {
+        table.push(format!(
+            "| {} | {} | {} | {:.1}% | {} / {} | {:.3} | {} |",
+            suite.name,
+            m.name,
+            r.decoder,
+            r.wer() * 100.0,
+            r.errors,
+            r.words,
+            r.rtf,
+            r.latency.map_or("-".to_owned(), |(p50, p95)| format!(
+                "{:.0} / {:.0}",
+                p50.as_secs_f64() * 1000.0,
+                p95.as_secs_f64() * 1000.0
+            ))
+        ));
+    }
+    let find = |name: &str| rows.iter().find(|r| r.decoder == name);
+    let (Some(ours), Some(ours5), Some(fw5)) = (
+        find("whisper-sat beam 1 (satellite path)"),
+        find("whisper-sat beam 5 (satellite path)"),
+        find("faster-whisper int8 beam 5 (whole clips)"),
+    ) else {
+        anyhow::bail!("a decoder of {} did not run", m.name);
+    };
+    let ratio = |a: &Row| {
+        if fw5.errors == 0 {
+            // No errors to compare against: equal when ours has none either.
+            if a.errors == 0 { 1.0 } else { f64::INFINITY }
+        } else {
+            a.wer() / fw5.wer()
+        }
+    };
+    let ms = |d: Duration| d.as_secs_f64() * 1000.0;
+    for (label, r) in [("beam 1, the default", ours), ("beam 5", ours5)] {
+        let (p50, p95) = r.latency.unwrap_or_default();
+        summary.push(format!(
+            "SUMMARY asr wer {} on {} ({label}, satellite path): {:.1}% ({}/{} words; baseline faster-whisper int8 beam 5 {:.1}%, ratio {:.2}); RTF {:.3} (faster-whisper beam 5 {:.3}, ratio {:.2}); end of speech -> transcript p50 {:.0} ms, p95 {:.0} ms (target 500 ms)",
+            m.name,
+            suite.name,
+            r.wer() * 100.0,
+            r.errors,
+            r.words,
+            fw5.wer() * 100.0,
+            ratio(r),
+            r.rtf,
+            fw5.rtf,
+            r.rtf / fw5.rtf,
+            ms(p50),
+            ms(p95),
+        ));
+    }
+    Ok(())
 }
