@@ -16,6 +16,8 @@ packages=(
     # Real Italian speech with its transcripts for the Italian conversation test: the Asterisk prompts recorded by
     # Carlo Flora (CC-BY-3.0), 8 kHz WAV under /usr/share/asterisk/sounds/it_IT_m_Carlo, text in the doc directory.
     asterisk-core-sounds-it-wav asterisk-core-sounds-it
+    # More real English read speech for the ASR benchmark's word error rates: LibriVox clips with transcription.
+    pocketsphinx-testdata
 )
 
 missing=()

@@ -9,16 +9,17 @@
 //! free at the pause; in the satellite an aborted speculative decode of an earlier pause in the same utterance may
 //! still be finishing its encoder then (whisper.cpp cannot stop the encoder), which this figure does not count.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Duration;
+use std::path::PathBuf;
 
 use anyhow::Context;
-use whisper_sat::model_path::{FIXTURE_CLIPS, default_model, fixtures_dir, repo_root};
-use whisper_sat::resample::resample_clip;
-use whisper_sat::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig};
+use whisper_sat::model_path::{default_model, repo_root};
+use whisper_sat::segmenter::RATE;
 use whisper_sat::transcriber::{AudioContext, Transcriber, TranscriberConfig};
 
+use super::bench_clips::{
+    ClipAudio, clip_from, load_clips, median, peak_rss_mb, percentile, segment,
+};
+use super::faster_whisper::{FasterWhisper, faster_whisper};
 use super::fleet_bench::fleets;
 use super::wer_bench::{Suite, provisioned_models, wer_bench};
 
@@ -49,64 +50,6 @@ pub struct Args {
     wer_only: bool,
 }
 
-pub(super) struct ClipAudio {
-    pub(super) name: String,
-    pub(super) path: PathBuf,
-    pub(super) audio: Vec<f32>,
-}
-
-impl ClipAudio {
-    pub(super) fn seconds(&self) -> f64 {
-        self.audio.len() as f64 / f64::from(RATE)
-    }
-}
-
-fn median(v: &[f64]) -> f64 {
-    percentile(v, 0.5)
-}
-
-fn percentile(v: &[f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[((s.len() - 1) as f64 * p).round() as usize]
-}
-
-fn peak_rss_mb() -> f64 {
-    process_peak_rss_mb("self")
-}
-
-/// Peak resident memory of process `pid` ("self" for this one) in MB, from Linux's `VmHWM`; NaN if unknown.
-pub(super) fn process_peak_rss_mb(pid: &str) -> f64 {
-    std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
-
-fn load_clips() -> anyhow::Result<Vec<ClipAudio>> {
-    FIXTURE_CLIPS
-        .iter()
-        .map(|name| clip_from(name, &fixtures_dir().join(format!("audio/{name}.wav"))))
-        .collect()
-}
-
-/// A WAV file read and resampled to Whisper's rate.
-pub(super) fn clip_from(name: &str, path: &Path) -> anyhow::Result<ClipAudio> {
-    let clip = whisper_sat::wav::read_mono(path)?;
-    Ok(ClipAudio {
-        name: name.to_owned(),
-        audio: resample_clip(&clip.samples, clip.rate, RATE)?,
-        path: path.to_path_buf(),
-    })
-}
-
 /// Median seconds to transcribe each clip whole.
 fn time_clips(t: &mut Transcriber, clips: &[ClipAudio], runs: usize) -> anyhow::Result<Vec<f64>> {
     clips
@@ -120,152 +63,6 @@ fn time_clips(t: &mut Transcriber, clips: &[ClipAudio], runs: usize) -> anyhow::
             Ok(median(&times))
         })
         .collect()
-}
-
-/// One utterance of a clip as the satellite's segmenter reports it, with audio times from its end of speech.
-pub(super) struct Segmented {
-    pub(super) audio: Vec<f32>,
-    /// Until the segmenter ends it (the hangover).
-    end_lag: Duration,
-    /// Until it paused with exactly the audio it ended with, if it did: a speculative decode starts there.
-    pause_lag: Option<Duration>,
-}
-
-impl Segmented {
-    /// End of speech to transcript for a decode taking `inference`: with speculation, and without.
-    pub(super) fn latency(&self, inference: Duration) -> (Duration, Duration) {
-        let plain = self.end_lag + inference;
-        let speculative = self
-            .pause_lag
-            .map_or(plain, |pause| self.end_lag.max(pause + inference));
-        (speculative, plain)
-    }
-}
-
-/// The utterances of a clip.
-pub(super) fn segment(audio: &[f32]) -> anyhow::Result<Vec<Segmented>> {
-    let mut seg = Segmenter::new(SegmenterConfig::default())?;
-    let mut out = Vec::new();
-    let mut events = Vec::new();
-    let mut pause = None;
-    let lag = |at: u64, speech_end: u64| {
-        Duration::from_secs_f64((at - speech_end) as f64 / f64::from(RATE))
-    };
-    // Feed in 20 ms messages with a second of silence after the clip, as the hub would deliver them.
-    let padded = [audio, &vec![0.0; RATE as usize]].concat();
-    for chunk in padded.chunks(320) {
-        seg.push(chunk, &mut events);
-        for ev in events.drain(..) {
-            match ev {
-                SegmentEvent::Paused(u) => pause = Some((u, seg.position())),
-                SegmentEvent::Resumed { .. } => pause = None,
-                SegmentEvent::Ended(u) => {
-                    let pause_lag = pause
-                        .take()
-                        .filter(|(p, _)| *p == u)
-                        .map(|(p, at)| lag(at, p.speech_end));
-                    out.push(Segmented {
-                        end_lag: lag(seg.position(), u.speech_end),
-                        pause_lag,
-                        audio: u.audio,
-                    });
-                }
-                _ => {}
-            }
-        }
-    }
-    Ok(out)
-}
-
-pub(super) struct Baseline {
-    pub(super) compute_type: String,
-    pub(super) beam: u64,
-    pub(super) per_clip: Vec<f64>,
-    pub(super) texts: Vec<String>,
-}
-
-/// How faster-whisper is run: on which weights, in which language, with which compute types and beams.
-pub(super) struct FasterWhisper<'a> {
-    pub(super) python: &'a Path,
-    pub(super) ct2: &'a Path,
-    pub(super) language: &'a str,
-    pub(super) compute_types: &'a [&'a str],
-    pub(super) beams: &'a [usize],
-}
-
-pub(super) fn faster_whisper(
-    fw: &FasterWhisper<'_>,
-    threads: usize,
-    runs: usize,
-    clips: &[ClipAudio],
-) -> anyhow::Result<(Vec<Baseline>, f64)> {
-    let FasterWhisper {
-        python,
-        ct2,
-        language,
-        ..
-    } = *fw;
-    let script = repo_root().join("bench/asr/faster_whisper_bench.py");
-    let mut cmd = Command::new(python);
-    cmd.arg(&script)
-        .arg("--model")
-        .arg(ct2)
-        .arg("--threads")
-        .arg(threads.to_string())
-        .arg("--runs")
-        .arg(runs.to_string())
-        .arg("--language")
-        .arg(language)
-        .args(fw.compute_types.iter().flat_map(|c| ["--compute-type", c]))
-        .args(
-            fw.beams
-                .iter()
-                .flat_map(|b| ["--beam-size".to_owned(), b.to_string()]),
-        )
-        .args(clips.iter().map(|c| &c.path));
-    let out = cmd.output().with_context(|| {
-        format!(
-            "running {} (create it with `make bench`, which installs faster-whisper)",
-            python.display()
-        )
-    })?;
-    anyhow::ensure!(
-        out.status.success(),
-        "faster-whisper baseline failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let mut baselines: Vec<Baseline> = Vec::new();
-    let mut rss = f64::NAN;
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
-        let v: serde_json::Value = serde_json::from_str(line)?;
-        if let Some(r) = v["peak_rss_mb"].as_f64() {
-            rss = r;
-            continue;
-        }
-        let ct = v["compute_type"].as_str().unwrap_or_default().to_owned();
-        let beam = v["beam"].as_u64().unwrap_or(1);
-        let runs: Vec<f64> = v["runs_s"]
-            .as_array()
-            .map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect())
-            .unwrap_or_default();
-        let text = v["text"].as_str().unwrap_or_default().to_owned();
-        match baselines
-            .iter_mut()
-            .find(|b| b.compute_type == ct && b.beam == beam)
-        {
-            Some(b) => {
-                b.per_clip.push(median(&runs));
-                b.texts.push(text);
-            }
-            None => baselines.push(Baseline {
-                compute_type: ct,
-                beam,
-                per_clip: vec![median(&runs)],
-                texts: vec![text],
-            }),
-        }
-    }
-    Ok((baselines, rss))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -300,6 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .map(|c| clip_from(&c.name, &c.path))
                 .collect::<anyhow::Result<_>>()?,
         )?];
+        suites.extend(Suite::librivox()?);
         suites.extend(Suite::italian_prompts()?);
         Ok(suites)
     };
@@ -469,29 +267,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn speculation_hides_the_inference_behind_the_rest_of_the_hangover() {
-        let ms = Duration::from_millis;
-        let paused = Segmented {
-            audio: Vec::new(),
-            end_lag: ms(300),
-            pause_lag: Some(ms(160)),
-        };
-        // A short decode is done before the end: the transcript goes out when the utterance ends.
-        assert_eq!(paused.latency(ms(100)), (ms(300), ms(400)));
-        // A longer one finishes after the end, still 140 ms sooner than one started there.
-        assert_eq!(paused.latency(ms(250)), (ms(410), ms(550)));
-        // Without a pause of the same audio (a cut at the maximum length) nothing is gained.
-        let cut = Segmented {
-            pause_lag: None,
-            ..paused
-        };
-        assert_eq!(cut.latency(ms(250)), (ms(550), ms(550)));
-    }
 }

@@ -242,7 +242,7 @@ impl Fleet {
     pub fn peak_rss_mb(&self) -> Vec<f64> {
         self.workers
             .iter()
-            .map(|w| super::bench::process_peak_rss_mb(&w.child.id().to_string()))
+            .map(|w| super::bench_clips::process_peak_rss_mb(&w.child.id().to_string()))
             .collect()
     }
 }

@@ -33,7 +33,7 @@ fn median(mut v: Vec<Duration>) -> Duration {
 /// longest clip whole.
 pub fn fleets(
     model: &Path,
-    clips: &[super::bench::ClipAudio],
+    clips: &[super::bench_clips::ClipAudio],
     utterances: &[Vec<f32>],
     runs: usize,
 ) -> anyhow::Result<FleetFigures> {

@@ -1,7 +1,9 @@
 //! The `whisper-sat` subcommands.
 
 mod bench;
+mod bench_clips;
 mod convert;
+mod faster_whisper;
 mod fleet;
 mod fleet_bench;
 mod progress;

@@ -9,7 +9,8 @@ use whisper_sat::model_path::repo_root;
 use whisper_sat::transcriber::{Outcome, Transcriber, TranscriberConfig};
 use whisper_sat::wer::word_errors;
 
-use super::bench::{Baseline, ClipAudio, FasterWhisper, clip_from, faster_whisper, segment};
+use super::bench_clips::{ClipAudio, clip_from, segment};
+use super::faster_whisper::{Baseline, FasterWhisper, faster_whisper};
 use super::fleet::{Fleet, write_jobs};
 
 /// Peak RSS of one satellite process with `model` that has decoded every clip.
@@ -92,6 +93,37 @@ impl Suite {
         Ok(Some(Suite {
             name: "Italian prompts",
             language: "it",
+            clips,
+            references,
+        }))
+    }
+}
+
+impl Suite {
+    /// Real English read speech beyond the fixtures: five LibriVox utterances of "Sense and Sensibility" (public
+    /// domain) that Debian's `pocketsphinx-testdata` ships with their transcription. Its spelling is the
+    /// recognisers' own ("mister" for "Mr.", the reader's slip "a more a amiable" kept), which costs every decoder
+    /// alike. `None` when the package is not installed.
+    pub fn librivox() -> anyhow::Result<Option<Suite>> {
+        let dir = Path::new("/usr/share/pocketsphinx/test/data/librivox");
+        let Ok(text) = std::fs::read_to_string(dir.join("transcription")) else {
+            return Ok(None);
+        };
+        let mut clips = Vec::new();
+        let mut references = Vec::new();
+        // Lines read `<s> words </s> (file id)`.
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let (words, id) = line
+                .rsplit_once(" (")
+                .ok_or_else(|| anyhow::anyhow!("unexpected transcription line {line:?}"))?;
+            let id = id.trim_end_matches(')');
+            let words = words.replace("<s>", "").replace("</s>", "");
+            clips.push(clip_from(id, &dir.join(format!("{id}.wav")))?);
+            references.push(words.trim().to_owned());
+        }
+        Ok(Some(Suite {
+            name: "LibriVox",
+            language: "en",
             clips,
             references,
         }))
