@@ -96,6 +96,7 @@ impl Recorder {
                 opts,
                 items,
                 subs: BTreeMap::new(),
+                last_seq: BTreeMap::new(),
                 streams: SelectAll::new(),
             };
             let looped = run.run(existing, events, stopped).await;
@@ -132,11 +133,16 @@ impl Recorder {
     }
 }
 
+/// The longest a stop waits for messages still on their way to the recorder.
+const DRAIN_WAIT: Duration = Duration::from_secs(1);
+
 struct Run {
     client: Client,
     opts: RecordOptions,
     items: mpsc::Sender<Item>,
     subs: BTreeMap<String, Arc<Subscription>>,
+    /// The sequence number of the last message handed over, per channel: what a stop waits to have caught up.
+    last_seq: BTreeMap<String, u64>,
     streams: SelectAll<Messages>,
 }
 
@@ -156,9 +162,7 @@ impl Run {
             tokio::select! {
                 _ = &mut stopped => return self.drain().await,
                 Some((name, data)) = self.streams.next(), if !self.streams.is_empty() => {
-                    let log_ns = hub_receive_ns(&data);
-                    let item = Item::Message { name, data, log_ns };
-                    hand_over(&self.items, item).await?;
+                    self.keep(name, data).await?;
                 }
                 event = events.recv() => match event {
                     Ok(ClientEvent::ChannelAdded(info)) => self.offer(info).await?,
@@ -207,21 +211,47 @@ impl Run {
         Ok(())
     }
 
-    /// Hands over what the subscriptions hold already, so that a stop keeps every message that had arrived.
+    /// Hands one message over to the writer, noting how far its channel has come.
+    async fn keep(&mut self, name: String, data: Data) -> Result<(), RecordError> {
+        self.last_seq.insert(name.clone(), data.seq);
+        let item = Item::Message {
+            log_ns: hub_receive_ns(&data),
+            name,
+            data,
+        };
+        hand_over(&self.items, item).await
+    }
+
+    /// Keeps every message the hub had accepted on a recorded channel before the stop. The hub's count of a
+    /// channel's messages is the sequence number of its last one, so each subscription is read until it has
+    /// caught up with that count: messages still on their way through the hub's lanes arrive within
+    /// milliseconds. A message dropped for falling behind never comes, so the wait is bounded by
+    /// [`DRAIN_WAIT`]; a hub that no longer answers leaves only what has arrived.
     async fn drain(&mut self) -> Result<(), RecordError> {
         let subs: Vec<(String, Arc<Subscription>)> = self
             .subs
             .iter()
             .map(|(name, sub)| (name.clone(), sub.clone()))
             .collect();
+        let published: BTreeMap<String, u64> =
+            match tokio::time::timeout(DRAIN_WAIT, self.client.channels()).await {
+                Ok(Ok(channels)) => channels
+                    .into_iter()
+                    .map(|c| (c.name, c.stats.msgs))
+                    .collect(),
+                _ => BTreeMap::new(),
+            };
+        let deadline = tokio::time::Instant::now() + DRAIN_WAIT;
         for (name, sub) in subs {
             while let Some(data) = sub.try_recv() {
-                let item = Item::Message {
-                    name: name.clone(),
-                    log_ns: hub_receive_ns(&data),
-                    data,
-                };
-                hand_over(&self.items, item).await?;
+                self.keep(name.clone(), data).await?;
+            }
+            let target = published.get(&name).copied().unwrap_or(0);
+            while self.last_seq.get(&name).copied().unwrap_or(0) < target {
+                match tokio::time::timeout_at(deadline, sub.recv()).await {
+                    Ok(Some(data)) => self.keep(name.clone(), data).await?,
+                    _ => break,
+                }
             }
         }
         Ok(())
