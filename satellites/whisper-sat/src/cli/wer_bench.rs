@@ -97,9 +97,7 @@ impl Suite {
             references,
         }))
     }
-}
 
-impl Suite {
     /// Real English read speech beyond the fixtures: five LibriVox utterances of "Sense and Sensibility" (public
     /// domain) that Debian's `pocketsphinx-testdata` ships with their transcription. Its spelling is the
     /// recognisers' own ("mister" for "Mr.", the reader's slip "a more a amiable" kept), which costs every decoder
