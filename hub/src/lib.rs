@@ -20,3 +20,6 @@ pub mod tokens;
 pub use config::Config;
 pub use server::{Application, RunningServer, start};
 pub use shared::Shared;
+
+#[cfg(test)]
+mod shutdown_tests;

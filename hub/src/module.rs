@@ -88,7 +88,7 @@ pub async fn spawn(shared: Arc<Shared>, module: Box<dyn Module>) -> anyhow::Resu
         name,
         client,
         params: shared.config.module(name),
-        shutdown: shared.shutdown.subscribe(),
+        shutdown: shared.modules_stop.subscribe(),
         shared: shared.clone(),
     };
     info!(module = name, "module started");

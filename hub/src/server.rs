@@ -33,6 +33,8 @@ pub struct RunningServer {
     pub flow_unix: Option<PathBuf>,
     pub shared: Arc<Shared>,
     tasks: Vec<JoinHandle<()>>,
+    /// The modules' tasks, stopped first at shutdown.
+    module_tasks: Vec<JoinHandle<()>>,
     io: IoRuntime,
 }
 
@@ -115,6 +117,7 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         pulses: pulses.clone(),
         admission: Arc::new(Admission::new(config.hub.max_unauthenticated)),
         shutdown,
+        modules_stop: watch::channel(false).0,
         reports: Mutex::new(BTreeMap::new()),
         config,
     });
@@ -196,8 +199,9 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
             tracing::error!("http server failed: {e}");
         }
     }));
+    let mut module_tasks = Vec::new();
     for module in modules {
-        tasks.push(crate::module::spawn(shared.clone(), module).await?);
+        module_tasks.push(crate::module::spawn(shared.clone(), module).await?);
     }
     info!(%http, ?flow_tcp, ?flow_unix, "robot-agent is up");
     Ok(RunningServer {
@@ -207,27 +211,39 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         flow_unix,
         shared,
         tasks,
+        module_tasks,
         io,
     })
 }
 
 impl RunningServer {
-    /// Tells clients goodbye, stops listeners and modules, and waits for them.
+    /// Stops the modules, then tells clients goodbye and stops the listeners, and waits for them.
+    ///
+    /// Modules go first, while the hub still serves every connection: a module's last work may need the hub (the
+    /// recorder reads what the hub had accepted before the stop) and may need what satellites still send. Only then
+    /// are the outboxes closed, so nothing the hub acknowledged before the stop is lost to a module.
     pub async fn shutdown(self) {
         info!("shutting down");
+        self.shared.modules_stop.send_replace(true);
+        join_within(self.module_tasks, "a module").await;
         self.shared.hub.shutdown("server shutting down");
         self.shared.shutdown.send_replace(true);
-        for task in self.tasks {
-            if tokio::time::timeout(Duration::from_secs(5), task)
-                .await
-                .is_err()
-            {
-                tracing::warn!("a task did not stop within 5 s");
-            }
-        }
+        join_within(self.tasks, "a task").await;
         // The listeners have waited for their connections; what is left on the I/O runtime ends here.
         self.io.stop().await;
         // redb commits every acknowledged write durably; nothing is left to flush.
         info!("stopped");
+    }
+}
+
+/// Waits for each task to end, at most 5 s each, and logs one that does not.
+async fn join_within(tasks: Vec<JoinHandle<()>>, what: &str) {
+    for task in tasks {
+        if tokio::time::timeout(Duration::from_secs(5), task)
+            .await
+            .is_err()
+        {
+            tracing::warn!("{what} did not stop within 5 s");
+        }
     }
 }

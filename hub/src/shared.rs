@@ -26,8 +26,11 @@ pub struct Shared {
     pub metrics: Arc<Metrics>,
     /// Connections that have not logged in yet, against `hub.max_unauthenticated`.
     pub admission: Arc<Admission>,
-    /// Flips to true once at shutdown; every task watches it.
+    /// Flips to true once at shutdown, after the modules have stopped; connections, listeners and pulses watch it.
     pub shutdown: watch::Sender<bool>,
+    /// Flips to true first at shutdown: the modules' stop signal. They stop while the hub still serves them, so
+    /// that one finishing its work (the recorder draining what the hub had accepted) still has its link.
+    pub modules_stop: watch::Sender<bool>,
     pub(crate) reports: Mutex<BTreeMap<String, serde_json::Value>>,
 }
 
