@@ -1,7 +1,5 @@
 //! The shutdown order, tested on a real server: modules get their stop signal while the hub still serves them.
 
-use std::sync::Mutex;
-
 use tokio::sync::oneshot;
 
 use crate::config::Config;
@@ -13,7 +11,7 @@ type Answer = Result<Vec<String>, String>;
 
 /// A module whose last act, after the stop signal, is to ask the hub for its channels; it says what it got.
 struct LastWords {
-    said: Mutex<Option<oneshot::Sender<Answer>>>,
+    said: oneshot::Sender<Answer>,
 }
 
 impl Module for LastWords {
@@ -31,14 +29,7 @@ impl Module for LastWords {
                 .await
                 .map(|list| list.into_iter().map(|c| c.name).collect())
                 .map_err(|e| e.to_string());
-            let said = self
-                .said
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .take();
-            if let Some(said) = said {
-                let _ = said.send(answer);
-            }
+            let _ = self.said.send(answer);
             Ok(())
         })
     }
@@ -54,9 +45,7 @@ async fn a_stopping_module_still_reaches_the_hub() -> anyhow::Result<()> {
     config.server.data_dir = dir.path().to_path_buf();
     let (said, heard) = oneshot::channel();
     let app = Application {
-        modules: vec![Box::new(LastWords {
-            said: Mutex::new(Some(said)),
-        })],
+        modules: vec![Box::new(LastWords { said })],
         ..Application::default()
     };
     let server = start(config, app).await?;
