@@ -132,7 +132,11 @@ impl Session {
                     .set_header(self.conn, chan, &header)
                     .map(|()| Reply::Done),
             },
-            Command::Subscribe { chan } => self.hub.subscribe(self.conn, &chan).map(Reply::Channel),
+            Command::Subscribe { chan } => match self.hub.subscribe_acked(self.conn, &chan, req) {
+                // The hub has queued the reply itself, ahead of the channel's first message.
+                Ok(_) => return Outcome::Continue,
+                Err(e) => Err(e),
+            },
             Command::Unsubscribe { chan } => {
                 self.hub.unsubscribe(self.conn, &chan).map(|()| Reply::Done)
             }

@@ -383,8 +383,23 @@ impl Hub {
         Ok(())
     }
 
-    /// Subscribes `conn` to a streaming channel; idempotent.
+    /// Subscribes `conn` to a streaming channel with no request to answer (the unit tests' way in).
+    #[cfg(test)]
     pub fn subscribe(&self, conn: ConnId, chan: &ChanRef) -> HubResult<ChannelInfo> {
+        self.subscribe_acked(conn, chan, 0)
+    }
+
+    /// Subscribes `conn` to a streaming channel (idempotent) and, when `req` is not 0, queues the reply to request `req` on the subscriber's control
+    /// lane under the same lock, before any publish can queue data for it. A client learns the channel's id from
+    /// that reply, so its first data event must not overtake it: the owner hears of its first subscriber at
+    /// once and may publish before the session would have queued the reply, and a message the client cannot
+    /// place is lost.
+    pub fn subscribe_acked(
+        &self,
+        conn: ConnId,
+        chan: &ChanRef,
+        req: ReqId,
+    ) -> HubResult<ChannelInfo> {
         let mut st = self.lock();
         let id = resolve(&st, chan)?;
         let Some(c) = st.conns.get(&conn) else {
@@ -407,17 +422,28 @@ impl Hub {
             );
         }
         if !ch.subscribers.iter().any(|(c, _)| *c == conn) {
-            ch.subscribers.push((conn, outbox));
+            ch.subscribers.push((conn, outbox.clone()));
             if ch.subscribers.len() == 1 {
                 let owner = ch.owner;
                 notify_owner(&st, owner, Event::StartPublishing { id });
             }
         }
-        let info = st.channels.get(&id).map(Channel::info);
+        let info = st
+            .channels
+            .get(&id)
+            .map(Channel::info)
+            .ok_or_else(|| ErrorReply::new(ErrorCode::Internal, "channel vanished"))?;
+        // Still under the lock that every publish takes, so no data event for this subscriber is queued yet.
+        if req != 0 {
+            outbox.push_control(Event::Reply {
+                req,
+                result: Ok(Reply::Channel(info.clone())),
+            });
+        }
         if let Some(c) = st.conns.get_mut(&conn) {
             c.subs.insert(id);
         }
-        info.ok_or_else(|| ErrorReply::new(ErrorCode::Internal, "channel vanished"))
+        Ok(info)
     }
 
     /// Ends a subscription; not being subscribed is not an error.

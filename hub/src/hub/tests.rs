@@ -1027,3 +1027,20 @@ fn call_outcomes_are_counted_by_service_and_kept_after_it_goes() {
     );
     assert_eq!(calls[0].0, "S");
 }
+
+#[test]
+fn a_subscription_is_acknowledged_before_its_first_message_can_be_queued() {
+    let hub = Hub::new(limits(64));
+    let (p, _) = async_conn(&hub, "pub");
+    let id = stream(&hub, p, "A");
+    let (s, ob) = async_conn(&hub, "s");
+    hub.subscribe_acked(s, &by_name("A"), 7).expect("sub");
+    // The reply is already queued when the owner could first publish, so no data event can overtake it.
+    let queued = drain(&ob);
+    assert!(
+        matches!(queued.as_slice(), [Event::Reply { req: 7, result: Ok(Reply::Channel(info)) }] if info.id == id),
+        "{queued:?}"
+    );
+    hub.publish(p, id, Bytes::from_static(b"x")).expect("pub");
+    assert_eq!(data_seqs(&drain(&ob)), vec![1]);
+}
