@@ -132,6 +132,27 @@ pub enum SceneError {
     NoBox(String),
 }
 
+/// The photo whose face the appearance trials paste into the empty room.
+pub const APPEARING_FACE: &str = "faces/fr_obama.jpg";
+
+/// Frame `index` (from 1) of the fixtures' 15 fps motion sequence at 640x360; its first 60 frames show an empty room.
+pub fn motion_frame(fixtures: &Path, index: usize) -> std::path::PathBuf {
+    fixtures.join(format!(
+        "motion/derived/intel_one-by-one_t2-10s_640x360_15fps/frame_{index:04}.jpg"
+    ))
+}
+
+/// The face of [`APPEARING_FACE`], cut with a margin of head, as the appearance trials paste it.
+pub fn appearing_face(fixtures: &Path) -> Result<FacePatch, SceneError> {
+    let truth = crate::fixtures::GroundTruth::load(fixtures)?;
+    let photo = truth
+        .faces
+        .iter()
+        .find(|t| t.image == APPEARING_FACE)
+        .ok_or_else(|| SceneError::NoBox(APPEARING_FACE.to_owned()))?;
+    face_patch(fixtures, photo)
+}
+
 /// Cuts the first annotated face of `truth`'s photo, with a margin of head around it.
 pub fn face_patch(fixtures: &Path, truth: &FaceTruth) -> Result<FacePatch, SceneError> {
     use opencv::core::{Mat, MatTraitConst, Rect};

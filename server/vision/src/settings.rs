@@ -58,6 +58,8 @@ pub struct FaceSettings {
     pub pyramid_phases: u32,
     /// Scan regions where motion appears first, at every face size (needs the motion detector).
     pub motion_focus: bool,
+    /// `min_neighbors` of those focus scans.
+    pub focus_min_neighbors: i32,
 }
 
 /// `[modules.vision.motion]`.
@@ -129,6 +131,7 @@ impl Default for FaceSettings {
             verify_also: face.verify_also.map_or("none", Cascade::name).to_owned(),
             pyramid_phases: face.pyramid_phases,
             motion_focus: face.motion_focus,
+            focus_min_neighbors: face.focus_min_neighbors,
         }
     }
 }
@@ -224,6 +227,11 @@ impl VisionSettings {
                 "must be 0-50",
             )?;
             check(
+                (0..=50).contains(&f.focus_min_neighbors),
+                "faces.focus_min_neighbors",
+                "must be 0-50",
+            )?;
+            check(
                 (8..=1000).contains(&f.min_face_px),
                 "faces.min_face_px",
                 "must be 8-1000",
@@ -268,6 +276,7 @@ impl VisionSettings {
                 equalize: f.equalize,
                 scan_budget_px: (f.scan_budget_px > 0).then_some(f.scan_budget_px),
                 motion_focus: f.motion_focus,
+                focus_min_neighbors: f.focus_min_neighbors,
             })
         } else {
             None
@@ -391,6 +400,13 @@ mod tests {
                 .expect_err("bad method")
                 .to_string()
                 .contains("motion.method")
+        );
+        let settings = VisionSettings::from_json(&json!({"faces": {"focus_min_neighbors": 51}}))
+            .expect("parses");
+        let err = settings.pipeline_params().expect_err("too many neighbours");
+        assert!(
+            err.to_string().contains("faces.focus_min_neighbors"),
+            "{err}"
         );
     }
 
