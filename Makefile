@@ -54,10 +54,12 @@ bench: deps model-release build
 	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
 	AGENT_BIN_DIR=$(TARGET_DIR)/release satellites/python/.venv/bin/python satellites/python/bench/bench_python.py --write docs/bench-python.md
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_record -- --write docs/bench-record.md
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin federation-bench -- --write docs/bench-federation.md
 
-## Coverage-guided fuzzing of the protocol decoder (not in CI).
+## Coverage-guided fuzzing of the protocol decoder and the federation's sample stamp (not in CI).
 fuzz:
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run decode -- -max_total_time=60
+	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run stamp -- -max_total_time=30
 
 deps:
 	scripts/deps.sh

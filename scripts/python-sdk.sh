@@ -14,4 +14,6 @@ fi
 "$venv/bin/python" -c "import pytest, numpy, mcap" 2>/dev/null || "$venv/bin/pip" install -q 'pytest>=8' 'numpy>=1.24' 'mcap>=1.2'
 # Prometheus's own Python client: the metrics test parses /metrics with its exposition-format parser.
 "$venv/bin/python" -c "import prometheus_client" 2>/dev/null || "$venv/bin/pip" install -q 'prometheus-client>=0.20'
+# eclipse-zenoh: a plain Zenoh client joining the federation (tests/test_zenoh.py), the version of the hub's zenoh crate.
+"$venv/bin/python" -c "import zenoh" 2>/dev/null || "$venv/bin/pip" install -q 'eclipse-zenoh==1.10.2'
 "$venv/bin/pip" install -q --force-reinstall --no-deps ./satellites/python

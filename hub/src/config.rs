@@ -28,6 +28,7 @@ pub struct Config {
     pub ticks: TickSection,
     pub http: HttpSection,
     pub agent: AgentSection,
+    pub federation: FederationSection,
     /// `[modules.NAME]` tables, handed to each module as JSON parameters.
     #[serde(default)]
     pub modules: BTreeMap<String, toml::Table>,
@@ -82,6 +83,41 @@ pub struct HttpSection {
 pub struct AgentSection {
     /// The language the agent converses in, as an ISO 639-1 code; the application checks that it knows it.
     pub language: String,
+}
+
+/// `[federation]`: this hub on a Zenoh network with other hubs and Zenoh clients (docs/federation.md).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FederationSection {
+    pub enabled: bool,
+    /// This hub's name in key expressions; empty: the machine's host name.
+    pub name: String,
+    /// The first chunks of every key expression of the federation.
+    pub prefix: String,
+    /// `"peer"` or `"client"` (a client reaches the others through the routers or peers it connects to).
+    pub mode: String,
+    /// Zenoh endpoints to connect to (`tcp/HOST:PORT`), retried in the background until they answer.
+    pub connect: Vec<String>,
+    /// Zenoh endpoints to listen on (`tcp/HOST:PORT`).
+    pub listen: Vec<String>,
+    /// Zenoh's multicast scouting (discovery of peers on the LAN); off unless asked for.
+    pub multicast_scouting: bool,
+    /// Globs of local channel names offered to the other hubs.
+    pub export: Vec<String>,
+    /// Globs of remote channel names made local here.
+    pub import: Vec<String>,
+    /// Zenoh user/password authentication: the user this hub presents, ...
+    pub user: String,
+    /// ... the file holding its password (relative paths are inside data_dir), ...
+    pub password_file: String,
+    /// ... and the file of `user:password` lines that peers connecting here must match.
+    pub users_file: String,
+    /// How long a silent peer is kept before its channels are taken away (ms).
+    pub lease_ms: u64,
+    /// The longest a call to a remote service may take (the caller's own timeout applies when shorter).
+    pub call_timeout_ms: u64,
+    /// Per imported stream: messages queued towards the local hub before the oldest is dropped.
+    pub queue: usize,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -244,7 +280,7 @@ impl Config {
                 format!("{} is shorter than ticks.fast_ms", self.ticks.slow_ms),
             ));
         }
-        Ok(())
+        self.federation.validate()
     }
 
     /// The Unix socket path, resolved against the data directory; `None` if disabled.
@@ -266,6 +302,95 @@ impl Config {
             .and_then(|t| t.get("enabled"))
             .and_then(toml::Value::as_bool)
             .unwrap_or(true)
+    }
+}
+
+impl FederationSection {
+    /// This hub's name on the federation: `name`, or the host name when it is empty.
+    pub fn hub_name(&self) -> String {
+        if !self.name.is_empty() {
+            return self.name.clone();
+        }
+        let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+            .unwrap_or_default();
+        let host: String = host
+            .trim()
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        if host.is_empty() { "hub".into() } else { host }
+    }
+
+    fn validate(&self) -> Result<(), (&'static str, String)> {
+        use crate::federation::keys::{check_hub_name, check_literal};
+        if !self.enabled {
+            return Ok(());
+        }
+        check_hub_name(&self.hub_name()).map_err(|e| ("federation.name", e.to_string()))?;
+        check_literal(&self.prefix).map_err(|e| ("federation.prefix", e.to_string()))?;
+        match self.mode.as_str() {
+            "peer" => {}
+            "client" if self.connect.is_empty() => {
+                return Err((
+                    "federation.connect",
+                    "a client must connect to at least one peer or router".into(),
+                ));
+            }
+            "client" => {}
+            other => {
+                return Err((
+                    "federation.mode",
+                    format!("unknown mode {other:?} (expected \"peer\" or \"client\")"),
+                ));
+            }
+        }
+        for (key, list) in [
+            ("federation.connect", &self.connect),
+            ("federation.listen", &self.listen),
+        ] {
+            for endpoint in list {
+                crate::federation::endpoint::check_endpoint(endpoint).map_err(|e| (key, e))?;
+            }
+        }
+        for (key, list) in [
+            ("federation.export", &self.export),
+            ("federation.import", &self.import),
+        ] {
+            for pattern in list {
+                glob::Pattern::new(pattern)
+                    .map_err(|e| (key, format!("{pattern:?} is not a glob: {e}")))?;
+            }
+        }
+        let auth = [&self.user, &self.password_file];
+        if auth.iter().any(|v| v.is_empty()) && auth.iter().any(|v| !v.is_empty()) {
+            return Err((
+                "federation.user",
+                "user and password_file go together: set both or neither".into(),
+            ));
+        }
+        if !(500..=600_000).contains(&self.lease_ms) {
+            return Err((
+                "federation.lease_ms",
+                format!("{} is outside 500..=600000", self.lease_ms),
+            ));
+        }
+        if !(1..=3_600_000).contains(&self.call_timeout_ms) {
+            return Err((
+                "federation.call_timeout_ms",
+                format!("{} is outside 1..=3600000", self.call_timeout_ms),
+            ));
+        }
+        if self.queue == 0 {
+            return Err(("federation.queue", "must be at least 1".into()));
+        }
+        Ok(())
     }
 }
 
@@ -365,6 +490,41 @@ mod tests {
             .expect_err("open beyond loopback");
         assert_eq!(e.key, "http.open_on_loopback");
         assert!(load_text("[http]\nopen_on_loopback = true\n").is_ok());
+    }
+
+    #[test]
+    fn federation_mistakes_are_named_by_their_key() {
+        let on = "[federation]\nenabled = true\nname = \"a\"\n";
+        assert!(load_text(on).is_ok());
+        assert!(
+            load_text("[federation]\nmode = \"bogus\"\n").is_ok(),
+            "a switched-off section is not checked"
+        );
+        for (extra, key, words) in [
+            ("mode = \"router\"\n", "federation.mode", "unknown mode"),
+            ("mode = \"client\"\n", "federation.connect", "at least one"),
+            (
+                "connect = [\"udp/1.2.3.4:7447\"]\n",
+                "federation.connect",
+                "only tcp",
+            ),
+            (
+                "listen = [\"tcp/127.0.0.1\"]\n",
+                "federation.listen",
+                "HOST:PORT",
+            ),
+            ("export = [\"[\"]\n", "federation.export", "not a glob"),
+            ("user = \"a\"\n", "federation.user", "go together"),
+            ("prefix = \"a/*\"\n", "federation.prefix", "wildcard"),
+            ("lease_ms = 10\n", "federation.lease_ms", "outside"),
+            ("queue = 0\n", "federation.queue", "at least 1"),
+        ] {
+            let e = load_text(&format!("{on}{extra}")).expect_err(extra);
+            assert_eq!(e.key, key, "{extra}: {e}");
+            assert!(e.reason.contains(words), "{extra}: {e}");
+        }
+        let e = load_text("[federation]\nenabled = true\nname = \"a/b\"\n").expect_err("name");
+        assert_eq!(e.key, "federation.name");
     }
 
     #[test]

@@ -78,10 +78,16 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
     // start with the file, the key and the reason (a `ConfigError` the binary reports as such).
     let names: Vec<&str> = modules.iter().map(|m| m.name()).collect();
     config.check_module_names(&names)?;
-    let modules: Vec<Box<dyn Module>> = modules
+    let mut modules: Vec<Box<dyn Module>> = modules
         .into_iter()
         .filter(|m| config.module_enabled(m.name()))
         .collect();
+    // The federation is the hub's own module, switched by `[federation]`; its Zenoh session opens here so that an
+    // endpoint it cannot listen on stops the start.
+    if config.federation.enabled {
+        let federation = crate::federation::Federation::open(&config).await?;
+        modules.insert(0, Box::new(federation));
+    }
     for m in &modules {
         m.check(&config.module(m.name()))
             .map_err(|e| config.module_error(m.name(), &format!("{e:#}")))?;

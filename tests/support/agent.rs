@@ -75,6 +75,9 @@ pub struct AgentOptions {
     pub program: Option<&'static str>,
     /// More command-line arguments (e.g. `--record FILE`).
     pub args: Vec<String>,
+    /// Run in this network namespace (`ip netns exec`; see `netns::NetnsPair`). Its TCP addresses are then
+    /// reachable only from inside it: talk to it over its Unix socket ([`Agent::unix_client`]).
+    pub netns: Option<String>,
 }
 
 /// Everything a process printed, line by line, with a wake-up for waiters.
@@ -207,7 +210,15 @@ impl Agent {
     pub async fn start_with(dir: &DataDir, opts: AgentOptions) -> anyhow::Result<Agent> {
         let any = "127.0.0.1:0".to_string();
         let program = opts.program.unwrap_or("robot-agent");
-        let mut cmd = Command::new(binary(program)?);
+        let mut cmd = match &opts.netns {
+            // `ip netns exec` enters the namespace and then executes the binary itself, so the child is the server.
+            Some(ns) => {
+                let mut cmd = Command::new("ip");
+                cmd.args(["netns", "exec", ns]).arg(binary(program)?);
+                cmd
+            }
+            None => Command::new(binary(program)?),
+        };
         // From the repository root, as `make run` starts it: the default configuration's relative paths (the rule
         // program) resolve there.
         cmd.current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(".."));
@@ -326,6 +337,12 @@ impl Agent {
     /// A logged-in asynchronous satellite over TCP.
     pub async fn client(&self, name: &str) -> anyhow::Result<Client> {
         Ok(Client::connect(&self.tcp(), self.options(name)).await?)
+    }
+
+    /// A logged-in asynchronous satellite over the Unix socket (which reaches a server in another network
+    /// namespace too).
+    pub async fn unix_client(&self, name: &str) -> anyhow::Result<Client> {
+        Ok(Client::connect(&self.unix(), self.options(name)).await?)
     }
 
     /// `flowctl` pointed at this server over TCP, reading the token from the data directory.

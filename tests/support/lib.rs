@@ -10,6 +10,7 @@ pub mod browser_media;
 pub mod fixtures;
 pub mod http;
 pub mod metrics;
+pub mod netns;
 pub mod raw;
 pub mod recording;
 pub mod satellite;
@@ -27,4 +28,7 @@ pub use wait::PATIENCE;
 pub fn artifacts_dir() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
 }
-pub use wait::{json_message, next_payload, recv, until_subscribed, until_unsubscribed};
+pub use wait::{
+    free_port, json_message, next_payload, recv, until_channel, until_subscribed,
+    until_unsubscribed,
+};

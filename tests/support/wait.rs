@@ -50,3 +50,30 @@ pub async fn next_payload(sub: &Subscription) -> anyhow::Result<bytes::Bytes> {
 pub fn json_message(payload: &[u8]) -> Option<serde_json::Value> {
     serde_json::from_slice(payload).ok()
 }
+
+/// Waits until `name` exists on the hub of `client` (made there by a satellite or imported from another hub), and
+/// returns its header; `patience` bounds the wait.
+pub async fn until_channel(
+    client: &flow::Client,
+    name: &str,
+    patience: std::time::Duration,
+) -> anyhow::Result<String> {
+    tokio::time::timeout(patience, async {
+        loop {
+            if let Ok(info) = client.channel(name).await {
+                return info.header;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+    })
+    .await
+    .with_context(|| format!("{name} did not appear"))
+}
+
+/// A free TCP port on loopback, for a listener a test configures (a Zenoh endpoint): bound and released, so the
+/// process it is handed to binds it again at once.
+pub fn free_port() -> anyhow::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port())
+}

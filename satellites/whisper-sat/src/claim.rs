@@ -90,6 +90,20 @@ impl ClaimHeader {
     }
 }
 
+/// Whether the claim this satellite (`our_name`) holds on `ours` gives way to the claim `theirs` on the same speech.
+///
+/// Claims are exclusive by channel name, but two satellites can claim the same speech under different names in
+/// the same instant: on federated hubs, where each hub sees the other's claim only a network hop later
+/// (docs/federation.md), or on one hub when two segmenters cut the speech a frame apart. Both then see both headers,
+/// and this rule, which needs nothing else, gives them the same verdict: the satellite whose name sorts first keeps
+/// the speech. A finished claim is no rival (its transcript is out), and neither is a header without a name.
+pub fn yields_to(our_name: &str, ours: (u64, u64), theirs: &ClaimHeader, min_us: u64) -> bool {
+    !theirs.done
+        && !theirs.satellite.is_empty()
+        && theirs.satellite.as_str() < our_name
+        && overlaps(ours, theirs.interval(), min_us)
+}
+
 /// True when two intervals share more than `min_us`.
 pub fn overlaps(a: (u64, u64), b: (u64, u64), min_us: u64) -> bool {
     let lo = a.0.max(b.0);
@@ -100,6 +114,23 @@ pub fn overlaps(a: (u64, u64), b: (u64, u64), min_us: u64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn of_two_claims_on_the_same_speech_the_first_name_keeps_it() {
+        let speech = (1_000_000, 2_500_000);
+        let by = |name: &str| ClaimHeader::new(1_000_900, 2_400_000, name, true);
+        // Both sides reach the same verdict from the two headers.
+        assert!(yields_to("whisper-b", speech, &by("whisper-a"), 200_000));
+        assert!(!yields_to("whisper-a", speech, &by("whisper-b"), 200_000));
+        // Other speech, a finished claim, or an anonymous one is no rival.
+        let elsewhere = ClaimHeader::new(3_000_000, 4_000_000, "whisper-a", false);
+        assert!(!yields_to("whisper-b", speech, &elsewhere, 200_000));
+        let mut done = by("whisper-a");
+        done.done = true;
+        assert!(!yields_to("whisper-b", speech, &done, 200_000));
+        assert!(!yields_to("whisper-b", speech, &by(""), 200_000));
+        assert!(!yields_to("whisper-a", speech, &by("whisper-a"), 200_000));
+    }
 
     #[test]
     fn names_and_headers_round_trip() {

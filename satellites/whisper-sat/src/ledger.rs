@@ -135,13 +135,18 @@ impl Ledger {
         }
     }
 
-    /// The holder's claim disappeared without the utterance finishing: it may be claimed again from `eligible_at`.
-    pub fn released(&mut self, id: &str, eligible_at: Instant) {
-        if let Some(e) = self
-            .entries
-            .iter_mut()
-            .find(|e| e.utterance.id == id && e.standing == Standing::Taken)
-        {
+    /// The holder's claim on `id` disappeared without the utterance finishing: it may be claimed again from
+    /// `eligible_at`. `span`, the claim's interval when its header was seen, also releases the entries of the same
+    /// speech under other ids: a satellite on another hub stamps the audio a network hop later and so can name the
+    /// same speech a millisecond apart, and the entry this satellite put back as taken because of that claim must
+    /// not stay taken once the claim is gone. (A release is only a chance to claim: the claim attempt still looks for
+    /// any other live claim on the speech first.)
+    pub fn released(&mut self, id: &str, span: Option<(u64, u64)>, eligible_at: Instant) {
+        for e in self.entries.iter_mut().filter(|e| {
+            e.standing == Standing::Taken
+                && (e.utterance.id == id
+                    || span.is_some_and(|s| overlaps(interval(&e.utterance), s, SAME_SPEECH_US)))
+        }) {
             e.standing = Standing::Waiting;
             e.eligible_at = eligible_at;
         }
@@ -261,7 +266,7 @@ mod tests {
         let p = l.next_claimable(t0).expect("claimable");
         l.put_back(p, Standing::Taken, t0);
         assert_eq!(l.next_claimable(t0), None);
-        l.released("a", t0);
+        l.released("a", None, t0);
         assert_eq!(l.standing("a"), Some(Standing::Waiting));
         l.taken("a");
         // Finished by a transcript whose interval differs slightly: the same speech, dropped.
@@ -284,7 +289,7 @@ mod tests {
         assert_eq!(l.standing("a"), Some(Standing::Taken));
         assert_eq!(l.len(), 1);
         // The holder died: what is claimed again is the whole utterance, not the pause.
-        l.released("a", t0);
+        l.released("a", None, t0);
         let p = l.next_claimable(t0).expect("claimable");
         assert_eq!(
             p,
@@ -305,6 +310,23 @@ mod tests {
         l.put_back(p, Standing::Taken, t0);
         l.forget("b");
         assert!(l.is_empty());
+    }
+
+    #[test]
+    fn a_vanished_claim_under_another_id_releases_the_same_speech_only() {
+        let t0 = Instant::now();
+        let mut l = Ledger::new(Duration::from_secs(60));
+        // A satellite on another hub claimed this speech as "u1001"; this satellite heard it as "u1000".
+        l.found(utt("u1000", 1_000_000, 2_500_000), true, t0, t0);
+        l.found(utt("u5000", 5_000_000, 6_000_000), true, t0, t0);
+        l.taken("u1000");
+        l.taken("u5000");
+        // Its id alone finds nothing here; its interval finds the same speech and nothing else.
+        l.released("u1001", None, t0);
+        assert_eq!(l.standing("u1000"), Some(Standing::Taken));
+        l.released("u1001", Some((1_001_000, 2_400_000)), t0);
+        assert_eq!(l.standing("u1000"), Some(Standing::Waiting));
+        assert_eq!(l.standing("u5000"), Some(Standing::Taken));
     }
 
     #[test]

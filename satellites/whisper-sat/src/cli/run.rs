@@ -40,6 +40,11 @@ pub struct Args {
     /// satellites' segmentation depend on when the reference arrives.
     #[arg(long)]
     echo_gate: bool,
+    /// Never take the transcript relay role (owning `Agent.transcript` and `Agent.asr.submit`). For a satellite on
+    /// a hub that imports those channels from the microphone's hub over the federation (docs/federation.md): it
+    /// then never races the import for them when its hub starts first.
+    #[arg(long)]
+    no_relay: bool,
     #[command(flatten)]
     recognition: RecognitionArgs,
 }
@@ -70,6 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         speculate: !args.no_speculate,
         judge_turns: !args.no_speculate && !args.no_turn_detection,
         echo_gate: args.echo_gate,
+        relay: !args.no_relay,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

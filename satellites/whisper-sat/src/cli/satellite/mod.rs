@@ -15,7 +15,7 @@ mod audio;
 mod relay;
 
 use audio::Heard;
-use std::collections::{HashSet, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -25,7 +25,7 @@ use tokio::sync::{broadcast, watch};
 use tokio::task::JoinHandle;
 use whisper_sat::abort::AbortFlag;
 use whisper_sat::claim::{self, CLAIM_PREFIX, ClaimHeader, PRESENCE_PREFIX, PauseTurn};
-use whisper_sat::ledger::{Ledger, Pending, Standing};
+use whisper_sat::ledger::{Ledger, Pending, SAME_SPEECH_US, Standing};
 use whisper_sat::segmenter::SegmenterConfig;
 use whisper_sat::speculation::{Action, Hold};
 use whisper_sat::stream::ClockedUtterance;
@@ -48,6 +48,9 @@ pub struct Settings {
     /// Hold the agent's own voice, heard back through loudspeakers, under a floor learned from `Agent.speech`
     /// (`whisper_sat::echo`).
     pub echo_gate: bool,
+    /// Take the transcript relay role when it is free. Off for a satellite on a hub that imports the relay's
+    /// channels from another hub (docs/federation.md): the relay lives there.
+    pub relay: bool,
 }
 
 /// After a holder's claim vanishes, wait this long for its transcript before claiming the utterance again (the
@@ -192,6 +195,9 @@ struct Satellite {
     retained: VecDeque<(Instant, Publisher)>,
     /// When this satellite finished its recent utterances, for the fairness delay.
     recent_jobs: VecDeque<Instant>,
+    /// The interval of every live claim channel (by name) whose header was seen: when one vanishes, the same speech
+    /// under another id is released too (`Ledger::released`).
+    claim_spans: HashMap<String, (u64, u64)>,
 }
 
 impl Satellite {
@@ -376,6 +382,45 @@ impl Satellite {
         })
     }
 
+    /// Another satellite claimed the speech of the claim held here in the same instant, under another name (see
+    /// `claim::yields_to`): if it keeps the speech, this satellite drops its claim (the channel goes) and its decode,
+    /// so the speech is decoded once. Its utterance stays taken: the rival's claim overlaps it.
+    fn yield_to_rival(&mut self, id: &str, header: &ClaimHeader) {
+        let Some(held) = &self.worker.held else {
+            return;
+        };
+        let ours = held.hold.utterance();
+        if held.hold.id() == id
+            || !claim::yields_to(
+                &self.settings.name,
+                (ours.start_us, ours.speech_end_us),
+                header,
+                SAME_SPEECH_US,
+            )
+        {
+            return;
+        }
+        tracing::info!(
+            ours = %held.hold.id(),
+            theirs = %id,
+            rival = %header.satellite,
+            "the same speech was claimed by another satellite at once: leaving it to that one"
+        );
+        if let Some(d) = &self.worker.decoding {
+            d.abort.abort();
+        }
+        // Back in the book as taken, by the rival's claim: should the rival die holding it, this satellite
+        // claims the speech again (its claim's interval releases this entry).
+        if let Some(held) = self.worker.held.take() {
+            let pending = Pending {
+                ended: held.hold.is_ended(),
+                utterance: held.hold.utterance().clone(),
+            };
+            self.ledger
+                .put_back(pending, Standing::Taken, Instant::now());
+        }
+    }
+
     /// The decode came back: the transcriber is free again, and the hold decides what the result is worth.
     fn on_decoded(
         &mut self,
@@ -411,7 +456,10 @@ impl Satellite {
                 } else if let Some(id) = claim::claimed_utterance(&info.name) {
                     self.ledger.taken(id);
                     if let Some(header) = ClaimHeader::parse(&info.header) {
+                        self.claim_spans
+                            .insert(info.name.clone(), header.interval());
                         self.follow_pause(id, &header);
+                        self.yield_to_rival(id, &header);
                     }
                 }
             }
@@ -421,13 +469,16 @@ impl Satellite {
                     self.listener.send(audio::Feed::Flush);
                 }
                 if let Some(id) = claim::claimed_utterance(&name) {
-                    self.ledger.released(id, Instant::now() + RELEASE_GRACE);
+                    let span = self.claim_spans.remove(&name);
+                    self.ledger
+                        .released(id, span, Instant::now() + RELEASE_GRACE);
                 }
             }
             Ok(ClientEvent::HeaderChanged { name, header, .. }) => {
                 if let (Some(id), Some(claim)) =
                     (claim::claimed_utterance(&name), ClaimHeader::parse(&header))
                 {
+                    self.claim_spans.insert(name.clone(), claim.interval());
                     if claim.done {
                         let (start, end) = claim.interval();
                         self.ledger.finished(id, start, end);
@@ -495,6 +546,7 @@ pub async fn run(
             client.clone(),
             settings.name.clone(),
             listener.activity.clone(),
+            settings.relay,
         )),
     ];
     let transcripts = client.subscribe(relay::TRANSCRIPT).await?;
@@ -523,6 +575,7 @@ pub async fn run(
         },
         retained: VecDeque::new(),
         recent_jobs: VecDeque::new(),
+        claim_spans: HashMap::new(),
     };
     // Created once: a fresh `ctrl_c()` per turn of the loop would register with the signal driver again each time.
     let ctrl_c = tokio::signal::ctrl_c();

@@ -22,12 +22,17 @@ use whisper_sat::transcript::{TranscriptMessage, vad_message};
 pub const SUBMIT: &str = agent_contract::channels::ASR_SUBMIT.name;
 pub const TRANSCRIPT: &str = agent_contract::channels::TRANSCRIPT.name;
 
-/// Takes the relay role whenever it is free, until the client shuts down.
+/// Takes the relay role whenever it is free, until the client shuts down; never, unless `take_role`.
 pub async fn relay(
     client: Client,
     satellite: String,
     activity: broadcast::Sender<VoiceActivity>,
+    take_role: bool,
 ) -> anyhow::Result<()> {
+    if !take_role {
+        tracing::info!(%satellite, "never relaying (--no-relay): transcripts go to the relay of {TRANSCRIPT}");
+        return std::future::pending().await;
+    }
     let mut events = client.events();
     loop {
         match client
