@@ -554,14 +554,28 @@ async fn screenshots(renderer: &str) -> anyhow::Result<()> {
     s.wait("agentDebug.viseme === 'sil' && agentDebug.jaw < 0.05", 15)
         .await?;
 
-    // The longest hold the page accepts; a software-rendered frame and its capture can take longer than that on a
-    // busy machine, so the shot counts only if the lids are still closed once it is taken (else once more).
+    // The page holds a blink for 2 s at most, and a software-rendered frame and its capture can take longer than
+    // that on a busy machine: while the shot is taken, the lids are closed again every 500 ms (a blink with no
+    // closing phase starts closed, so they never open in between). The shot counts only if they are still closed
+    // once it is taken (else once more).
+    let closed_blink = json!({"cmd": "blink", "close_ms": 0, "hold_ms": 2000, "open_ms": 100});
+    let blink_shot = name("blink");
     let mut closed = false;
     for _ in 0..4 {
-        s.command(json!({"cmd": "blink", "close_ms": 10, "hold_ms": 2000, "open_ms": 100}))
-            .await?;
+        s.command(closed_blink.clone()).await?;
         s.wait("agentDebug.eyelid < 0.05", 5).await?;
-        s.shot(&name("blink")).await?;
+        let keep_closed = async {
+            loop {
+                tokio::time::sleep(Duration::from_millis(500)).await;
+                if let Err(e) = s.command(closed_blink.clone()).await {
+                    return e;
+                }
+            }
+        };
+        tokio::select! {
+            shot = s.shot(&blink_shot) => shot?,
+            e = keep_closed => return Err(e),
+        }
         if s.eval("agentDebug.eyelid < 0.05").await? == json!(true) {
             closed = true;
             break;
