@@ -13,6 +13,7 @@ pub mod ledger;
 pub mod model_path;
 pub mod offline;
 pub mod resample;
+pub mod restart_stop;
 pub mod segmenter;
 pub mod speculation;
 pub mod stream;

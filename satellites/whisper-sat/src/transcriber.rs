@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 
 use crate::abort::AbortFlag;
 use crate::cores::CoreShare;
+use crate::restart_stop::{RestartStop, WordStarts};
 use whisper_rs::{
     FullParams, SamplingStrategy, WhisperContext, WhisperContextParameters, WhisperState,
 };
@@ -118,6 +119,8 @@ pub struct Transcriber {
     model_name: String,
     /// The machine's core share this transcriber's decodes lease their threads from, if it joined one.
     cores: Option<CoreShare>,
+    /// Which tokens begin a word, for ending a decode that restarts (crate::restart_stop).
+    words: WordStarts,
 }
 
 impl std::fmt::Debug for Transcriber {
@@ -156,12 +159,14 @@ impl Transcriber {
             .file_stem()
             .map(|s| s.to_string_lossy().trim_start_matches("ggml-").to_owned())
             .unwrap_or_else(|| "whisper".into());
+        let words = WordStarts::of(&ctx);
         Ok(Self {
             ctx,
             state,
             cfg,
             model_name,
             cores: None,
+            words,
         })
     }
 
@@ -298,6 +303,15 @@ impl Transcriber {
             params.set_audio_ctx(fit_audio_ctx(input.len(), self.ctx.n_audio_ctx()));
         }
         abort.attach(&mut params);
+        // A greedy decode with the fitted window ends once it starts saying the utterance again (restart_stop.rs).
+        let restart = RestartStop::new(
+            &self.ctx,
+            &self.words,
+            MIN_WORDS_PER_SECOND * audio.len() as f32 / RATE as f32,
+        );
+        if context == AudioContext::Fit && self.cfg.beam_size <= 1 {
+            restart.attach(&mut params);
+        }
         let result = self.state.full(params, input);
         // An aborted run fails inside whisper.cpp, or may finish with whatever it had; either way it is unwanted.
         if abort.is_aborted() {
@@ -305,7 +319,11 @@ impl Transcriber {
         }
         result?;
         let eot = self.ctx.token_eot();
+        // A decode ended on a restart keeps the phrase it restarted, once.
+        let keep = restart.phrase().unwrap_or(usize::MAX);
         let mut text = String::new();
+        // Token by token as bytes: a multilingual token may hold part of a character.
+        let mut kept = Vec::new();
         let mut logprob_sum = 0.0f32;
         let mut tokens = 0usize;
         let mut no_speech_prob = 0.0f32;
@@ -314,16 +332,28 @@ impl Transcriber {
                 continue;
             };
             no_speech_prob = no_speech_prob.max(segment.no_speech_probability());
-            text.push_str(&segment.to_str_lossy()?);
+            if keep == usize::MAX {
+                text.push_str(&segment.to_str_lossy()?);
+            }
             for t in 0..segment.n_tokens() {
                 if let Some(token) = segment.get_token(t) {
                     let data = token.token_data();
-                    if data.id < eot {
+                    if data.id < eot && tokens < keep {
+                        if keep != usize::MAX {
+                            kept.extend_from_slice(token.to_bytes()?);
+                        }
                         logprob_sum += data.plog;
                         tokens += 1;
                     }
                 }
             }
+        }
+        if keep != usize::MAX {
+            text = String::from_utf8_lossy(&kept)
+                .trim()
+                .trim_end_matches([',', ';', ':'])
+                .to_owned();
+            tracing::debug!(%text, tokens, "the decode restarted the utterance; ended it there");
         }
         Ok(Decoded {
             text: text.trim().to_owned(),

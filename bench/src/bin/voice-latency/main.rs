@@ -9,7 +9,8 @@
 //! VAD hangover, ASR, rules, first TTS chunk; the hub hop is measured on its own. See docs/bench-voice-latency.md.
 //!
 //! Options: `--runs N` (default 20), `--threads N` (satellite inference threads, default 2), `--hangover-ms N`
-//! (default: the satellite's), `--write PATH` (a Markdown report).
+//! (default: the satellite's), `--satellite-arg ARG` (repeatable: passed on to `whisper-sat run`, to measure another
+//! setting), `--write PATH` (a Markdown report).
 
 mod barge_in;
 mod report;
@@ -55,6 +56,8 @@ struct Options {
     runs: usize,
     threads: u32,
     hangover_ms: Option<u32>,
+    /// Further `whisper-sat run` arguments, as given (`--satellite-arg --turn-confirm-ms=150`).
+    satellite_args: Vec<String>,
     write: Option<PathBuf>,
     barge_ins: usize,
 }
@@ -64,6 +67,7 @@ fn options() -> anyhow::Result<Options> {
         runs: 20,
         threads: 2,
         hangover_ms: None,
+        satellite_args: Vec::new(),
         write: None,
         barge_ins: 8,
     };
@@ -76,12 +80,13 @@ fn options() -> anyhow::Result<Options> {
             "--hangover-ms" => {
                 o.hangover_ms = Some(value("--hangover-ms")?.parse().context("--hangover-ms N")?);
             }
+            "--satellite-arg" => o.satellite_args.push(value("--satellite-arg")?),
             "--write" => o.write = Some(PathBuf::from(value("--write")?)),
             "--barge-ins" => {
                 o.barge_ins = value("--barge-ins")?.parse().context("--barge-ins N")?
             }
             other => bail!(
-                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --barge-ins N, --write PATH)"
+                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --satellite-arg ARG, --barge-ins N, --write PATH)"
             ),
         }
     }
@@ -160,7 +165,7 @@ async fn main() -> anyhow::Result<()> {
     let hop = watch::hub_hop(&mic_client, &watcher_client, 250).await?;
     let mut watcher = Watcher::start(&watcher_client).await?;
 
-    rig.start_satellite(&bins, opts.threads, opts.hangover_ms)
+    rig.start_satellite(&bins, opts.threads, opts.hangover_ms, &opts.satellite_args)
         .await?;
     watch::wait_channel(
         &watcher_client,
@@ -253,5 +258,9 @@ fn opts_summary(o: &Options) -> String {
         o.threads,
         o.hangover_ms
             .map_or_else(|| "default".to_owned(), |ms| format!("{ms} ms"))
-    )
+    ) + &if o.satellite_args.is_empty() {
+        String::new()
+    } else {
+        format!(", satellite {}", o.satellite_args.join(" "))
+    }
 }

@@ -104,12 +104,13 @@ impl Rig {
         })
     }
 
-    /// Starts `whisper-sat run` with `threads` inference threads and the given hangover.
+    /// Starts `whisper-sat run` with `threads` inference threads, the given hangover and any further arguments.
     pub async fn start_satellite(
         &mut self,
         bins: &Path,
         threads: u32,
         hangover_ms: Option<u32>,
+        extra: &[String],
     ) -> anyhow::Result<()> {
         let mut cmd = Command::new(binary(bins, "whisper-sat")?);
         cmd.arg("run")
@@ -125,6 +126,7 @@ impl Rig {
         if let Some(ms) = hangover_ms {
             cmd.arg("--hangover-ms").arg(ms.to_string());
         }
+        cmd.args(extra);
         let child = cmd
             .env("RUST_LOG", "warn")
             .env("NO_COLOR", "1")

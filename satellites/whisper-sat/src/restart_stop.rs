@@ -1,0 +1,329 @@
+//! Ending a greedy decode as soon as it starts saying the utterance again: whisper.cpp's logits filter, which
+//! forces the end-of-text token once the tokens decoded so far end with a repeat of their own beginning.
+//!
+//! With the fitted encoder window (docs/asr.md), short utterances are often transcribed whole and then said again
+//! and again until the token cap ("How many people do you see? How many people do you see? How many..."). The
+//! transcriber keeps such an output once ([`crate::transcriber::repeated_utterance`]), but by then the decoder has
+//! spent a step on every repeated token: measured with tiny.en on two cores, 22-29 tokens instead of 3-7, about
+//! 60-100 ms of a 150-200 ms inference, all of it on the critical path of a reply. This filter watches the tokens as
+//! they come and ends the decode after a few tokens of the second time, when the phrase they repeat holds enough
+//! words for the audio (the same test as the whole-output rule), so the text is what that rule would have kept.
+//!
+//! whisper-rs has no safe setter for the logits filter, so the raw one is used here, and `unsafe` is kept to this
+//! module: the callback reads the token slice and writes the logits slice that whisper.cpp hands it, and the
+//! [`RestartStop`] behind the user-data pointer, which the borrow checker keeps alive for as long as the parameters
+//! can be used.
+
+#![allow(unsafe_code)]
+
+use std::ffi::{c_int, c_void};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use whisper_rs::{
+    FullParams, WhisperContext, WhisperSysContext, WhisperSysState, WhisperTokenData,
+};
+
+/// Tokens of the second time that must agree with the beginning before the decode is ended (fewer when the phrase
+/// itself is shorter): one or two tokens recur by chance ("the ... the"), three in a row from the very start do
+/// not.
+pub const REPEAT_TOKENS: usize = 3;
+
+/// Which tokens of a model's vocabulary begin a word, computed once per model.
+#[derive(Debug, Clone)]
+pub struct WordStarts {
+    /// Per token id: 1 when the token holds a letter or digit and begins with a space (a word of its own), 2 when it
+    /// holds one without the space (the rest of a word, or the first word of a text), 0 for punctuation.
+    marks: Vec<u8>,
+}
+
+impl WordStarts {
+    /// Marks every token of `ctx`'s vocabulary.
+    pub fn of(ctx: &WhisperContext) -> Self {
+        let n = usize::try_from(ctx.n_vocab()).unwrap_or(0);
+        let marks = (0..n)
+            .map(|id| {
+                let bytes = i32::try_from(id)
+                    .ok()
+                    .and_then(|id| ctx.token_to_bytes(id).ok())
+                    .unwrap_or_default();
+                Self::mark(bytes)
+            })
+            .collect();
+        Self { marks }
+    }
+
+    /// The mark of one token's text (bytes, since a multilingual token may hold part of a character).
+    fn mark(bytes: &[u8]) -> u8 {
+        // Bytes from 0x80 up belong to non-ASCII characters, letters in every language Whisper writes.
+        let wordy = bytes
+            .iter()
+            .any(|b| b.is_ascii_alphanumeric() || *b >= 0x80);
+        match (wordy, bytes.first()) {
+            (false, _) => 0,
+            (true, Some(b' ')) => 1,
+            (true, _) => 2,
+        }
+    }
+
+    /// Words in a text of `tokens`: every token that begins one, and the first token holding a letter when it has
+    /// no space before it.
+    pub fn words(&self, tokens: &[i32]) -> usize {
+        let mut words = 0;
+        for &id in tokens {
+            match usize::try_from(id).ok().and_then(|i| self.marks.get(i)) {
+                Some(1) => words += 1,
+                Some(2) if words == 0 => words += 1,
+                _ => {}
+            }
+        }
+        words
+    }
+}
+
+/// The length of the phrase that `tokens` say again from their start, when they end with at least
+/// `min(phrase, REPEAT_TOKENS)` tokens of its second time (`tokens[p..] == tokens[..n - p]`); the shortest such
+/// phrase.
+pub fn restarted_phrase(tokens: &[i32]) -> Option<usize> {
+    let n = tokens.len();
+    (1..n).find(|&p| n - p >= p.min(REPEAT_TOKENS) && tokens[p..] == tokens[..n - p])
+}
+
+/// One decode's watch for a restart: what it needs to judge one, and what it found.
+#[derive(Debug)]
+pub struct RestartStop<'w> {
+    words: &'w WordStarts,
+    /// Fewest words the repeated phrase must hold to stand for the whole utterance.
+    min_words: f32,
+    eot: c_int,
+    n_vocab: usize,
+    /// The length in tokens of the phrase the decode was ended on, or 0.
+    phrase: AtomicUsize,
+}
+
+impl<'w> RestartStop<'w> {
+    /// A watch for a decode of `ctx` whose repeated phrase counts only with `min_words` words or more.
+    pub fn new(ctx: &WhisperContext, words: &'w WordStarts, min_words: f32) -> Self {
+        Self {
+            words,
+            min_words,
+            eot: ctx.token_eot(),
+            n_vocab: usize::try_from(ctx.n_vocab()).unwrap_or(0),
+            phrase: AtomicUsize::new(0),
+        }
+    }
+
+    /// The length in tokens of the phrase the decode was ended on, once it was.
+    pub fn phrase(&self) -> Option<usize> {
+        match self.phrase.load(Ordering::Relaxed) {
+            0 => None,
+            p => Some(p),
+        }
+    }
+
+    /// Whether the decode should end before `tokens` go on: they say their beginning again, and that beginning
+    /// holds enough words. Records the phrase when so.
+    fn should_end(&self, tokens: &[i32]) -> bool {
+        let Some(p) = restarted_phrase(tokens) else {
+            return false;
+        };
+        if (self.words.words(&tokens[..p]) as f32) < self.min_words {
+            return false;
+        }
+        self.phrase.store(p, Ordering::Relaxed);
+        true
+    }
+
+    /// Makes decoding with `params` end when it restarts. The watch is borrowed for the parameters' lifetime, so it
+    /// outlives every inference that can run with them. Only for greedy decoding: beam search filters several
+    /// decoders' logits at once, and its beams are left to its own scoring.
+    pub fn attach<'a>(&'a self, params: &mut FullParams<'a, '_>) {
+        // SAFETY: `filter` only reads the `RestartStop` behind the user-data pointer (its one mutable field is an
+        // atomic), which is borrowed for `'a`, as long as `params` may be used; whisper.cpp calls the filter only
+        // during `whisper_full` with these parameters.
+        unsafe {
+            params.set_filter_logits_callback(Some(filter));
+            params.set_filter_logits_callback_user_data(
+                std::ptr::from_ref(self).cast_mut().cast::<c_void>(),
+            );
+        }
+    }
+}
+
+/// whisper.cpp's logits filter: before each decoder step, with the tokens so far and the next token's logits.
+unsafe extern "C" fn filter(
+    _ctx: *mut WhisperSysContext,
+    _state: *mut WhisperSysState,
+    tokens: *const WhisperTokenData,
+    n_tokens: c_int,
+    logits: *mut f32,
+    user_data: *mut c_void,
+) {
+    let Ok(n) = usize::try_from(n_tokens) else {
+        return;
+    };
+    if user_data.is_null() || tokens.is_null() || logits.is_null() || n < 2 {
+        return;
+    }
+    // SAFETY: `RestartStop::attach` is the only place this filter is installed, always with a pointer to a
+    // `RestartStop` that lives as long as the parameters (see there); it is only read here, apart from its atomic.
+    let stop = unsafe { &*user_data.cast::<RestartStop>() };
+    // SAFETY: whisper.cpp passes the decoder's `n_tokens` tokens so far, a live vector it does not touch while the
+    // filter runs.
+    let tokens = unsafe { std::slice::from_raw_parts(tokens, n) };
+    let ids: Vec<i32> = tokens.iter().map(|t| t.id).collect();
+    if !stop.should_end(&ids) {
+        return;
+    }
+    let Ok(eot) = usize::try_from(stop.eot) else {
+        return;
+    };
+    if eot >= stop.n_vocab {
+        return;
+    }
+    // SAFETY: whisper.cpp passes the next token's logits, one per vocabulary entry (`n_vocab`, asserted there), in
+    // a vector of its decoder that nothing else touches while the filter runs.
+    let logits = unsafe { std::slice::from_raw_parts_mut(logits, stop.n_vocab) };
+    logits.fill(f32::NEG_INFINITY);
+    logits[eot] = 0.0;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_phrase_said_again_is_found_after_three_tokens_of_its_second_time() {
+        let phrase = [10, 11, 12, 13, 14, 15, 16];
+        let mut tokens = phrase.to_vec();
+        tokens.extend_from_slice(&phrase[..2]);
+        assert_eq!(restarted_phrase(&tokens), None);
+        tokens.push(phrase[2]);
+        assert_eq!(restarted_phrase(&tokens), Some(7));
+    }
+
+    #[test]
+    fn a_short_phrase_counts_once_it_is_said_twice_whole() {
+        assert_eq!(restarted_phrase(&[1, 2, 1]), None);
+        assert_eq!(restarted_phrase(&[1, 2, 1, 2]), Some(2));
+        assert_eq!(restarted_phrase(&[5, 5]), Some(1));
+    }
+
+    #[test]
+    fn a_word_that_merely_recurs_is_no_restart() {
+        // "the cat saw the dog": the first token comes back, but what follows it does not.
+        assert_eq!(restarted_phrase(&[1, 2, 3, 1, 4]), None);
+        assert_eq!(restarted_phrase(&[1, 2, 3, 1, 2, 4]), None);
+        assert_eq!(restarted_phrase(&[]), None);
+        assert_eq!(restarted_phrase(&[7]), None);
+    }
+
+    fn vocabulary() -> WordStarts {
+        // 0 " How", 1 " many", 2 "?", 3 "How", 4 "atively", 5 " è", 6 ",".
+        let texts: [&[u8]; 7] = [
+            b" How",
+            b" many",
+            b"?",
+            b"How",
+            b"atively",
+            " è".as_bytes(),
+            b",",
+        ];
+        WordStarts {
+            marks: texts.iter().map(|t| WordStarts::mark(t)).collect(),
+        }
+    }
+
+    #[test]
+    fn words_are_counted_from_the_tokens_that_begin_them() {
+        let v = vocabulary();
+        assert_eq!(v.words(&[0, 1, 2]), 2);
+        assert_eq!(
+            v.words(&[3, 1, 6, 5]),
+            3,
+            "a first word without its space counts"
+        );
+        assert_eq!(v.words(&[0, 4]), 1, "the rest of a word is not another");
+        assert_eq!(v.words(&[2, 6]), 0);
+        assert_eq!(
+            v.words(&[99, -1]),
+            0,
+            "ids outside the vocabulary count for nothing"
+        );
+    }
+
+    #[test]
+    fn the_filter_ends_a_restart_only_when_the_phrase_holds_enough_words() {
+        let v = vocabulary();
+        let stop = |min_words| RestartStop {
+            words: &v,
+            min_words,
+            eot: 7,
+            n_vocab: 8,
+            phrase: AtomicUsize::new(0),
+        };
+        let enough = stop(1.5);
+        assert!(enough.should_end(&[0, 1, 2, 0, 1, 2]));
+        assert_eq!(enough.phrase(), Some(3));
+        let too_few = stop(2.5);
+        assert!(!too_few.should_end(&[0, 1, 2, 0, 1, 2]));
+        assert_eq!(too_few.phrase(), None);
+    }
+
+    #[test]
+    fn the_callback_forces_the_end_of_text_token_on_a_restart() {
+        let v = vocabulary();
+        let stop = RestartStop {
+            words: &v,
+            min_words: 1.0,
+            eot: 7,
+            n_vocab: 8,
+            phrase: AtomicUsize::new(0),
+        };
+        let token = |id| WhisperTokenData {
+            id,
+            tid: 0,
+            p: 0.5,
+            plog: -0.7,
+            pt: 0.0,
+            ptsum: 0.0,
+            t0: 0,
+            t1: 0,
+            t_dtw: 0,
+            vlen: 0.0,
+        };
+        let user = std::ptr::from_ref(&stop).cast_mut().cast::<c_void>();
+        let mut logits = [1.0f32; 8];
+        let going_on = [token(0), token(1), token(2), token(0)];
+        // SAFETY: live slices of the lengths passed, and a pointer to a live `RestartStop`, as whisper.cpp and
+        // `attach` pass them.
+        unsafe {
+            filter(
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                going_on.as_ptr(),
+                4,
+                logits.as_mut_ptr(),
+                user,
+            );
+        }
+        assert_eq!(
+            logits, [1.0; 8],
+            "no restart yet: the logits are left alone"
+        );
+        let restarted = [token(0), token(1), token(2), token(0), token(1), token(2)];
+        // SAFETY: as above.
+        unsafe {
+            filter(
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                restarted.as_ptr(),
+                6,
+                logits.as_mut_ptr(),
+                user,
+            );
+        }
+        assert_eq!(logits[7], 0.0);
+        assert!(logits[..7].iter().all(|l| *l == f32::NEG_INFINITY));
+        assert_eq!(stop.phrase(), Some(3));
+    }
+}
