@@ -36,10 +36,14 @@ function applyLanguage(next) {
 }
 
 const link = new Link({ autostart });
+// Visemes are drawn on the clock of what is heard: the audio clock less the playback route's delay now (the
+// speech player below sets it; the avatar may draw before that).
+let heardTime = (/** @type {number} */ nowS) => nowS;
+const heardClock = () => heardTime(audioClock());
 // `?avatar=2d` or `?avatar=3d` picks the renderer; the 3D head falls back to the 2D face where it cannot run.
 const { avatar, renderer: avatarRenderer } = await createAvatar(
   $("avatar"),
-  audioClock,
+  heardClock,
   params.get("avatar") ?? DEFAULT_RENDERER,
   {
     syncFrames: params.get("avatarsync") === "1",
@@ -60,6 +64,7 @@ const speech = new SpeechPlayer((utterance, startS) => {
     avatar.scheduleVisemes(utterance, startS, items);
   }
 });
+heardTime = (nowS) => speech.heardTime(nowS);
 
 // Speech plays through a loopback peer connection so that Chrome's echo canceller removes it from the microphone
 // (loudspeakers, not headphones); `?playback=direct` keeps the plain Web Audio path. It opens once the microphone
@@ -71,7 +76,10 @@ async function openEchoSafePlayback() {
   if (playbackOpening || params.get("playback") === "direct") return;
   playbackOpening = true;
   try {
-    speech.useRoute(await LoopbackRoute.open(audioContext()));
+    // `?playbackbuffer=N` holds the loopback's jitter buffer at N ms (0-4000) instead of letting WebRTC resize it.
+    const buffer = Number.parseInt(params.get("playbackbuffer") ?? "", 10);
+    const bufferMs = Number.isInteger(buffer) && buffer >= 0 && buffer <= 4000 ? buffer : null;
+    speech.useRoute(await LoopbackRoute.open(audioContext(), { bufferMs }));
     speech.routeError = null;
   } catch (e) {
     speech.routeError = String(e?.message ?? e);

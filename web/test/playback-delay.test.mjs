@@ -5,7 +5,16 @@
 import assert from "node:assert/strict";
 import { test } from "node:test";
 
-import { DelayEstimator, EnvelopeTrack, FRAME_S, MATCH_FRAMES, bestLag } from "../js/media/playback-delay.js";
+import {
+  DelayEstimator,
+  EnvelopeTrack,
+  FRAME_S,
+  HeardShift,
+  JitterTrack,
+  MATCH_FRAMES,
+  SHIFT_SLEW,
+  bestLag,
+} from "../js/media/playback-delay.js";
 
 /** A speech-like signal: bursts of a 150 Hz tone of varying loudness and length, with pauses, `seconds` long. */
 function speechLike(rate, seconds, seed = 1) {
@@ -78,4 +87,71 @@ test("the estimator matches each stretch once and keeps the median, the initial 
   assert.ok(found.length >= 3 && found.length <= 6, `${found.length} matches`);
   for (const d of found) assert.ok(Math.abs(d - 0.1) < 0.003, `delay ${d}`);
   assert.ok(Math.abs(e.delayS - 0.1) < 0.003);
+});
+
+test("the jitter buffer's mean over a stretch takes the readings in it and the one that covers its end", () => {
+  const j = new JitterTrack();
+  assert.equal(j.latestS, null);
+  assert.equal(j.meanOver(0, 1), null);
+  for (let k = 0; k < 8; k++) j.add(k * 0.25, 0.05 + 0.01 * k);
+  j.add(2.5, Number.NaN); // a reading the receiver could not give is left out
+  assert.ok(Math.abs(j.latestS - 0.12) < 1e-9);
+  // Readings at 0.5, 0.75, 1.0 and the one at 1.25 that covers the end of 1.1.
+  assert.ok(Math.abs(j.meanOver(0.5, 1.1) - (0.07 + 0.08 + 0.09 + 0.1) / 4) < 1e-9);
+  assert.equal(j.meanOver(5, 6), null);
+});
+
+test("a jitter buffer that grows mid-speech moves the delay at once, without waiting for new matches", () => {
+  const rate = 8000;
+  const e = new DelayEstimator(0.09);
+  const sig = speechLike(rate, 8, 3);
+  // 40 ms of fixed delay plus a 55 ms buffer while the stretches are matched.
+  e.sent.add(sig, 0, rate);
+  e.received.add(sig, 0.095, rate);
+  for (let t = 0; t <= 8; t += 0.25) e.jitter.add(t, 0.055);
+  const second = Math.round(1 / FRAME_S);
+  for (let upTo = 3 * second; upTo < 8 * second; upTo += 20) e.match(upTo);
+  assert.ok(e.measured.length >= 3);
+  assert.ok(Math.abs(e.delayS - 0.095) < 0.003, `delay ${e.delayS}`);
+  // The machine gets busy and the receiver's buffer grows to 190 ms: the delay follows its reading.
+  e.jitter.add(8.25, 0.19);
+  assert.ok(Math.abs(e.delayS - 0.23) < 0.003, `delay ${e.delayS}`);
+});
+
+test("without jitter-buffer readings the delay is the median of the matches", () => {
+  const rate = 8000;
+  const e = new DelayEstimator(0.09);
+  const sig = speechLike(rate, 8, 5);
+  e.sent.add(sig, 0, rate);
+  e.received.add(sig, 0.12, rate);
+  const second = Math.round(1 / FRAME_S);
+  for (let upTo = 3 * second; upTo < 8 * second; upTo += 20) e.match(upTo);
+  assert.ok(Math.abs(e.delayS - 0.12) < 0.003, `delay ${e.delayS}`);
+});
+
+test("the heard clock's shift jumps while nothing plays and never runs the clock backwards while speech does", () => {
+  const h = new HeardShift();
+  assert.equal(h.follow(1.0, 0.09, false), 0.09);
+  // Speech plays and the delay jumps by 100 ms: the shift follows at SHIFT_SLEW, so heard time keeps rising.
+  let heard = 1.0 - 0.09;
+  let now = 1.0;
+  for (let k = 1; k <= 40; k++) {
+    now = 1.0 + k / 60;
+    const next = now - h.follow(now, 0.19, true);
+    assert.ok(next >= heard, `heard clock went back at ${now}: ${next} < ${heard}`);
+    heard = next;
+  }
+  assert.ok(Math.abs(h.s - 0.19) < 1e-9, `shift ${h.s}`);
+  // It took 100 ms / SHIFT_SLEW of audio time to get there, and the history tells what was in effect when.
+  assert.equal(h.at(0.5), 0.09);
+  assert.ok(Math.abs(h.at(1.0 + 0.1 / SHIFT_SLEW / 2) - 0.14) < 0.01, `halfway ${h.at(1.1)}`);
+  assert.equal(h.at(now), 0.19);
+});
+
+test("before any match the delay is the guessed fixed part plus the jitter buffer's reading, if there is one", () => {
+  const e = new DelayEstimator(0.09, 0.035);
+  assert.equal(e.delayS, 0.09);
+  e.jitter.add(0.25, 0.2);
+  assert.ok(Math.abs(e.delayS - 0.235) < 1e-9, `delay ${e.delayS}`);
+  assert.equal(new DelayEstimator(0.09).delayS, 0.09, "no fixed guess: the initial one");
 });

@@ -9,15 +9,22 @@
 // reduced to an envelope (mean magnitude per 5 ms frame), and the lag at which the two envelopes correlate best is
 // the delay. A whole stretch of speech is matched, not single onsets: Opus codes noise-like sounds by their
 // spectrum rather than their waveform, so the first loud sample of a fricative comes out tens of milliseconds from
-// where it went in, while the envelope of a second of speech does not move. Each utterance takes the estimate
-// of the stretches before it, so a measurement never corrects the schedule it was measured on.
+// where it went in, while the envelope of a second of speech does not move.
+//
+// Most of the delay is fixed (frames, the audio element and the probe's input), but the receiver's jitter buffer
+// is not: on a busy machine packets arrive unevenly and WebRTC grows the buffer, by over a hundred milliseconds in
+// the middle of an utterance, which a median of two-second matches follows only seconds later. The receiver
+// reports its buffer's delay (`getStats`, a few times a second), so each match is kept as the part the buffer does
+// not explain (the match less the buffer's mean delay over the stretch), and the delay now is the median of those
+// parts plus the buffer's delay now. A measurement never corrects the schedule it was measured on: the matches
+// only give the fixed part, and what moves comes from the receiver's own figure.
 
 /** Length of one envelope frame (seconds). */
 export const FRAME_S = 0.005;
 /** The stretch of envelope matched at a time (frames): two seconds, several words. */
 export const MATCH_FRAMES = 400;
-/** The longest delay looked for (frames): 300 ms. */
-export const MAX_LAG_FRAMES = 60;
+/** The longest delay looked for (frames): 500 ms, room for a jitter buffer held long (`?playbackbuffer=`). */
+export const MAX_LAG_FRAMES = 100;
 /** The correlation a match needs to count: speech against its own delayed copy is far above it, noise far below. */
 export const MIN_SCORE = 0.8;
 /** The mean magnitude a frame needs to count as sound (of full scale; speech is well above it). */
@@ -26,6 +33,8 @@ const SOUND_LEVEL = 0.01;
 const KEEP_FRAMES = 1024;
 /** Measurements kept; the estimate is their median, so one odd stretch does not move it far. */
 const KEEP = 7;
+/** Jitter-buffer readings kept (one every quarter second: half a minute). */
+const KEEP_JITTER = 120;
 
 /** Mean magnitude per `FRAME_S` frame of a signal on the audio clock, for the last `KEEP_FRAMES` frames. */
 export class EnvelopeTrack {
@@ -143,15 +152,66 @@ function stats(v, from, n) {
   return { mean, sd: Math.sqrt(sq / n) };
 }
 
-/** The route's delay: the median of recent envelope matches, or an initial guess before any. */
+/** The receiver's jitter-buffer delay over time: readings on the audio clock, each the mean since the last. */
+export class JitterTrack {
+  constructor() {
+    /** @type {{atS: number, delayS: number}[]} */
+    this.readings = [];
+  }
+
+  /**
+   * Adds the buffer's mean delay over the samples it let out since the last reading, read at audio time `atS`.
+   * @param {number} atS
+   * @param {number} delayS
+   */
+  add(atS, delayS) {
+    if (!Number.isFinite(atS) || !Number.isFinite(delayS) || delayS < 0) return;
+    this.readings.push({ atS, delayS });
+    if (this.readings.length > KEEP_JITTER) this.readings.shift();
+  }
+
+  /** The latest reading (seconds), or null before any. */
+  get latestS() {
+    const last = this.readings[this.readings.length - 1];
+    return last ? last.delayS : null;
+  }
+
+  /**
+   * The mean delay over audio times `fromS` .. `toS`: the readings taken in it and the first one after (which covers
+   * the end of it), or null when none covers it.
+   * @param {number} fromS
+   * @param {number} toS
+   */
+  meanOver(fromS, toS) {
+    let sum = 0;
+    let n = 0;
+    for (const r of this.readings) {
+      if (r.atS < fromS) continue;
+      sum += r.delayS;
+      n += 1;
+      if (r.atS > toS) break;
+    }
+    return n > 0 ? sum / n : null;
+  }
+}
+
+/** The route's delay: recent envelope matches, less the jitter buffer they held, plus the buffer's delay now. */
 export class DelayEstimator {
-  /** @param {number} initialS the estimate before anything is measured */
-  constructor(initialS) {
+  /**
+   * @param {number} initialS the estimate before anything is measured and without a jitter-buffer reading
+   * @param {number | null} fixedGuessS the part of the delay the jitter buffer does not explain, assumed before
+   *   anything is measured (the estimate is then this plus the buffer's latest reading)
+   */
+  constructor(initialS, fixedGuessS = null) {
     this.initialS = initialS;
+    this.fixedGuessS = fixedGuessS;
     this.sent = new EnvelopeTrack();
     this.received = new EnvelopeTrack();
-    /** @type {number[]} */
+    this.jitter = new JitterTrack();
+    /** @type {number[]} the delays matched */
     this.measured = [];
+    /** @type {(number | null)[]} for each match, the part the jitter buffer does not explain (null: no reading) */
+    this.fixed = [];
     this.lastMatched = -Infinity;
   }
 
@@ -178,16 +238,93 @@ export class DelayEstimator {
     if (!found || found.score < MIN_SCORE) return null;
     this.lastMatched = upTo;
     const delayS = found.lag * FRAME_S;
+    const buffered = this.jitter.meanOver(from * FRAME_S, (upTo + 1) * FRAME_S);
     this.measured.push(delayS);
-    if (this.measured.length > KEEP) this.measured.shift();
+    this.fixed.push(buffered === null ? null : delayS - buffered);
+    if (this.measured.length > KEEP) {
+      this.measured.shift();
+      this.fixed.shift();
+    }
     return { delayS, score: found.score };
   }
 
-  /** The delay to compensate now (seconds): the median of recent measurements, or the initial guess. */
+  /**
+   * The delay to compensate now (seconds): the median fixed part plus the jitter buffer's latest reading; the
+   * median of the matches themselves where the receiver gives no readings; before any match, the guessed fixed
+   * part plus the buffer's reading, or the initial guess.
+   */
   get delayS() {
-    if (this.measured.length === 0) return this.initialS;
-    const s = [...this.measured].sort((a, b) => a - b);
-    const mid = s.length >> 1;
-    return s.length % 2 ? s[mid] : (s[mid - 1] + s[mid]) / 2;
+    const now = this.jitter.latestS;
+    if (this.measured.length === 0) {
+      return this.fixedGuessS !== null && now !== null ? this.fixedGuessS + now : this.initialS;
+    }
+    if (now !== null && this.fixed.every((f) => f !== null)) {
+      return Math.max(0, median(/** @type {number[]} */ (this.fixed)) + now);
+    }
+    return median(this.measured);
+  }
+}
+
+/** @param {number[]} values (not empty) */
+function median(values) {
+  const s = [...values].sort((a, b) => a - b);
+  const mid = s.length >> 1;
+  return s.length % 2 ? s[mid] : (s[mid - 1] + s[mid]) / 2;
+}
+
+/**
+ * While speech plays, the heard clock's shift follows the route's delay at most this fast (seconds per second of
+ * audio), so the heard clock never runs backwards: the mouth slows down while the receiver stretches the sound to
+ * fill a growing jitter buffer, as the sound does, instead of jumping back.
+ */
+export const SHIFT_SLEW = 0.5;
+/** Shifts in effect kept, for pairing them with the route's measurements. */
+const KEEP_SHIFTS = 600;
+
+/**
+ * How far behind the audio clock the sound is heard, as the clock visemes are drawn on uses it: the route's delay,
+ * taken at once while nothing plays and followed at most `SHIFT_SLEW` as fast as the clock while speech plays.
+ */
+export class HeardShift {
+  constructor() {
+    this.s = 0;
+    this.atS = -Infinity;
+    /** @type {{atS: number, shiftS: number}[]} the shift in effect from each audio time on */
+    this.history = [];
+  }
+
+  /**
+   * The shift at audio time `nowS`, moved towards the route's delay `targetS`.
+   * @param {number} nowS
+   * @param {number} targetS
+   * @param {boolean} playing speech is being heard, so the shift may not jump
+   */
+  follow(nowS, targetS, playing) {
+    const elapsed = nowS - this.atS;
+    let s = targetS;
+    if (playing && Number.isFinite(elapsed) && elapsed >= 0) {
+      const step = elapsed * SHIFT_SLEW;
+      s = this.s + Math.max(-step, Math.min(step, targetS - this.s));
+    }
+    if (s !== this.s || this.history.length === 0) {
+      this.history.push({ atS: nowS, shiftS: s });
+      if (this.history.length > KEEP_SHIFTS) this.history.shift();
+    }
+    this.s = s;
+    this.atS = nowS;
+    return s;
+  }
+
+  /**
+   * The shift in effect at audio time `atS`.
+   * @param {number} atS
+   */
+  at(atS) {
+    let s = this.history.length > 0 ? this.history[0].shiftS : this.s;
+    for (const e of this.history) {
+      if (e.atS > atS) break;
+      s = e.shiftS;
+    }
+    return s;
   }
 }

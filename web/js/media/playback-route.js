@@ -5,8 +5,9 @@
 // unseen by it (chromium bug 687574), and with loudspeakers instead of headphones the agent would hear itself. The
 // known workaround, done here, sends the speech through a peer connection to the same page (a local loopback
 // with no server involved) and plays what arrives in an `<audio>` element, which the canceller does see. It costs
-// some delay (Opus frames, the receiver's jitter buffer); a probe on the received stream measures it
-// (playback-delay.js) so that the viseme schedule can be shifted by the same amount.
+// some delay (Opus frames, the receiver's jitter buffer); a probe on the received stream measures it, and the
+// receiver's statistics follow its jitter buffer (playback-delay.js), so that the clock visemes are drawn on can
+// run behind the audio clock by the same amount, moment by moment.
 //
 // The direct route is the fallback where WebRTC is missing or the loopback does not connect within a few seconds
 // (no network interface for a host candidate, a policy that blocks it), and the choice with `?playback=direct`.
@@ -18,7 +19,16 @@ import { DelayEstimator, FRAME_S, MATCH_FRAMES } from "./playback-delay.js";
  * loopback measures (90-95 ms in tests/playback.rs: frames, jitter buffer and the probe's input).
  */
 const LOOPBACK_INITIAL_DELAY_S = 0.09;
+/**
+ * The part of that delay the receiver's jitter buffer does not explain (the Opus frame, the element's output and the
+ * probe's input), assumed until a stretch of speech is matched: 85-95 ms measured with the buffer at 54-64 ms in
+ * tests/playback.rs.
+ */
+const LOOPBACK_FIXED_GUESS_S = 0.035;
 const CONNECT_TIMEOUT_MS = 5000;
+/** How often the receiver's statistics are read: its jitter buffer moves within an utterance on a busy machine. */
+const STATS_EVERY_MS = 250;
+
 
 /** Web Audio straight to the output: nothing added, nothing the echo canceller sees. */
 export class DirectRoute {
@@ -33,7 +43,7 @@ export class DirectRoute {
 
   /** The debug state of a direct route, also the player's before any route exists. */
   static idleState() {
-    return { route: "direct", delayMs: 0, measuredMs: [], pairs: [], packetsReceived: 0 };
+    return { route: "direct", delayMs: 0, measuredMs: [], pairs: [], packetsReceived: 0, jitterBufferMs: 0 };
   }
 
   debugState() {
@@ -50,16 +60,22 @@ export class LoopbackRoute {
     this.sender = parts.sender;
     this.receiver = parts.receiver;
     this.element = parts.element;
-    this.estimator = new DelayEstimator(LOOPBACK_INITIAL_DELAY_S);
+    this.ctx = parts.ctx;
+    this.estimator = new DelayEstimator(LOOPBACK_INITIAL_DELAY_S, LOOPBACK_FIXED_GUESS_S);
     this.packetsReceived = 0;
+    /** The receiver's cumulative jitter-buffer figures at the last reading, for the mean since. */
+    this.lastBuffer = null;
     /**
-     * Recent measurements: [{utterance, appliedMs, measuredMs, score}], the shift the utterance playing in the
-     * matched stretch had its visemes placed with, and the delay its sound took; what the sync test compares.
+     * Recent measurements: [{utterance, appliedMs, measuredMs, score}], the shift in effect when the middle of the
+     * matched stretch was heard, and the delay its sound took; what the sync test compares.
      */
     this.pairs = [];
-    /** Which utterance was sent at an audio time, and the delay its visemes were shifted by (set by the player). */
-    this.tagAt = (_atS) => null;
-    this.statsTimer = setInterval(() => this.pollStats(), 1000);
+    /**
+     * Which utterance was sent at audio time `sentS`, and the shift of the visemes drawn when it was heard at
+     * `heardS` (set by the player).
+     */
+    this.tagAt = (_sentS, _heardS) => null;
+    this.statsTimer = setInterval(() => this.pollStats(), STATS_EVERY_MS);
     this.pollStats();
     parts.probe.port.onmessage = (ev) => {
       const { first, values } = ev.data ?? {};
@@ -68,8 +84,9 @@ export class LoopbackRoute {
       const upTo = first + values.length - 1;
       const m = this.estimator.match(upTo);
       if (!m) return;
-      // The stretch's middle, as it was sent.
-      const tag = this.tagAt((upTo - MATCH_FRAMES / 2) * FRAME_S - m.delayS) ?? {};
+      // The stretch's middle, as it was heard, and as it was sent.
+      const heardS = (upTo - MATCH_FRAMES / 2) * FRAME_S;
+      const tag = this.tagAt(heardS - m.delayS, heardS) ?? {};
       this.pairs.push({
         utterance: tag.utterance ?? null,
         appliedMs: (tag.appliedS ?? 0) * 1000,
@@ -82,9 +99,13 @@ export class LoopbackRoute {
 
   /**
    * Connects the loopback: a MediaStreamDestination feeds one peer connection, the other plays what it receives.
-   * Rejects when WebRTC is missing or the connection does not come up in time.
+   * `bufferMs` holds the receiver's jitter buffer at that many milliseconds (where the browser allows it: Chrome's
+   * `jitterBufferTarget`) instead of letting WebRTC size it. Rejects when WebRTC is missing or the connection does
+   * not come up in time.
+   * @param {AudioContext} ctx
+   * @param {{bufferMs?: number | null}} options
    */
-  static async open(ctx) {
+  static async open(ctx, { bufferMs = null } = {}) {
     if (typeof RTCPeerConnection !== "function") throw new Error("no RTCPeerConnection in this browser");
     const input = ctx.createMediaStreamDestination();
     const sender = new RTCPeerConnection();
@@ -111,6 +132,11 @@ export class LoopbackRoute {
       const sdp = (answer.sdp ?? "").replace(/(a=fmtp:\d+ [^\r\n]*useinbandfec=1)/, "$1;stereo=0;maxaveragebitrate=64000");
       await sender.setRemoteDescription({ type: "answer", sdp: `${sdp.trimEnd()}\r\na=ptime:10\r\n` });
       const stream = await withTimeout(arrived, CONNECT_TIMEOUT_MS, "no track arrived over the loopback");
+      if (bufferMs !== null) {
+        const rtp = receiver.getReceivers()[0];
+        if (rtp && "jitterBufferTarget" in rtp) rtp.jitterBufferTarget = bufferMs;
+        else console.warn("this browser cannot hold the playback jitter buffer; WebRTC sizes it");
+      }
       await withTimeout(connected(receiver), CONNECT_TIMEOUT_MS, "the loopback connection did not come up");
 
       const element = new Audio();
@@ -123,7 +149,7 @@ export class LoopbackRoute {
       await ctx.audioWorklet.addModule(new URL("./envelope-probe-worklet.js", import.meta.url));
       const probe = new AudioWorkletNode(ctx, "envelope-probe", { numberOfInputs: 1, numberOfOutputs: 0 });
       ctx.createMediaStreamSource(stream).connect(probe);
-      return new LoopbackRoute({ input, sender, receiver, element, probe });
+      return new LoopbackRoute({ ctx, input, sender, receiver, element, probe });
     } catch (e) {
       close();
       throw e;
@@ -146,9 +172,18 @@ export class LoopbackRoute {
       report.forEach((s) => {
         if (s.type !== "inbound-rtp" || s.kind !== "audio") return;
         this.packetsReceived = s.packetsReceived ?? 0;
+        // Cumulative: the seconds every sample let out spent in the buffer, and how many were let out.
+        const total = s.jitterBufferDelay;
+        const count = s.jitterBufferEmittedCount;
+        if (!Number.isFinite(total) || !Number.isFinite(count)) return;
+        const last = this.lastBuffer;
+        this.lastBuffer = { total, count };
+        if (last && count > last.count) {
+          this.estimator.jitter.add(this.ctx.currentTime, (total - last.total) / (count - last.count));
+        }
       });
     } catch {
-      // A closed connection has no stats; the figure stays where it was.
+      // A closed connection has no stats; the figures stay where they were.
     }
   }
 
@@ -159,6 +194,7 @@ export class LoopbackRoute {
       measuredMs: this.estimator.measured.map((s) => s * 1000),
       pairs: this.pairs.slice(),
       packetsReceived: this.packetsReceived,
+      jitterBufferMs: (this.estimator.jitter.latestS ?? 0) * 1000,
     };
   }
 }

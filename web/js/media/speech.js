@@ -3,28 +3,34 @@
 // Each chunk becomes an AudioBuffer at 22050 Hz (WebAudio resamples to the device rate) scheduled right after the
 // previous one, with a 60 ms jitter buffer before the first chunk of an utterance. The audio-clock time of an
 // utterance's sample 0 is its anchor. What leaves the player goes through a playback route (playback-route.js):
-// the loopback one, which the echo canceller covers, is heard later than the audio clock says, so viseme
-// timelines are placed at the anchor plus the route's delay at the time the utterance starts.
+// the loopback one, which the echo canceller covers, is heard later than the audio clock says, by a delay that
+// moves when its jitter buffer does, so visemes are placed at the anchor on the audio clock and drawn on the heard
+// clock (`heardClock`): the audio clock less the route's delay at that moment.
 
 import { audioContext } from "./audio-context.js";
+import { HeardShift } from "./playback-delay.js";
 import { DirectRoute } from "./playback-route.js";
 
 const RATE = 22050;
 const JITTER_S = 0.06;
 const NEW_UTTERANCE_GAP_S = 0.25; // for unframed PCM (utterance 0): a gap this long starts a new utterance
 
+
 export class SpeechPlayer {
   /**
-   * `onAnchor(utterance, heardS)` is called when an utterance's sample 0 gets its audio-clock time: `heardS` is
-   * when it is heard, the time visemes are placed from.
+   * `onAnchor(utterance, atS)` is called when an utterance's sample 0 gets its audio-clock time, the time visemes
+   * are placed from (and drawn on `heardClock`).
    */
   constructor(onAnchor) {
     this.onAnchor = onAnchor;
     this.playhead = 0;
     this.sources = new Set();
-    // utterance -> {at, delayS}: the audio time its sample 0 enters the route, and the route's delay when it
-    // started (what its visemes are shifted by).
+    // utterance -> {at}: the audio time its sample 0 enters the route.
     this.anchors = new Map();
+    /** How far behind the audio clock the sound is heard (playback-delay.js). */
+    this.shift = new HeardShift();
+    /** Until this audio time nothing is playing yet (a fresh start is scheduled ahead): the shift may jump. */
+    this.quietUntil = -Infinity;
     /** @type {DirectRoute | import("./playback-route.js").LoopbackRoute | null} */
     this.route = null;
     this.nextRoute = null;
@@ -47,11 +53,14 @@ export class SpeechPlayer {
   }
 
   /**
-   * Plays through `route` from the next utterance on: switching in the middle of one would shift the rest of
-   * it by the route's delay, out of step with its visemes.
+   * Plays through `route` from the next utterance on: switching in the middle of one would make the rest of it
+   * heard a route's delay later, a jump its visemes would make at a different moment.
    */
   useRoute(route) {
-    route.tagAt = (atS) => this.tagAt(atS);
+    route.tagAt = (sentS, heardS) => {
+      const tag = this.tagAt(sentS);
+      return tag ? { ...tag, appliedS: this.shift.at(heardS) } : null;
+    };
     this.nextRoute = route;
     if (!this.speaking) this.switchRoute();
   }
@@ -78,14 +87,17 @@ export class SpeechPlayer {
     const ctx = audioContext();
     const now = ctx.currentTime;
     const fresh = this.playhead < now;
-    if (fresh) this.switchRoute();
+    if (fresh) {
+      this.switchRoute();
+      this.quietUntil = now + JITTER_S;
+    }
     const ctxOut = this.output(ctx);
     let start = fresh ? now + JITTER_S : this.playhead;
     let anchor = this.anchors.get(utterance)?.at;
     const unframedRestart = utterance === 0 && now - this.lastEnd > NEW_UTTERANCE_GAP_S && fresh;
     if (anchor === undefined || unframedRestart) {
       anchor = start - (utterance === 0 ? 0 : offset / RATE);
-      this.anchors.set(utterance, { at: anchor, delayS: this.route ? this.route.delayS : 0 });
+      this.anchors.set(utterance, { at: anchor });
       this.trimAnchors();
       this.onAnchor(utterance, this.anchorOf(utterance));
     } else if (utterance !== 0) {
@@ -109,19 +121,32 @@ export class SpeechPlayer {
     this.chunks += 1;
   }
 
-  /** The utterance sent at audio time `atS` (the latest to start before it) and the shift of its visemes. */
+  /** The utterance sent at audio time `atS` (the latest to start before it). */
   tagAt(atS) {
     let found = null;
     for (const [utterance, a] of this.anchors) {
-      if (a.at <= atS && (!found || a.at > found.at)) found = { utterance, at: a.at, appliedS: a.delayS };
+      if (a.at <= atS && (!found || a.at > found.at)) found = { utterance, at: a.at };
     }
-    return found ? { utterance: found.utterance, appliedS: found.appliedS } : null;
+    return found ? { utterance: found.utterance } : null;
   }
 
-  /** The audio time sample 0 of `utterance` is heard at (its anchor plus the route's delay), if it has started. */
+  /** The audio time sample 0 of `utterance` enters the route at (its anchor), if it has started. */
   anchorOf(utterance) {
-    const a = this.anchors.get(utterance);
-    return a === undefined ? undefined : a.at + a.delayS;
+    return this.anchors.get(utterance)?.at;
+  }
+
+  /** How far behind the audio clock the sound is heard now (seconds): the route's delay, 0 before any route. */
+  get routeDelayS() {
+    return this.route ? this.route.delayS : 0;
+  }
+
+  /**
+   * The audio time being heard at audio time `nowS`: `nowS` less the route's delay, which the shift takes at once
+   * before an utterance is heard and follows gradually while one plays.
+   * @param {number} nowS
+   */
+  heardTime(nowS) {
+    return nowS - this.shift.follow(nowS, this.routeDelayS, this.speaking && nowS >= this.quietUntil);
   }
 
   /**
