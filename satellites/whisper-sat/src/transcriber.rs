@@ -62,6 +62,10 @@ pub struct TranscriberConfig {
     /// Beams of whisper.cpp's beam search; 1 decodes greedily (the default: the fastest, and on the fixtures as
     /// accurate; docs/bench-asr.md has both).
     pub beam_size: usize,
+    /// A fitted-window decode whose mean token log-probability is below this is unsure, and is decoded again with
+    /// the full window, whose text is kept (`None`: never). The full window is what costs accuracy to leave out
+    /// (docs/asr.md), and the fitted decode's confidence tells when it probably did.
+    pub unsure_logprob: Option<f32>,
 }
 
 impl Default for TranscriberConfig {
@@ -74,6 +78,7 @@ impl Default for TranscriberConfig {
             near_silence_dbfs: -45.0,
             language: "en".into(),
             beam_size: 1,
+            unsure_logprob: None,
         }
     }
 }
@@ -247,6 +252,16 @@ impl Transcriber {
             && (decoded.tokens >= token_cap(audio.len()) || is_repetition_loop(&decoded.text))
         {
             tracing::debug!(text = %decoded.text, "fitted window looped; decoding with the full window");
+            decoded = self.decode_with(audio, AudioContext::Full, threads, abort)?;
+            decoded.full_window_retry = true;
+        } else if self.cfg.audio_context == AudioContext::Fit
+            && decoded.tokens > 0
+            && self
+                .cfg
+                .unsure_logprob
+                .is_some_and(|floor| decoded.avg_logprob < floor)
+        {
+            tracing::debug!(text = %decoded.text, logprob = decoded.avg_logprob, "fitted window unsure; decoding with the full window");
             decoded = self.decode_with(audio, AudioContext::Full, threads, abort)?;
             decoded.full_window_retry = true;
         }

@@ -214,3 +214,73 @@ fn a_short_utterance_beside_a_long_one_on_another_transcriber_of_the_machine_doe
     assert!(rate <= 0.2, "WER {rate:.3} for {:?}", short.text);
     let _ = std::fs::remove_dir_all(&share);
 }
+
+/// The utterances of a fixture clip as the satellite's segmenter cuts them, decoded with `cfg`.
+fn fixture_utterances(
+    name: &str,
+    cfg: TranscriberConfig,
+) -> Vec<whisper_sat::transcriber::Decoded> {
+    let (clip, _) = fixture(name);
+    let mut t = Transcriber::load(&model(), cfg).expect("model loads");
+    transcribe_clip(&clip.samples, clip.rate, SegmenterConfig::default(), &mut t)
+        .expect("transcription")
+        .into_iter()
+        .map(|u| match u.outcome {
+            Outcome::Speech(d) | Outcome::Rejected(_, d) => d,
+        })
+        .collect()
+}
+
+#[test]
+fn a_fitted_decode_that_starts_the_utterance_again_is_ended_after_it() {
+    // With the fitted window tiny.en says the first phrase of LJ001-0004 and starts it again; the decode ends a
+    // few tokens into the second time instead of at the token cap (about 30 tokens for its 1.8 s).
+    let first = fixture_utterances("LJ001-0004", TranscriberConfig::default())
+        .into_iter()
+        .next()
+        .expect("an utterance");
+    println!("{:?} in {} tokens", first.text, first.tokens);
+    assert!(
+        wer("produced the block books", &first.text) == 0.0,
+        "{:?}",
+        first.text
+    );
+    assert!(
+        first.tokens <= 8,
+        "{} tokens: the decode went on",
+        first.tokens
+    );
+    assert!(!first.full_window_retry);
+}
+
+#[test]
+fn an_unsure_fitted_decode_is_decoded_again_with_the_full_window() {
+    let full = fixture_utterances(
+        "LJ001-0002",
+        TranscriberConfig {
+            audio_context: AudioContext::Full,
+            ..TranscriberConfig::default()
+        },
+    );
+    // Every decode is less sure than a floor just below certainty, and none is as unsure as -5.
+    let retried = fixture_utterances(
+        "LJ001-0002",
+        TranscriberConfig {
+            unsure_logprob: Some(-1e-6),
+            ..TranscriberConfig::default()
+        },
+    );
+    let kept = fixture_utterances(
+        "LJ001-0002",
+        TranscriberConfig {
+            unsure_logprob: Some(-5.0),
+            ..TranscriberConfig::default()
+        },
+    );
+    assert_eq!(retried.len(), full.len());
+    for (r, f) in retried.iter().zip(&full) {
+        assert!(r.full_window_retry, "{:?} was not decoded again", r.text);
+        assert_eq!(r.text, f.text, "the full window's text is kept");
+    }
+    assert!(kept.iter().all(|d| !d.full_window_retry));
+}
