@@ -335,7 +335,7 @@ impl Transcriber {
         result?;
         let eot = self.ctx.token_eot();
         // A decode ended on a restart keeps the phrase it restarted, once.
-        let keep = restart.phrase().unwrap_or(usize::MAX);
+        let keep = restart.phrase();
         let mut text = String::new();
         // Token by token as bytes: a multilingual token may hold part of a character.
         let mut kept = Vec::new();
@@ -347,14 +347,14 @@ impl Transcriber {
                 continue;
             };
             no_speech_prob = no_speech_prob.max(segment.no_speech_probability());
-            if keep == usize::MAX {
+            if keep.is_none() {
                 text.push_str(&segment.to_str_lossy()?);
             }
             for t in 0..segment.n_tokens() {
                 if let Some(token) = segment.get_token(t) {
                     let data = token.token_data();
-                    if data.id < eot && tokens < keep {
-                        if keep != usize::MAX {
+                    if data.id < eot && keep.is_none_or(|k| tokens < k) {
+                        if keep.is_some() {
                             kept.extend_from_slice(token.to_bytes()?);
                         }
                         logprob_sum += data.plog;
@@ -363,7 +363,7 @@ impl Transcriber {
                 }
             }
         }
-        if keep != usize::MAX {
+        if keep.is_some() {
             text = String::from_utf8_lossy(&kept)
                 .trim()
                 .trim_end_matches([',', ';', ':'])
