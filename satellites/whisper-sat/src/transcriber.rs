@@ -368,7 +368,7 @@ impl Transcriber {
                 .trim()
                 .trim_end_matches([',', ';', ':'])
                 .to_owned();
-            tracing::debug!(%text, tokens, "the decode restarted the utterance; ended it there");
+            tracing::debug!(%text, tokens, logprob = logprob_sum / tokens.max(1) as f32, "the decode restarted the utterance; ended it there");
         }
         Ok(Decoded {
             text: text.trim().to_owned(),
