@@ -85,13 +85,7 @@ async fn speak_and_wait(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn speech_plays_through_the_echo_cancelled_loopback_with_the_mouth_in_step_with_what_is_heard()
 -> anyhow::Result<()> {
-    let state = speak_and_match("").await?;
-    // The delay WebRTC chooses for a loopback: well under the 200 ms the next test holds it at.
-    ensure!(
-        state.pairs.iter().all(|p| p.measured_ms < 150.0),
-        "the loopback's own delay is unexpectedly long: {:?}",
-        state.pairs
-    );
+    speak_and_match("").await?;
     Ok(())
 }
 

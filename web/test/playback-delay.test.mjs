@@ -155,3 +155,13 @@ test("before any match the delay is the guessed fixed part plus the jitter buffe
   assert.ok(Math.abs(e.delayS - 0.235) < 1e-9, `delay ${e.delayS}`);
   assert.equal(new DelayEstimator(0.09).delayS, 0.09, "no fixed guess: the initial one");
 });
+
+test("a match made while the receiver gave no reading does not stop the delay following the buffer", () => {
+  const e = new DelayEstimator(0.09, 0.035);
+  e.measured = [0.1, 0.1, 0.1];
+  e.fixed = [0.04, null, 0.04];
+  e.jitter.add(1, 0.2);
+  assert.ok(Math.abs(e.delayS - 0.24) < 1e-9, `delay ${e.delayS}`);
+  e.fixed = [null, null, null];
+  assert.ok(Math.abs(e.delayS - 0.1) < 1e-9, "no match with a reading: the matches' median");
+});

@@ -7,7 +7,9 @@
 //! spent a step on every repeated token: measured with tiny.en on two cores, 22-29 tokens instead of 3-7, about
 //! 60-100 ms of a 150-200 ms inference, all of it on the critical path of a reply. This filter watches the tokens as
 //! they come and ends the decode once the phrase has been said a second time whole, when it holds enough words for
-//! the audio (the same tests as the whole-output rule), so the text is what that rule would have kept. Not
+//! the audio (the same tests as the whole-output rule), keeping the phrase once: what that rule keeps, unless the
+//! decoder would have strayed only after the second time (then the rule found no clean repetition and the full
+//! window decoded it again; docs/asr.md has the one such utterance measured). Not
 //! earlier: a second time that strays from the first ("nessuno ulteriore messaggio nessun ulteriore messaggio.")
 //! marks a decode the model is unsure of, which goes on to the token cap and the full-window retry as before (ending
 //! such a decode three tokens into the repeat cost a word on the Italian prompts).
@@ -131,8 +133,9 @@ impl<'w> RestartStop<'w> {
     }
 
     /// Makes decoding with `params` end when it restarts. The watch is borrowed for the parameters' lifetime, so it
-    /// outlives every inference that can run with them. Only for greedy decoding: beam search filters several
-    /// decoders' logits at once, and its beams are left to its own scoring.
+    /// outlives every inference that can run with them. Only for greedy decoding with one decoder and no temperature
+    /// fallback (as the transcriber decodes): beam search or `best_of` filter several decoders' logits, possibly at
+    /// once, and a fallback pass would decode again after a stop, while one watch records one phrase.
     pub fn attach<'a>(&'a self, params: &mut FullParams<'a, '_>) {
         // SAFETY: `filter` only reads the `RestartStop` behind the user-data pointer (its one mutable field is an
         // atomic), which is borrowed for `'a`, as long as `params` may be used; whisper.cpp calls the filter only

@@ -260,6 +260,10 @@ impl Transcriber {
                 .cfg
                 .unsure_logprob
                 .is_some_and(|floor| decoded.avg_logprob < floor)
+            // What the filter will reject anyway (near silence, or no speech by Whisper's own rule) is usually
+            // unsure too; it is not worth the full window.
+            && decoded.no_speech_prob <= self.cfg.no_speech_threshold
+            && level_dbfs(audio) >= self.cfg.near_silence_dbfs
         {
             tracing::debug!(text = %decoded.text, logprob = decoded.avg_logprob, "fitted window unsure; decoding with the full window");
             decoded = self.decode_with(audio, AudioContext::Full, threads, abort)?;

@@ -233,8 +233,8 @@ fn fixture_utterances(
 
 #[test]
 fn a_fitted_decode_that_starts_the_utterance_again_is_ended_after_it() {
-    // With the fitted window tiny.en says the first phrase of LJ001-0004 and starts it again; the decode ends a
-    // few tokens into the second time instead of at the token cap (about 30 tokens for its 1.8 s).
+    // With the fitted window tiny.en says the first phrase of LJ001-0004 and starts it again; the decode ends once
+    // the phrase has been said twice instead of at the token cap (about 30 tokens for its 1.8 s), and keeps it once.
     let first = fixture_utterances("LJ001-0004", TranscriberConfig::default())
         .into_iter()
         .next()

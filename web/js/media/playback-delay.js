@@ -249,18 +249,17 @@ export class DelayEstimator {
   }
 
   /**
-   * The delay to compensate now (seconds): the median fixed part plus the jitter buffer's latest reading; the
-   * median of the matches themselves where the receiver gives no readings; before any match, the guessed fixed
-   * part plus the buffer's reading, or the initial guess.
+   * The delay to compensate now (seconds): the median fixed part (of the matches made with a buffer reading) plus
+   * the jitter buffer's latest reading; the median of the matches themselves where the receiver gives no readings;
+   * before any match, the guessed fixed part plus the buffer's reading, or the initial guess.
    */
   get delayS() {
     const now = this.jitter.latestS;
     if (this.measured.length === 0) {
       return this.fixedGuessS !== null && now !== null ? this.fixedGuessS + now : this.initialS;
     }
-    if (now !== null && this.fixed.every((f) => f !== null)) {
-      return Math.max(0, median(/** @type {number[]} */ (this.fixed)) + now);
-    }
+    const fixed = /** @type {number[]} */ (this.fixed.filter((f) => f !== null));
+    if (now !== null && fixed.length > 0) return Math.max(0, median(fixed) + now);
     return median(this.measured);
   }
 }

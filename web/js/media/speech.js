@@ -29,7 +29,10 @@ export class SpeechPlayer {
     this.anchors = new Map();
     /** How far behind the audio clock the sound is heard (playback-delay.js). */
     this.shift = new HeardShift();
-    /** Until this audio time nothing is playing yet (a fresh start is scheduled ahead): the shift may jump. */
+    /**
+     * Until this audio time nothing scheduled is heard yet (a fresh start is scheduled ahead, and the route delays
+     * it): the shift may jump. From then on until the last chunk's end is heard, it may not.
+     */
     this.quietUntil = -Infinity;
     /** @type {DirectRoute | import("./playback-route.js").LoopbackRoute | null} */
     this.route = null;
@@ -89,7 +92,7 @@ export class SpeechPlayer {
     const fresh = this.playhead < now;
     if (fresh) {
       this.switchRoute();
-      this.quietUntil = now + JITTER_S;
+      this.quietUntil = now + JITTER_S + this.shift.s;
     }
     const ctxOut = this.output(ctx);
     let start = fresh ? now + JITTER_S : this.playhead;
@@ -146,7 +149,10 @@ export class SpeechPlayer {
    * @param {number} nowS
    */
   heardTime(nowS) {
-    return nowS - this.shift.follow(nowS, this.routeDelayS, this.speaking && nowS >= this.quietUntil);
+    // Sound is heard from a fresh start's first sample to the last chunk's end, each a shift after the audio clock
+    // has it: the route still plays the tail of a reply after its last source has ended.
+    const hearing = nowS >= this.quietUntil && nowS < this.lastEnd + this.shift.s;
+    return nowS - this.shift.follow(nowS, this.routeDelayS, hearing);
   }
 
   /**
