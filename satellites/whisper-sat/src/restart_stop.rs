@@ -67,9 +67,9 @@ impl WordStarts {
 
     /// Words in a text of `tokens`: every token that begins one, and the first token holding a letter when it has
     /// no space before it.
-    pub fn words(&self, tokens: &[i32]) -> usize {
+    pub fn words(&self, tokens: impl IntoIterator<Item = i32>) -> usize {
         let mut words = 0;
-        for &id in tokens {
+        for id in tokens {
             match usize::try_from(id).ok().and_then(|i| self.marks.get(i)) {
                 Some(1) => words += 1,
                 Some(2) if words == 0 => words += 1,
@@ -82,9 +82,16 @@ impl WordStarts {
 
 /// The length of the phrase that `tokens` are, said twice: `tokens[..p] == tokens[p..]`.
 pub fn restarted_phrase(tokens: &[i32]) -> Option<usize> {
+    restarted_phrase_of(tokens, |&id| id)
+}
+
+/// [`restarted_phrase`] over any token records, compared by the id `id` reads from each: the filter runs it on
+/// whisper.cpp's records as they are, with no copy per decoder step.
+fn restarted_phrase_of<T>(tokens: &[T], id: impl Fn(&T) -> i32) -> Option<usize> {
     let n = tokens.len();
     let p = n / 2;
-    (n >= 2 && n.is_multiple_of(2) && tokens[..p] == tokens[p..]).then_some(p)
+    (n >= 2 && n.is_multiple_of(2) && tokens[..p].iter().map(&id).eq(tokens[p..].iter().map(&id)))
+        .then_some(p)
 }
 
 /// One decode's watch for a restart: what it needs to judge one, and what it found.
@@ -121,11 +128,11 @@ impl<'w> RestartStop<'w> {
 
     /// Whether the decode should end before `tokens` go on: they say their beginning again, and that beginning
     /// holds enough words. Records the phrase when so.
-    fn should_end(&self, tokens: &[i32]) -> bool {
-        let Some(p) = restarted_phrase(tokens) else {
+    fn should_end<T>(&self, tokens: &[T], id: impl Fn(&T) -> i32) -> bool {
+        let Some(p) = restarted_phrase_of(tokens, &id) else {
             return false;
         };
-        if (self.words.words(&tokens[..p]) as f32) < self.min_words {
+        if (self.words.words(tokens[..p].iter().map(&id)) as f32) < self.min_words {
             return false;
         }
         self.phrase.store(p, Ordering::Relaxed);
@@ -170,8 +177,7 @@ unsafe extern "C" fn filter(
     // SAFETY: whisper.cpp passes the decoder's `n_tokens` tokens so far, a live vector it does not touch while the
     // filter runs.
     let tokens = unsafe { std::slice::from_raw_parts(tokens, n) };
-    let ids: Vec<i32> = tokens.iter().map(|t| t.id).collect();
-    if !stop.should_end(&ids) {
+    if !stop.should_end(tokens, |t| t.id) {
         return;
     }
     let Ok(eot) = usize::try_from(stop.eot) else {
@@ -240,16 +246,16 @@ mod tests {
     #[test]
     fn words_are_counted_from_the_tokens_that_begin_them() {
         let v = vocabulary();
-        assert_eq!(v.words(&[0, 1, 2]), 2);
+        assert_eq!(v.words([0, 1, 2]), 2);
         assert_eq!(
-            v.words(&[3, 1, 6, 5]),
+            v.words([3, 1, 6, 5]),
             3,
             "a first word without its space counts"
         );
-        assert_eq!(v.words(&[0, 4]), 1, "the rest of a word is not another");
-        assert_eq!(v.words(&[2, 6]), 0);
+        assert_eq!(v.words([0, 4]), 1, "the rest of a word is not another");
+        assert_eq!(v.words([2, 6]), 0);
         assert_eq!(
-            v.words(&[99, -1]),
+            v.words([99, -1]),
             0,
             "ids outside the vocabulary count for nothing"
         );
@@ -266,10 +272,10 @@ mod tests {
             phrase: AtomicUsize::new(0),
         };
         let enough = stop(1.5);
-        assert!(enough.should_end(&[0, 1, 2, 0, 1, 2]));
+        assert!(enough.should_end(&[0, 1, 2, 0, 1, 2], |&id| id));
         assert_eq!(enough.phrase(), Some(3));
         let too_few = stop(2.5);
-        assert!(!too_few.should_end(&[0, 1, 2, 0, 1, 2]));
+        assert!(!too_few.should_end(&[0, 1, 2, 0, 1, 2], |&id| id));
         assert_eq!(too_few.phrase(), None);
     }
 
