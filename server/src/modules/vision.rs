@@ -10,6 +10,7 @@
 
 use std::collections::VecDeque;
 
+use agent_vision::pipeline::FaceDetection;
 use agent_vision::settings::VisionSettings;
 use agent_vision::wire::{self, CountersMsg};
 use agent_vision::{FrameDetections, ProcessError, VisionPipeline};
@@ -38,7 +39,18 @@ impl Module for VisionModule {
 
     fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
         let settings = VisionSettings::from_json(params).context("[modules.vision]")?;
-        settings.pipeline_params().context("[modules.vision]")?;
+        let pipeline = settings.pipeline_params().context("[modules.vision]")?;
+        // The network's file is checked here too, so that a missing model stops the server at start with the key
+        // named, before any module runs.
+        if let Some(FaceDetection::CenterFace(net)) = &pipeline.faces
+            && !net.model.is_file()
+        {
+            anyhow::bail!(
+                "[modules.vision] faces.centerface.model: {} not found (run `make model MODEL=centerface`, or set \
+                 faces.detector = \"cascades\")",
+                net.model.display()
+            );
+        }
         Ok(())
     }
 
@@ -70,7 +82,7 @@ async fn run(ctx: ModuleContext) -> anyhow::Result<()> {
     let settings = VisionSettings::from_json(&ctx.params).context("[modules.vision]")?;
     let params = settings.pipeline_params().context("[modules.vision]")?;
     agent_vision::set_opencv_threads(settings.threads).context("[modules.vision] threads")?;
-    // Loading the cascade reads a megabyte of XML: keep it off the async threads too.
+    // Loading the network (7 MB) or the cascades (a megabyte of XML each) blocks: keep it off the async threads.
     let mut pipeline = tokio::task::spawn_blocking(move || VisionPipeline::new(params))
         .await
         .context("starting the vision detectors")?

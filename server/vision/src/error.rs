@@ -31,6 +31,12 @@ pub enum FrameError {
 pub enum VisionError {
     #[error("cascade file {} could not be loaded (is Debian's opencv-data installed?)", path.display())]
     CascadeLoad { path: PathBuf },
+    #[error("face model {} not found (run `make model MODEL=centerface`, or set faces.centerface.model)", path.display())]
+    ModelMissing { path: PathBuf },
+    #[error("face model {} could not be loaded: {reason}", path.display())]
+    ModelLoad { path: PathBuf, reason: String },
+    #[error("face model output: {0}")]
+    ModelOutput(String),
     #[error("invalid vision setting `{key}`: {reason}")]
     InvalidSetting { key: &'static str, reason: String },
     #[error("OpenCV: {0}")]

@@ -5,6 +5,7 @@
 //! [`FrameDetections`]; [`wire`] turns that into the JSON messages published on the hub.
 
 pub mod appearance;
+pub mod centerface;
 pub mod codes;
 pub mod error;
 pub mod evaluation;

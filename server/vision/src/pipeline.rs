@@ -4,18 +4,64 @@
 use std::time::{Duration, Instant};
 
 use crate::appearance::{AppearanceTracker, SeenCode};
+use crate::centerface::{CenterFace, CenterFaceParams};
 use crate::codes::{CodeParams, CodeReader};
 use crate::error::{ProcessError, VisionError};
-use crate::face::{FaceParams, FaceScanner};
+use crate::face::{FaceParams, FaceScan, FaceScanner};
 use crate::frame::{self, GreyFrame};
 use crate::gaze::{GazeParams, GazePolicy, GazeTarget};
 use crate::geometry::{BoxPx, FrameSize};
 use crate::motion::{Motion, MotionDetector, MotionParams};
 
+/// Which face detector runs: the CenterFace network (the default) or OpenCV's cascades with the budgeted scan.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FaceDetection {
+    CenterFace(CenterFaceParams),
+    Cascades(FaceParams),
+}
+
+impl Default for FaceDetection {
+    fn default() -> Self {
+        FaceDetection::CenterFace(CenterFaceParams::default())
+    }
+}
+
+/// A face detector with its state across frames.
+#[derive(Debug)]
+enum FaceDetector {
+    CenterFace(Box<CenterFace>),
+    Cascades(Box<FaceScanner>),
+}
+
+impl FaceDetector {
+    fn new(params: FaceDetection) -> Result<Self, VisionError> {
+        Ok(match params {
+            FaceDetection::CenterFace(p) => FaceDetector::CenterFace(Box::new(CenterFace::new(p)?)),
+            FaceDetection::Cascades(p) => FaceDetector::Cascades(Box::new(FaceScanner::new(p)?)),
+        })
+    }
+
+    /// The faces of this frame. The cascades look first where something has just moved (`moving`); the network
+    /// sees the whole frame each time it runs, and runs at once when motion appears.
+    /// `in_motion` is the motion detector's state, held results included: held frames do not count as motion
+    /// stopping, so motion "appears" once per movement and not on every duplicated camera frame.
+    fn scan(
+        &mut self,
+        frame: &GreyFrame,
+        moving: &[BoxPx],
+        in_motion: bool,
+    ) -> Result<FaceScan, VisionError> {
+        match self {
+            FaceDetector::CenterFace(net) => net.scan(frame, in_motion),
+            FaceDetector::Cascades(scanner) => scanner.scan_with_motion(frame, moving),
+        }
+    }
+}
+
 /// Which detectors run and how they are tuned; `None` switches a detector off.
 #[derive(Debug, Clone)]
 pub struct PipelineParams {
-    pub faces: Option<FaceParams>,
+    pub faces: Option<FaceDetection>,
     pub motion: Option<MotionParams>,
     pub codes: Option<CodeParams>,
     /// A code not decoded for this long has left the view; its next sighting is a new appearance.
@@ -27,7 +73,7 @@ pub struct PipelineParams {
 impl Default for PipelineParams {
     fn default() -> Self {
         Self {
-            faces: Some(FaceParams::default()),
+            faces: Some(FaceDetection::default()),
             motion: Some(MotionParams::default()),
             codes: Some(CodeParams::default()),
             code_forget_after_us: 1_000_000,
@@ -54,7 +100,8 @@ pub struct FrameDetections {
     pub frame_us: u64,
     pub size: FrameSize,
     pub faces: Option<Vec<BoxPx>>,
-    /// Completed full face-scan cycles (see [`FaceScanner`]); 0 when face detection is off.
+    /// Completed full face scans: cycles of the cascades' budgeted scan (see [`FaceScanner`]) or runs of the network
+    /// (see [`CenterFace`]); 0 when face detection is off.
     pub face_cycles: u64,
     pub motion: Option<Motion>,
     pub codes: Option<Vec<SeenCode>>,
@@ -65,7 +112,7 @@ pub struct FrameDetections {
 /// The detectors of one video stream with their state.
 #[derive(Debug)]
 pub struct VisionPipeline {
-    faces: Option<FaceScanner>,
+    faces: Option<FaceDetector>,
     motion: Option<MotionDetector>,
     codes: Option<CodeReader>,
     appearances: AppearanceTracker,
@@ -78,7 +125,7 @@ pub struct VisionPipeline {
 impl VisionPipeline {
     pub fn new(params: PipelineParams) -> Result<Self, VisionError> {
         Ok(Self {
-            faces: params.faces.map(FaceScanner::new).transpose()?,
+            faces: params.faces.map(FaceDetector::new).transpose()?,
             motion: params.motion.map(MotionDetector::new).transpose()?,
             codes: params.codes.map(CodeReader::new).transpose()?,
             appearances: AppearanceTracker::new(params.code_forget_after_us),
@@ -141,10 +188,11 @@ impl VisionPipeline {
             }) => regions,
             _ => &[],
         };
+        let in_motion = matches!(motion, Some(Motion::Moving { .. }));
         let (faces, face_cycles) = match self.faces.as_mut() {
-            Some(scanner) => {
+            Some(detector) => {
                 let scan = timed(&mut timings.faces, || {
-                    scanner.scan_with_motion(frame, moving)
+                    detector.scan(frame, moving, in_motion)
                 })?;
                 (Some(scan.faces), scan.completed_cycles)
             }

@@ -7,13 +7,14 @@ use std::path::PathBuf;
 
 use serde::Deserialize;
 
+use crate::centerface::CenterFaceParams;
 use crate::codes::CodeParams;
 use crate::error::VisionError;
 use crate::face::{Cascade, DEBIAN_CASCADE_DIR, FaceParams};
 use crate::frame::DEFAULT_MAX_PIXELS;
 use crate::gaze::GazeParams;
 use crate::motion::{MotionMethod, MotionParams};
-use crate::pipeline::PipelineParams;
+use crate::pipeline::{FaceDetection, PipelineParams};
 
 /// `[modules.vision]`.
 #[derive(Debug, Clone, Deserialize)]
@@ -40,6 +41,11 @@ pub struct VisionSettings {
 #[serde(deny_unknown_fields, default)]
 pub struct FaceSettings {
     pub enabled: bool,
+    /// `centerface` (the network, the default) or `cascades` (OpenCV's cascades with the budgeted scan, tuned by
+    /// the keys below).
+    pub detector: String,
+    /// `[modules.vision.faces.centerface]`: the network's settings, parsed straight into its parameters.
+    pub centerface: CenterFaceParams,
     /// `haar_default`, `haar_alt`, `haar_alt2`, `lbp`, `lbp_improved`.
     pub cascade: String,
     pub cascade_dir: PathBuf,
@@ -119,6 +125,8 @@ impl Default for FaceSettings {
         let face = FaceParams::default();
         Self {
             enabled: true,
+            detector: "centerface".to_owned(),
+            centerface: CenterFaceParams::default(),
             cascade: face.cascade.name().to_owned(),
             cascade_dir: PathBuf::from(DEBIAN_CASCADE_DIR),
             scale_factor: face.scale_factor,
@@ -211,7 +219,13 @@ impl VisionSettings {
             "max_frame_pixels",
             "must be at least 4096",
         )?;
-        let faces = if self.faces.enabled {
+        let faces = if !self.faces.enabled {
+            None
+        } else if self.faces.detector == "centerface" {
+            let params = self.faces.centerface.clone();
+            params.validate()?;
+            Some(FaceDetection::CenterFace(params))
+        } else if self.faces.detector == "cascades" {
             let f = &self.faces;
             let cascade = Cascade::from_name(&f.cascade).ok_or_else(|| {
                 invalid("faces.cascade", format!("unknown cascade {:?}; one of haar_default, haar_alt, haar_alt2, lbp, lbp_improved", f.cascade))
@@ -263,7 +277,7 @@ impl VisionSettings {
                 "faces.pyramid_phases",
                 "must be 1-4",
             )?;
-            Some(FaceParams {
+            Some(FaceDetection::Cascades(FaceParams {
                 verify,
                 verify_also,
                 pyramid_phases: f.pyramid_phases,
@@ -277,9 +291,15 @@ impl VisionSettings {
                 scan_budget_px: (f.scan_budget_px > 0).then_some(f.scan_budget_px),
                 motion_focus: f.motion_focus,
                 focus_min_neighbors: f.focus_min_neighbors,
-            })
+            }))
         } else {
-            None
+            return Err(invalid(
+                "faces.detector",
+                format!(
+                    "unknown detector {:?}; centerface or cascades",
+                    self.faces.detector
+                ),
+            ));
         };
         let motion = if self.motion.enabled {
             let m = &self.motion;
@@ -388,8 +408,10 @@ mod tests {
 
     #[test]
     fn bad_values_name_their_key() {
-        let settings =
-            VisionSettings::from_json(&json!({"faces": {"cascade": "eyes"}})).expect("parses");
+        let settings = VisionSettings::from_json(
+            &json!({"faces": {"detector": "cascades", "cascade": "eyes"}}),
+        )
+        .expect("parses");
         let err = settings.pipeline_params().expect_err("unknown cascade");
         assert!(err.to_string().contains("faces.cascade"), "{err}");
         let settings =
@@ -401,11 +423,37 @@ mod tests {
                 .to_string()
                 .contains("motion.method")
         );
-        let settings = VisionSettings::from_json(&json!({"faces": {"focus_min_neighbors": 51}}))
-            .expect("parses");
+        let settings = VisionSettings::from_json(
+            &json!({"faces": {"detector": "cascades", "focus_min_neighbors": 51}}),
+        )
+        .expect("parses");
         let err = settings.pipeline_params().expect_err("too many neighbours");
         assert!(
             err.to_string().contains("faces.focus_min_neighbors"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn the_face_detector_is_chosen_by_name() {
+        let params = VisionSettings::default().pipeline_params().expect("valid");
+        assert!(matches!(params.faces, Some(FaceDetection::CenterFace(_))));
+        let settings =
+            VisionSettings::from_json(&json!({"faces": {"detector": "cascades"}})).expect("parses");
+        let params = settings.pipeline_params().expect("valid");
+        assert!(matches!(params.faces, Some(FaceDetection::Cascades(_))));
+        let settings =
+            VisionSettings::from_json(&json!({"faces": {"detector": "yolo"}})).expect("parses");
+        let err = settings.pipeline_params().expect_err("unknown detector");
+        assert!(err.to_string().contains("faces.detector"), "{err}");
+        let settings =
+            VisionSettings::from_json(&json!({"faces": {"centerface": {"input_width": 300}}}))
+                .expect("parses");
+        let err = settings
+            .pipeline_params()
+            .expect_err("not a multiple of 32");
+        assert!(
+            err.to_string().contains("faces.centerface.input_width"),
             "{err}"
         );
     }
