@@ -36,6 +36,11 @@ impl Samples {
     pub fn cpu_median(&self) -> f64 {
         percentile(&self.cpu_ms, 0.5)
     }
+
+    /// The mean CPU time: what a detector that works on some frames only (the network) costs per frame on average.
+    pub fn cpu_mean(&self) -> f64 {
+        self.cpu_ms.iter().sum::<f64>() / self.cpu_ms.len().max(1) as f64
+    }
 }
 
 pub use agent_vision::evaluation::percentile;
