@@ -73,11 +73,11 @@ impl Default for SegmenterConfig {
             onset_voiced_ms: 80,
             min_voiced_ms: 200,
             max_utterance_ms: 25_000,
-            post_roll_ms: 100,
+            post_roll_ms: 50,
             energy_floor_dbfs: -50.0,
             tonal_flatness: 0.3,
             min_tonal_ms: 100,
-            turn_confirm_ms: 250,
+            turn_confirm_ms: 150,
             turn_wait_ms: 600,
         }
     }

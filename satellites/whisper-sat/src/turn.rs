@@ -10,7 +10,10 @@
 //!   one a sentence cannot end on (a conjunction, an article, a preposition, a possessive, an auxiliary, a
 //!   filler such as "um"); or it opens with a question word and has no verb to go with it ("What time?").
 //! - **Complete** when it ends with `.`, `?` or `!` (Whisper punctuates what it hears as finished: "Turn left.",
-//!   "Yes.") and none of the above holds.
+//!   "Yes.") and none of the above holds; and, unpunctuated, when it is a **command**: it opens with a verb in the
+//!   imperative from a list of the verbs people address to a robot or an assistant ("turn left", "stop", "look at
+//!   me", "ask what you can do for your country") and none of the above holds. Whisper often leaves a short command
+//!   unpunctuated ("turn left"), and an imperative that does not trail off is a whole turn.
 //! - **Unknown** for anything else (an empty text, an unpunctuated stretch, which is how Whisper writes a fragment
 //!   it is unsure of): the ordinary hangover decides.
 //!
@@ -42,6 +45,61 @@ const QUESTION_VERBS: &[&str] = &[
     "should", "shall", "may", "might", "must", "have", "has", "had", "go", "goes", "went", "see",
     "say", "said", "mean", "know", "think", "want", "happen", "happened", "work", "works", "get",
     "make", "call", "called", "look", "looks", "feel", "like", "come", "came",
+];
+
+/// Verbs that open a command when they come first ("turn left", "stop"). Words that are as often nouns or openers of
+/// longer statements ("like", "mind", "check") are left out: a command must read as one.
+const COMMANDS: &[&str] = &[
+    "turn",
+    "stop",
+    "go",
+    "come",
+    "look",
+    "move",
+    "show",
+    "tell",
+    "say",
+    "read",
+    "count",
+    "wait",
+    "start",
+    "sit",
+    "stand",
+    "ask",
+    "give",
+    "bring",
+    "take",
+    "put",
+    "open",
+    "close",
+    "follow",
+    "listen",
+    "watch",
+    "repeat",
+    "continue",
+    "help",
+    "answer",
+    "describe",
+    "find",
+    "play",
+    "pause",
+    "speak",
+    "smile",
+    "nod",
+    "blink",
+    "greet",
+    "introduce",
+    "remember",
+    "forget",
+    "cancel",
+    "quit",
+    "halt",
+    "hold",
+    "raise",
+    "lower",
+    "walk",
+    "run",
+    "please",
 ];
 
 /// Judges `text` (a transcript, annotations already stripped).
@@ -79,7 +137,7 @@ pub fn judge(text: &str) -> Turn {
     {
         return Turn::Incomplete;
     }
-    if text.ends_with(['.', '?', '!']) {
+    if text.ends_with(['.', '?', '!']) || COMMANDS.contains(&words[0].as_str()) {
         Turn::Complete
     } else {
         Turn::Unknown
@@ -123,6 +181,27 @@ mod tests {
     }
 
     #[test]
+    fn unpunctuated_commands_read_complete_unless_they_trail_off() {
+        for text in [
+            "turn left",
+            "stop",
+            "Look at me",
+            "ask what you can do for your country",
+            "please tell me the time",
+        ] {
+            assert_eq!(judge(text), Turn::Complete, "{text:?}");
+        }
+        for text in [
+            "turn left and",
+            "tell me about",
+            "go to the",
+            "show me your",
+        ] {
+            assert_eq!(judge(text), Turn::Incomplete, "{text:?}");
+        }
+    }
+
+    #[test]
     fn texts_that_trail_off_read_incomplete() {
         for text in [
             "What time",
@@ -149,8 +228,8 @@ mod tests {
             "   ",
             "...!",
             "the quick brown fox jumps over lazy dogs",
-            "turn left",
             "in the comparative",
+            "produced the block books",
         ] {
             assert_eq!(judge(text), Turn::Unknown, "{text:?}");
         }
