@@ -32,7 +32,8 @@ use whisper_rs::{
 #[derive(Debug, Clone)]
 pub struct WordStarts {
     /// Per token id: 1 when the token holds a letter or digit and begins with a space (a word of its own), 2 when it
-    /// holds one without the space (the rest of a word, or the first word of a text), 0 for punctuation.
+    /// holds one without the space (the rest of a word, or the first word of a text), 3 for a sentence's end (`.`,
+    /// `?`, `!`), 0 for other punctuation.
     marks: Vec<u8>,
 }
 
@@ -58,7 +59,9 @@ impl WordStarts {
         let wordy = bytes
             .iter()
             .any(|b| b.is_ascii_alphanumeric() || *b >= 0x80);
+        let sentence_end = matches!(bytes.trim_ascii(), b"." | b"?" | b"!" | b"?!" | b"!?");
         match (wordy, bytes.first()) {
+            (false, _) if sentence_end => 3,
             (false, _) => 0,
             (true, Some(b' ')) => 1,
             (true, _) => 2,
@@ -77,6 +80,16 @@ impl WordStarts {
             }
         }
         words
+    }
+}
+
+impl WordStarts {
+    /// Whether the token `id` ends a sentence (`.`, `?`, `!`).
+    pub fn ends_sentence(&self, id: i32) -> bool {
+        usize::try_from(id)
+            .ok()
+            .and_then(|i| self.marks.get(i))
+            .is_some_and(|&m| m == 3)
     }
 }
 
@@ -100,6 +113,8 @@ pub struct RestartStop<'w> {
     words: &'w WordStarts,
     /// Fewest words the repeated phrase must hold to stand for the whole utterance.
     min_words: f32,
+    /// Fewest words a sentence must hold to be taken for the whole utterance when a repeat starts after it.
+    min_sentence_words: f32,
     eot: c_int,
     n_vocab: usize,
     /// The length in tokens of the phrase the decode was ended on, or 0.
@@ -107,11 +122,18 @@ pub struct RestartStop<'w> {
 }
 
 impl<'w> RestartStop<'w> {
-    /// A watch for a decode of `ctx` whose repeated phrase counts only with `min_words` words or more.
-    pub fn new(ctx: &WhisperContext, words: &'w WordStarts, min_words: f32) -> Self {
+    /// A watch for a decode of `ctx` whose repeated phrase counts only with `min_words` words or more, and a
+    /// sentence followed by the start of a repeat with `min_sentence_words` or more.
+    pub fn new(
+        ctx: &WhisperContext,
+        words: &'w WordStarts,
+        min_words: f32,
+        min_sentence_words: f32,
+    ) -> Self {
         Self {
             words,
             min_words,
+            min_sentence_words,
             eot: ctx.token_eot(),
             n_vocab: usize::try_from(ctx.n_vocab()).unwrap_or(0),
             phrase: AtomicUsize::new(0),
@@ -132,7 +154,40 @@ impl<'w> RestartStop<'w> {
         let Some(p) = restarted_phrase_of(tokens, &id) else {
             return false;
         };
-        if (self.words.words(tokens[..p].iter().map(&id)) as f32) < self.min_words {
+        self.keep_if_enough_words(tokens, p, self.min_words, id)
+    }
+
+    /// Whether the decode should end at once because `tokens` are a whole sentence (they end with `.`, `?` or `!`)
+    /// and the token the decoder is about to pick, `next`, is their first one again: the fitted window's repeat
+    /// starting. The sentence must hold enough words for the whole audio at an ordinary pace of speech
+    /// (`min_sentence_words`, more than a repeated phrase needs), so that the first sentence of several, even one
+    /// whose next sentence opens with the same word ("I went home. I slept."), is not taken for the whole. This saves the decoder steps of the second time through, which
+    /// [`Self::should_end`] waits for; a decode whose first time through ends unpunctuated still waits for it (a
+    /// second time that strays marks a decode the model is unsure of). Records the phrase when so.
+    fn ends_a_sentence_then_restarts<T>(
+        &self,
+        tokens: &[T],
+        next: i32,
+        id: impl Fn(&T) -> i32,
+    ) -> bool {
+        let (Some(first), Some(last)) = (tokens.first(), tokens.last()) else {
+            return false;
+        };
+        if tokens.len() < 2 || !self.words.ends_sentence(id(last)) || id(first) != next {
+            return false;
+        }
+        self.keep_if_enough_words(tokens, tokens.len(), self.min_sentence_words, id)
+    }
+
+    /// Records `tokens[..p]` as the phrase kept when it holds at least `min_words` words.
+    fn keep_if_enough_words<T>(
+        &self,
+        tokens: &[T],
+        p: usize,
+        min_words: f32,
+        id: impl Fn(&T) -> i32,
+    ) -> bool {
+        if (self.words.words(tokens[..p].iter().map(&id)) as f32) < min_words {
             return false;
         }
         self.phrase.store(p, Ordering::Relaxed);
@@ -177,9 +232,6 @@ unsafe extern "C" fn filter(
     // SAFETY: whisper.cpp passes the decoder's `n_tokens` tokens so far, a live vector it does not touch while the
     // filter runs.
     let tokens = unsafe { std::slice::from_raw_parts(tokens, n) };
-    if !stop.should_end(tokens, |t| t.id) {
-        return;
-    }
     let Ok(eot) = usize::try_from(stop.eot) else {
         return;
     };
@@ -189,8 +241,26 @@ unsafe extern "C" fn filter(
     // SAFETY: whisper.cpp passes the next token's logits, one per vocabulary entry (`n_vocab`, asserted there), in
     // a vector of its decoder that nothing else touches while the filter runs.
     let logits = unsafe { std::slice::from_raw_parts_mut(logits, stop.n_vocab) };
+    let end = stop.should_end(tokens, |t| t.id)
+        || (tokens
+            .last()
+            .is_some_and(|t| stop.words.ends_sentence(t.id))
+            && stop.ends_a_sentence_then_restarts(tokens, best(logits), |t| t.id));
+    if !end {
+        return;
+    }
     logits.fill(f32::NEG_INFINITY);
     logits[eot] = 0.0;
+}
+
+/// The id of the highest logit (the token a greedy decoder picks next); -1 for no logits.
+fn best(logits: &[f32]) -> i32 {
+    logits
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .and_then(|(i, _)| i32::try_from(i).ok())
+        .unwrap_or(-1)
 }
 
 #[cfg(test)]
@@ -243,6 +313,48 @@ mod tests {
         }
     }
 
+    /// A watch over [`vocabulary`] with the given word minimums (no model needed: the fields are set directly).
+    fn watch(words: &WordStarts, min_words: f32, min_sentence_words: f32) -> RestartStop<'_> {
+        RestartStop {
+            words,
+            min_words,
+            min_sentence_words,
+            eot: 7,
+            n_vocab: 8,
+            phrase: AtomicUsize::new(0),
+        }
+    }
+
+    #[test]
+    fn a_whole_sentence_ends_the_decode_as_soon_as_its_repeat_begins() {
+        let v = vocabulary();
+        // " How many?" and the decoder about to say " How" again: ended now, the sentence kept whole.
+        let stop = watch(&v, 1.0, 2.0);
+        assert!(stop.ends_a_sentence_then_restarts(&[0, 1, 2], 0, |&t| t));
+        assert_eq!(stop.phrase(), Some(3));
+        // Another word next, no sentence end yet, or too few words for the audio: the decode goes on.
+        let stop = watch(&v, 1.0, 2.0);
+        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1, 2], 1, |&t| t));
+        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1], 0, |&t| t));
+        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1, 6], 0, |&t| t));
+        assert!(!watch(&v, 1.0, 2.5).ends_a_sentence_then_restarts(&[0, 1, 2], 0, |&t| t));
+        assert_eq!(stop.phrase(), None);
+    }
+
+    #[test]
+    fn only_full_stops_question_and_exclamation_marks_end_a_sentence() {
+        for (text, ends) in [
+            (&b"."[..], true),
+            (b"?", true),
+            (b" !", true),
+            (b",", false),
+            (b"...", false),
+            (b" many", false),
+        ] {
+            assert_eq!(WordStarts::mark(text) == 3, ends, "{text:?}");
+        }
+    }
+
     #[test]
     fn words_are_counted_from_the_tokens_that_begin_them() {
         let v = vocabulary();
@@ -264,13 +376,7 @@ mod tests {
     #[test]
     fn the_filter_ends_a_restart_only_when_the_phrase_holds_enough_words() {
         let v = vocabulary();
-        let stop = |min_words| RestartStop {
-            words: &v,
-            min_words,
-            eot: 7,
-            n_vocab: 8,
-            phrase: AtomicUsize::new(0),
-        };
+        let stop = |min_words| watch(&v, min_words, 100.0);
         let enough = stop(1.5);
         assert!(enough.should_end(&[0, 1, 2, 0, 1, 2], |&id| id));
         assert_eq!(enough.phrase(), Some(3));
@@ -282,13 +388,7 @@ mod tests {
     #[test]
     fn the_callback_forces_the_end_of_text_token_on_a_restart() {
         let v = vocabulary();
-        let stop = RestartStop {
-            words: &v,
-            min_words: 1.0,
-            eot: 7,
-            n_vocab: 8,
-            phrase: AtomicUsize::new(0),
-        };
+        let stop = watch(&v, 1.0, 100.0);
         let token = |id| WhisperTokenData {
             id,
             tid: 0,
@@ -334,6 +434,26 @@ mod tests {
         }
         assert_eq!(logits[7], 0.0);
         assert!(logits[..7].iter().all(|l| *l == f32::NEG_INFINITY));
+        assert_eq!(stop.phrase(), Some(3));
+
+        // A whole sentence (" How many?") with the decoder's best next token its first one again: ended at once.
+        let stop = watch(&v, 1.0, 2.0);
+        let user = std::ptr::from_ref(&stop).cast_mut().cast::<c_void>();
+        let mut logits = [0.0f32; 8];
+        logits[0] = 5.0;
+        let sentence = [token(0), token(1), token(2)];
+        // SAFETY: as above.
+        unsafe {
+            filter(
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                sentence.as_ptr(),
+                3,
+                logits.as_mut_ptr(),
+                user,
+            );
+        }
+        assert_eq!(logits[7], 0.0);
         assert_eq!(stop.phrase(), Some(3));
     }
 }

@@ -323,10 +323,12 @@ impl Transcriber {
         }
         abort.attach(&mut params);
         // A greedy decode with the fitted window ends once it starts saying the utterance again (restart_stop.rs).
+        let seconds = audio.len() as f32 / RATE as f32;
         let restart = RestartStop::new(
             &self.ctx,
             &self.words,
-            MIN_WORDS_PER_SECOND * audio.len() as f32 / RATE as f32,
+            MIN_WORDS_PER_SECOND * seconds,
+            SENTENCE_WORDS_PER_SECOND * seconds,
         );
         if context == AudioContext::Fit && self.cfg.beam_size <= 1 {
             restart.attach(&mut params);
@@ -346,10 +348,12 @@ impl Transcriber {
         let mut logprob_sum = 0.0f32;
         let mut tokens = 0usize;
         let mut no_speech_prob = 0.0f32;
+        let mut decoded_tokens = 0usize;
         for i in 0..self.state.full_n_segments() {
             let Some(segment) = self.state.get_segment(i) else {
                 continue;
             };
+            decoded_tokens += usize::try_from(segment.n_tokens()).unwrap_or(0);
             no_speech_prob = no_speech_prob.max(segment.no_speech_probability());
             if keep.is_none() {
                 text.push_str(&segment.to_str_lossy()?);
@@ -374,6 +378,15 @@ impl Transcriber {
                 .to_owned();
             tracing::debug!(%text, tokens, logprob = logprob_sum / tokens.max(1) as f32, "the decode restarted the utterance; ended it there");
         }
+        tracing::debug!(
+            audio_ms = audio.len() * 1000 / RATE,
+            ?context,
+            decoded_tokens,
+            kept_tokens = tokens,
+            ms = started.elapsed().as_millis() as u64,
+            text = %text.trim(),
+            "decoded"
+        );
         Ok(Decoded {
             text: text.trim().to_owned(),
             no_speech_prob,
@@ -394,6 +407,11 @@ impl Transcriber {
 /// Fewest words a second the repeated phrase must hold to stand for the whole utterance: read speech runs at two
 /// to three, so a phrase below this covers only part of the audio and the output is not trusted.
 const MIN_WORDS_PER_SECOND: f32 = 1.2;
+
+/// Fewest words a second a sentence must hold to be taken for the whole utterance as soon as a repeat of it starts
+/// (`RestartStop`): an ordinary pace over the whole audio, pre-roll and post-roll included, so that a first sentence
+/// of two falls short of it.
+const SENTENCE_WORDS_PER_SECOND: f32 = 2.0;
 
 /// When `text` is one phrase from its start said at least twice over (the last time possibly cut by the token
 /// cap), and that phrase is long enough for `seconds` of speech, the phrase once; else `None`.

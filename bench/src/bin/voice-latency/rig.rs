@@ -128,7 +128,11 @@ impl Rig {
         }
         cmd.args(extra);
         let child = cmd
-            .env("RUST_LOG", "warn")
+            // `VOICE_LATENCY_SATELLITE_LOG=whisper_sat=debug` shows every decode on stderr.
+            .env(
+                "RUST_LOG",
+                std::env::var("VOICE_LATENCY_SATELLITE_LOG").unwrap_or_else(|_| "warn".to_owned()),
+            )
             .env("NO_COLOR", "1")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
