@@ -381,6 +381,7 @@ impl Transcriber {
         tracing::debug!(
             audio_ms = audio.len() * 1000 / RATE,
             ?context,
+            threads,
             decoded_tokens,
             kept_tokens = tokens,
             ms = started.elapsed().as_millis() as u64,
