@@ -501,6 +501,54 @@ mod tests {
     }
 
     #[test]
+    fn random_maps_give_clipped_boxes_above_the_threshold_strongest_first_and_apart() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+        for _ in 0..300 {
+            let (w, h) = (rng.random_range(1..24usize), rng.random_range(1..24usize));
+            let cells = w * h;
+            // Scores from the whole float range a broken model could give (NaN and infinities included).
+            let odd = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -1.0, 2.0];
+            let mut value = |scale: f32| {
+                if rng.random_bool(0.05) {
+                    odd[rng.random_range(0..odd.len())]
+                } else {
+                    rng.random_range(-scale..scale)
+                }
+            };
+            let heat: Vec<f32> = (0..cells).map(|_| value(1.0).abs()).collect();
+            let size: Vec<f32> = (0..2 * cells).map(|_| value(4.0)).collect();
+            let offset: Vec<f32> = (0..2 * cells).map(|_| value(2.0)).collect();
+            let maps = OutputMaps {
+                grid_width: w,
+                grid_height: h,
+                heat: &heat,
+                size: &size,
+                offset: &offset,
+            };
+            let input = (w as f32 * STRIDE, h as f32 * STRIDE);
+            let boxes = decode(&maps, input, 0.5, 0.3).expect("lengths match");
+            for b in &boxes {
+                assert!(b.score >= 0.5 && b.score.is_finite() || b.score == f32::INFINITY);
+                assert!(b.x >= 0.0 && b.y >= 0.0, "{b:?}");
+                assert!(b.width > 0.0 && b.height > 0.0, "{b:?}");
+                assert!(
+                    b.x + b.width <= input.0 && b.y + b.height <= input.1,
+                    "{b:?}"
+                );
+            }
+            for pair in boxes.windows(2) {
+                assert!(pair[0].score >= pair[1].score);
+            }
+            for (i, a) in boxes.iter().enumerate() {
+                for b in &boxes[i + 1..] {
+                    assert!(a.iou(b) <= 0.3, "{a:?} {b:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn settings_a_network_cannot_run_with_are_refused_by_name() {
         for (params, key) in [
             (
