@@ -283,12 +283,13 @@ impl CenterFace {
         })
     }
 
+    /// The settings the network runs with.
     pub fn params(&self) -> &CenterFaceParams {
         &self.params
     }
 
-    /// Runs the network when this frame is due, or at once when motion has just appeared (`moving` now, still on
-    /// the frame before: a face coming into view, or a new scene), else repeats the last boxes. The schedule
+    /// Runs the network when this frame is due, or at once when motion has just appeared (`moving` on this frame
+    /// and not on the one before: a face coming into view, or a new scene), else repeats the last boxes. The schedule
     /// starts over from a run. `completed_cycles` counts the runs: each one sees the whole frame.
     pub fn scan(&mut self, frame: &GreyFrame, moving: bool) -> Result<FaceScan, VisionError> {
         let motion_appeared = moving && !self.was_moving;
