@@ -81,9 +81,7 @@ impl WordStarts {
         }
         words
     }
-}
 
-impl WordStarts {
     /// Whether the token `id` ends a sentence (`.`, `?`, `!`).
     pub fn ends_sentence(&self, id: i32) -> bool {
         usize::try_from(id)
@@ -158,22 +156,24 @@ impl<'w> RestartStop<'w> {
     }
 
     /// Whether the decode should end at once because `tokens` are a whole sentence (they end with `.`, `?` or `!`)
-    /// and the token the decoder is about to pick, `next`, is their first one again: the fitted window's repeat
+    /// and the token the decoder is about to pick, `next()`, is their first one again: the fitted window's repeat
     /// starting. The sentence must hold enough words for the whole audio at an ordinary pace of speech
     /// (`min_sentence_words`, more than a repeated phrase needs), so that the first sentence of several, even one
-    /// whose next sentence opens with the same word ("I went home. I slept."), is not taken for the whole. This saves the decoder steps of the second time through, which
-    /// [`Self::should_end`] waits for; a decode whose first time through ends unpunctuated still waits for it (a
-    /// second time that strays marks a decode the model is unsure of). Records the phrase when so.
+    /// whose next sentence opens with the same word ("I went home. I slept."), is not taken for the whole. This
+    /// saves the decoder steps of the second time through, which [`Self::should_end`] waits for; a decode whose
+    /// first time through ends unpunctuated still waits for it (a second time that strays marks a decode the model
+    /// is unsure of). `next` is only asked once the tokens end a sentence, since it scans the whole vocabulary.
+    /// Records the phrase when so.
     fn ends_a_sentence_then_restarts<T>(
         &self,
         tokens: &[T],
-        next: i32,
+        next: impl FnOnce() -> i32,
         id: impl Fn(&T) -> i32,
     ) -> bool {
         let (Some(first), Some(last)) = (tokens.first(), tokens.last()) else {
             return false;
         };
-        if tokens.len() < 2 || !self.words.ends_sentence(id(last)) || id(first) != next {
+        if tokens.len() < 2 || !self.words.ends_sentence(id(last)) || id(first) != next() {
             return false;
         }
         self.keep_if_enough_words(tokens, tokens.len(), self.min_sentence_words, id)
@@ -242,10 +242,7 @@ unsafe extern "C" fn filter(
     // a vector of its decoder that nothing else touches while the filter runs.
     let logits = unsafe { std::slice::from_raw_parts_mut(logits, stop.n_vocab) };
     let end = stop.should_end(tokens, |t| t.id)
-        || (tokens
-            .last()
-            .is_some_and(|t| stop.words.ends_sentence(t.id))
-            && stop.ends_a_sentence_then_restarts(tokens, best(logits), |t| t.id));
+        || stop.ends_a_sentence_then_restarts(tokens, || best(logits), |t| t.id);
     if !end {
         return;
     }
@@ -330,14 +327,14 @@ mod tests {
         let v = vocabulary();
         // " How many?" and the decoder about to say " How" again: ended now, the sentence kept whole.
         let stop = watch(&v, 1.0, 2.0);
-        assert!(stop.ends_a_sentence_then_restarts(&[0, 1, 2], 0, |&t| t));
+        assert!(stop.ends_a_sentence_then_restarts(&[0, 1, 2], || 0, |&t| t));
         assert_eq!(stop.phrase(), Some(3));
         // Another word next, no sentence end yet, or too few words for the audio: the decode goes on.
         let stop = watch(&v, 1.0, 2.0);
-        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1, 2], 1, |&t| t));
-        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1], 0, |&t| t));
-        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1, 6], 0, |&t| t));
-        assert!(!watch(&v, 1.0, 2.5).ends_a_sentence_then_restarts(&[0, 1, 2], 0, |&t| t));
+        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1, 2], || 1, |&t| t));
+        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1], || 0, |&t| t));
+        assert!(!stop.ends_a_sentence_then_restarts(&[0, 1, 6], || 0, |&t| t));
+        assert!(!watch(&v, 1.0, 2.5).ends_a_sentence_then_restarts(&[0, 1, 2], || 0, |&t| t));
         assert_eq!(stop.phrase(), None);
     }
 

@@ -42,14 +42,8 @@ impl Module for VisionModule {
         let pipeline = settings.pipeline_params().context("[modules.vision]")?;
         // The network's file is checked here too, so that a missing model stops the server at start with the key
         // named, before any module runs.
-        if let Some(FaceDetection::CenterFace(net)) = &pipeline.faces
-            && !net.model.is_file()
-        {
-            anyhow::bail!(
-                "[modules.vision] faces.centerface.model: {} not found (run `make model MODEL=centerface`, or set \
-                 faces.detector = \"cascades\")",
-                net.model.display()
-            );
+        if let Some(FaceDetection::CenterFace(net)) = &pipeline.faces {
+            net.check_model().context("[modules.vision]")?;
         }
         Ok(())
     }

@@ -99,6 +99,18 @@ impl CenterFaceParams {
         }
         Ok(())
     }
+
+    /// Checks that the model file is there; the error says how to provision it. The server runs this at start
+    /// (module check) so that a missing file stops it before any module runs.
+    pub fn check_model(&self) -> Result<(), VisionError> {
+        if self.model.is_file() {
+            Ok(())
+        } else {
+            Err(VisionError::ModelMissing {
+                path: self.model.clone(),
+            })
+        }
+    }
 }
 
 /// The repository root, found from this crate's manifest directory (server/vision).
@@ -247,11 +259,7 @@ impl CenterFace {
     /// Loads the network; fails when the settings are invalid or the model file is missing or unreadable.
     pub fn new(params: CenterFaceParams) -> Result<Self, VisionError> {
         params.validate()?;
-        if !params.model.is_file() {
-            return Err(VisionError::ModelMissing {
-                path: params.model.clone(),
-            });
-        }
+        params.check_model()?;
         let path = params
             .model
             .to_str()
@@ -281,11 +289,6 @@ impl CenterFace {
             outputs: Vector::new(),
             output_names: OUTPUTS.iter().copied().collect(),
         })
-    }
-
-    /// The settings the network runs with.
-    pub fn params(&self) -> &CenterFaceParams {
-        &self.params
     }
 
     /// Runs the network when this frame is due, or at once when motion has just appeared (`moving` on this frame

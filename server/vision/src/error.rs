@@ -31,7 +31,7 @@ pub enum FrameError {
 pub enum VisionError {
     #[error("cascade file {} could not be loaded (is Debian's opencv-data installed?)", path.display())]
     CascadeLoad { path: PathBuf },
-    #[error("face model {} not found (run `make model MODEL=centerface`, or set faces.centerface.model)", path.display())]
+    #[error("faces.centerface.model: {} not found (run `make model MODEL=centerface`, or set faces.detector = \"cascades\")", path.display())]
     ModelMissing { path: PathBuf },
     #[error("face model {} could not be loaded: {reason}", path.display())]
     ModelLoad { path: PathBuf, reason: String },

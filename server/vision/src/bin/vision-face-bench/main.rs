@@ -148,6 +148,7 @@ fn main() -> anyhow::Result<()> {
     let fixtures = fixtures_dir();
     let truth = GroundTruth::load(&fixtures)?;
     let mut summary = Vec::new();
+    let all = variants();
 
     if !args.no_table {
         let images: Vec<(Vec<u8>, FaceTruth)> = truth
@@ -162,7 +163,7 @@ fn main() -> anyhow::Result<()> {
             "| variant | recall (IoU >= 0.3) | false faces / image | false faces / frame over the run | frames |"
         );
         println!("|---|---|---|---|---|");
-        for (index, variant) in variants().iter().enumerate() {
+        for (index, variant) in all.iter().enumerate() {
             if !args.variants.is_empty() && !args.variants.contains(&index) {
                 continue;
             }
@@ -217,7 +218,6 @@ fn main() -> anyhow::Result<()> {
             ));
         }
     }
-    let all = variants();
     let focus = all
         .get(args.trial_variant)
         .ok_or_else(|| anyhow::anyhow!("--trial-variant {} is not a row", args.trial_variant))?;
