@@ -515,6 +515,41 @@ async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> 
     Ok(())
 }
 
+/// What the 3D page drew last: its model, whether it took its WebGL for software, and its triangles.
+async fn drawn(s: &Stage) -> anyhow::Result<(String, Option<bool>, u64)> {
+    let text = s.eval("JSON.stringify(agentDebug.avatarQuality)").await?;
+    let q: Value = serde_json::from_str(text.as_str().context("avatarQuality")?)?;
+    Ok((
+        q["model"].as_str().unwrap_or_default().to_owned(),
+        q["software"].as_bool(),
+        q["triangles"].as_u64().unwrap_or(0),
+    ))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn software_webgl_draws_the_lite_model_and_gpu_settings_the_full_one() -> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("3d", WEBGL).await?;
+    let (model, software, lite_triangles) = drawn(&s).await?;
+    s.quit().await;
+    assert_eq!(model, "assets/avatar-lite.glb");
+    assert_eq!(
+        software,
+        Some(true),
+        "headless Chromium's WebGL is SwiftShader"
+    );
+    let s = Stage::open("3d-full", WEBGL).await?;
+    let (model, software, full_triangles) = drawn(&s).await?;
+    s.quit().await;
+    assert_eq!(model, "assets/avatar.glb");
+    assert_eq!(software, Some(false));
+    assert!(
+        lite_triangles > 0 && lite_triangles * 5 <= full_triangles * 2,
+        "the lite head drew {lite_triangles} triangles, the full one {full_triangles}"
+    );
+    Ok(())
+}
+
 /// Screenshots of `renderer` at rest, mid-viseme, blinking and looking either way, as `artifacts/avatar-<r>-*.png`.
 ///
 /// The 3D head is shot with the settings it has on a GPU (`avatarquality=full`); on SwiftShader it would lower its

@@ -3,11 +3,11 @@
 //! Chromium with the avatar's canvas at 800x600.
 //!
 //! Each renderer gets its own tab (the other closed), speaking all the time (visemes on a tone, so every frame is
-//! drawn: the page only drops to 30 fps when idle) with blinks and gaze changes. The frame time is the period of
-//! the page's rAF loop (p95), which includes whatever the browser does to show a frame; beside it, the cost of
-//! the avatar's own frame callback (`?avatarsync=1` makes it wait for the drawing where the browser lets it:
-//! `gl.finish`, a one-pixel read of the 2D canvas) and the frames drawn per second. Rounds alternate the
-//! renderers; the median round is reported.
+//! drawn: the page only drops to 30 fps when idle) with blinks and gaze changes. The frame time (p95) is the cost
+//! of the avatar's frame callback with its drawing waited for: `?avatarsync=1` ends each frame with a one-pixel
+//! read of the canvas, for both renderers (`gl.finish` does not wait for SwiftShader). Beside it: the period of
+//! the page's rAF loop, which includes whatever else the browser does to show a frame, and the frames drawn per
+//! second. Rounds alternate the renderers; the median round is reported.
 //!
 //! Options: `--seconds N` per renderer and round (default 10), `--rounds N` (default 3). Needs a built
 //! `robot-agent` (found like the integration tests find it) and chromium.
@@ -91,29 +91,28 @@ async fn main() -> anyhow::Result<()> {
         results.push((two, three));
     }
     // The median round by the 3D head's frame time.
-    results.sort_by(|a, b| a.1.interval_p95.total_cmp(&b.1.interval_p95));
+    results.sort_by(|a, b| a.1.cost_p95.total_cmp(&b.1.cost_p95));
     let (two, three) = &results[results.len() / 2];
     println!();
-    // The frame time is the rAF loop's period: with software WebGL the drawing happens in the GPU process, after
-    // the page's frame callback has returned, so what it costs shows as a longer period (and fewer frames), not
-    // in the callback's own time, which is reported second.
+    // The frame time is what a frame of the page's rAF loop costs: the avatar's frame callback with its drawing
+    // waited for (`?avatarsync=1`: a one-pixel read of the canvas, for both renderers). With software WebGL the
+    // drawing happens in the GPU process after the callback has returned, so without that wait a 3D frame would
+    // look nearly free. The rAF period and the frames drawn per second are reported beside it.
     println!(
-        "SUMMARY avatar_frame_time_p95_2d: {:.1} ms (rAF period, median of {rounds} rounds of {seconds} s; {:.1} fps drawn)",
-        two.interval_p95, two.fps
+        "SUMMARY avatar_frame_time_p95_2d: {:.1} ms (callback with its drawing, median of {rounds} rounds of {seconds} s; rAF period p95 {:.1} ms, {:.1} fps drawn)",
+        two.cost_p95, two.interval_p95, two.fps
     );
-    let ratio = three.interval_p95 / two.interval_p95.max(1e-9);
-    let met = ratio <= 2.0 && three.interval_p95 <= 8.0;
+    let ratio = three.cost_p95 / two.cost_p95.max(1e-9);
+    let met = ratio <= 2.0 && three.cost_p95 <= 8.0;
     println!(
-        "SUMMARY avatar_frame_time_p95_3d: {:.1} ms (baseline 2D {:.1} ms, ratio {ratio:.2}; target <= 2x 2D and <= 8 ms: {}; {:.1} fps drawn, at pixel ratio {:.2})",
-        three.interval_p95,
-        two.interval_p95,
+        "SUMMARY avatar_frame_time_p95_3d: {:.1} ms (baseline 2D {:.1} ms, ratio {ratio:.2}; target <= 2x 2D and <= 8 ms: {}; rAF period p95 {:.1} ms, {:.1} fps drawn, at pixel ratio {:.2}, {} triangles)",
+        three.cost_p95,
+        two.cost_p95,
         if met { "met" } else { "not met" },
+        three.interval_p95,
         three.fps,
-        three.pixel_ratio
-    );
-    println!(
-        "SUMMARY avatar_frame_callback_p95: 3D {:.2} ms, 2D {:.2} ms (the page's own work per frame: animation, draw calls; 2D includes its rasterisation)",
-        three.cost_p95, two.cost_p95
+        three.pixel_ratio,
+        three.triangles
     );
     println!(
         "SUMMARY avatar_fps_3d: {:.1} fps (2D {:.1} fps; target: at least 30 fps without a GPU: {})",
@@ -135,6 +134,8 @@ struct Stats {
     fps: f64,
     /// The 3D head's resolution scale at the end (it lowers it when frames come late); 1 for the 2D face.
     pixel_ratio: f64,
+    /// Triangles the 3D head's last frame drew; 0 for the 2D face.
+    triangles: u64,
 }
 
 async fn measure(
@@ -236,6 +237,11 @@ async fn measure(
         .await?
         .as_f64()
         .unwrap_or(1.0);
+    let triangles = browser
+        .eval(&tab, "agentDebug.avatarQuality?.triangles ?? 0")
+        .await?
+        .as_u64()
+        .unwrap_or(0);
     browser.close(&tab).await?;
     let costs: Vec<f64> = log
         .iter()
@@ -255,6 +261,7 @@ async fn measure(
         interval_p95: percentile(&intervals, 0.95),
         fps: costs.len() as f64 / ((window_end - window_start) / 1000.0),
         pixel_ratio,
+        triangles,
     })
 }
 

@@ -277,18 +277,28 @@ const outward = (center) => (p) => sub(p, center);
 const towardViewer = () => /** @type {V3} */ ([0, 0, 1]);
 
 /** The skull as a grid before the eye sockets and the mouth are pressed in (for placing features on it). */
+/**
+ * Grid cells at a level of detail: `n` at full detail (1), proportionally fewer below it, for the lighter model
+ * that software WebGL draws (its frame cost follows the triangles). Counts stay even, so grids symmetric about
+ * the midline stay so, and grids of four cells or fewer keep theirs.
+ */
+function cells(n, detail) {
+  if (detail >= 1 || n <= 4) return n;
+  return Math.max(4, 2 * Math.round((n * detail) / 2));
+}
+
 function skullPart(nu, nv) {
   const part = new Part("skull", outward(C));
   part.grid(nu, nv, (s, t) => ({ p: skull((s - 0.5) * 2 * Math.PI, t * Math.PI), c: SKIN }), true);
   return part;
 }
 
-function buildFace(base, eyes, zAt) {
+function buildFace(base, eyes, zAt, detail) {
   const part = new Part("face", outward(C));
   // ~4 mm cells: finer grids cost software WebGL frames and change nothing visible (the lips, lids and
   // eyes are their own meshes; where they meet the skin, the depth test draws the seam per pixel).
-  const nu = 96;
-  const nv = 72;
+  const nu = cells(96, detail);
+  const nv = cells(72, detail);
   part.grid(nu, nv, (s, t) => {
     const u = (s - 0.5) * 2 * Math.PI;
     const v = t * Math.PI;
@@ -337,7 +347,7 @@ function buildFace(base, eyes, zAt) {
     const centre = /** @type {V3} */ ([side * (A * 0.95), C[1] - 0.01, C[2] - 0.006]);
     const first = part.vertexCount;
     const ear = new Part("ear", outward(centre));
-    ear.grid(20, 12, (s, t) => {
+    ear.grid(cells(20, detail), cells(12, detail), (s, t) => {
       const u = s * 2 * Math.PI;
       const v = t * Math.PI;
       const n = [Math.sin(v) * Math.cos(u), Math.cos(v), Math.sin(v) * Math.sin(u)];
@@ -354,8 +364,8 @@ function buildFace(base, eyes, zAt) {
 }
 
 /** The lips (a ring from the meeting line to the outer contour, rolled inwards), the mouth's inside, teeth, tongue. */
-function buildMouth(zAt) {
-  const nt = 72;
+function buildMouth(zAt, detail) {
+  const nt = cells(72, detail);
   const zM = zAt(0, MOUTH_Y);
   /** The lips' rest position at angle `t` (0 = left corner, pi/2 = top) and `s` (-0.45 inside .. 1 outer edge). */
   const lipPoint = (t, s) => {
@@ -432,7 +442,7 @@ function buildMouth(zAt) {
   const teeth = new Part("teeth", towardViewer);
   for (const row of [{ top: MOUTH_Y + 0.0036, bottom: MOUTH_Y - 0.0013, jaw: 0, z: -0.0078 },
     { top: MOUTH_Y - 0.0018, bottom: MOUTH_Y - 0.006, jaw: 1, z: -0.0088 }]) {
-    teeth.grid(32, 3, (s, t) => {
+    teeth.grid(cells(32, detail), 3, (s, t) => {
       const x = (s - 0.5) * 0.027;
       const tooth = Math.abs(Math.sin((x / 0.0042) * Math.PI));
       const shade = 0.86 + 0.14 * Math.pow(tooth, 0.3);
@@ -447,7 +457,7 @@ function buildMouth(zAt) {
   // Tongue: a flattened ellipsoid on the floor of the mouth.
   const tc = /** @type {V3} */ ([0, MOUTH_Y - 0.0052, zM - 0.019]);
   const tongue = new Part("tongue", outward(tc));
-  tongue.grid(28, 12, (s, t) => {
+  tongue.grid(cells(28, detail), cells(12, detail), (s, t) => {
     const u = s * 2 * Math.PI;
     const v = t * Math.PI;
     const n = [Math.sin(v) * Math.sin(u), Math.cos(v), Math.sin(v) * Math.cos(u)];
@@ -484,11 +494,11 @@ function lidTargets(g) {
   };
 }
 
-function buildLids(eyes) {
+function buildLids(eyes, detail) {
   const lids = new Part("lids", towardViewer);
   const lashes = new Part("lashes", towardViewer);
   const catchlight = new Part("catchlight", towardViewer);
-  const nh = 40;
+  const nh = cells(40, detail);
   const hmax = 1.3;
   eyes.forEach((e, k) => {
     const side = k === 0 ? 1 : -1;
@@ -611,9 +621,9 @@ function browDisplacement(p, info, name, zAt) {
   return /** @type {V3} */ ([dx, dy, dz]);
 }
 
-function buildEyeball() {
+function buildEyeball(detail) {
   const sclera = new Part("sclera", (p) => p);
-  sclera.grid(36, 24, (s, t) => {
+  sclera.grid(cells(36, detail), cells(24, detail), (s, t) => {
     const u = s * 2 * Math.PI;
     const v = t * Math.PI;
     // The pole points forward (+z), so the grid's rings are circles around the iris.
@@ -623,7 +633,7 @@ function buildEyeball() {
   }, true);
   const iris = new Part("iris", (p) => p);
   const irisAngle = 0.5;
-  iris.grid(40, 12, (s, t) => {
+  iris.grid(cells(40, detail), cells(12, detail), (s, t) => {
     const u = s * 2 * Math.PI;
     const a = t * irisAngle;
     const n = /** @type {V3} */ ([Math.sin(a) * Math.cos(u), Math.sin(a) * Math.sin(u), Math.cos(a)]);
@@ -641,10 +651,10 @@ function buildEyeball() {
   return { sclera, iris };
 }
 
-function buildHair() {
+function buildHair(detail) {
   const hair = new Part("hair", outward(C));
-  const nu = 112;
-  const nv = 28;
+  const nu = cells(112, detail);
+  const nv = cells(28, detail);
   // The hairline: a fringe of pointed locks over the forehead, sweeping from the avatar's left to its right;
   // above the ears at the sides; a bob down to the nape at the back.
   const vmax = (u) => {
@@ -689,9 +699,9 @@ function buildHair() {
   return hair;
 }
 
-function buildNeckAndBody() {
+function buildNeckAndBody(detail) {
   const neck = new Part("neck", (p) => [p[0], 0, p[2]]);
-  neck.grid(36, 8, (s, t) => {
+  neck.grid(cells(36, detail), cells(8, detail), (s, t) => {
     const a = s * 2 * Math.PI;
     const y = lerp(0.142, 0.0, t);
     const front = Math.max(0, Math.cos(a));
@@ -711,7 +721,7 @@ function buildNeckAndBody() {
     return /** @type {V3} */ ([x, top - d, z]);
   };
   const body = new Part("body", (p) => [p[0], 0.2, p[2] + 0.006]);
-  body.grid(64, 18, (s, t) => {
+  body.grid(cells(64, detail), cells(18, detail), (s, t) => {
     const a = s * 2 * Math.PI;
     const d = 0.25 * Math.pow(t, 1.6);
     const p = section(a, d);
@@ -727,7 +737,7 @@ function buildNeckAndBody() {
     const y = top - 0.008 - 0.026 * (1 - (2 * k - 1) ** 2);
     path.push([x, y, zBody(x, y) + 0.0008]);
   }
-  collar.grid(24, 4, (s, t) => {
+  collar.grid(cells(24, detail), 4, (s, t) => {
     const q = path[Math.round(s * 24)];
     const a = t * Math.PI;
     const r = 0.0018;
@@ -771,7 +781,22 @@ function primitive(part, material, names, displace, withNormals = true) {
 }
 
 /** Builds the whole avatar as a glTF document for `writeGlb`. */
-export function buildAvatar() {
+/**
+ * The models the page loads (assets/), by file name, with the detail each is built at: the full model for WebGL
+ * on a GPU, and the lite one for software WebGL (SwiftShader, llvmpipe), where a frame costs about 0.5 us of CPU
+ * per triangle and half the grid resolution halves the frame's cost (bench_avatar).
+ */
+export const MODELS = [
+  { file: "avatar.glb", detail: 1 },
+  { file: "avatar-lite.glb", detail: 0.5 },
+];
+
+/**
+ * The avatar's glTF design. `detail` scales the rendered grids (1: the full model; the page's software-WebGL
+ * model, avatar-lite.glb, is 0.5); the skull that places the features stays fine at every detail, so the face is
+ * laid out the same.
+ */
+export function buildAvatar({ detail = 1 } = {}) {
   const base = skullPart(136, 104); // fine, for placing features on the skull (not rendered)
   const zAt = (x, y) => frontZ(base, x, y, C[2] + D);
   const eyes = [1, -1].map((side) => {
@@ -780,13 +805,13 @@ export function buildAvatar() {
     return /** @type {V3} */ ([x, EYE_Y, z]);
   });
 
-  const face = buildFace(base, eyes, zAt);
-  const mouth = buildMouth(zAt);
-  const { lids, lashes, catchlight } = buildLids(eyes);
+  const face = buildFace(base, eyes, zAt, detail);
+  const mouth = buildMouth(zAt, detail);
+  const { lids, lashes, catchlight } = buildLids(eyes, detail);
   const brows = buildBrows(zAt);
-  const { sclera, iris } = buildEyeball();
-  const hair = buildHair();
-  const { neck, body, collar } = buildNeckAndBody();
+  const { sclera, iris } = buildEyeball(detail);
+  const hair = buildHair(detail);
+  const { neck, body, collar } = buildNeckAndBody(detail);
 
   const mouthMorph = (p, info, name) => mouthTarget(name, p, info);
   const lidMorph = (p, info, name) => {

@@ -1,37 +1,45 @@
-//! Writes the avatar's model, assets/avatar.glb, from the design in head.mjs; `--check` only compares.
+//! Writes the avatar's models, assets/avatar.glb and assets/avatar-lite.glb, from the design in head.mjs; `--check` only compares.
 // @ts-check
 //
-// Usage: node scripts/avatar-gen/make-avatar.mjs [--check] [--out PATH]
-// The GLB is committed; `--check` (run by the tests) fails when regenerating it would change a byte, so the
-// committed file is always what this code produces.
+// Usage: node scripts/avatar-gen/make-avatar.mjs [--check] [--out DIR]
+// The GLBs are committed; `--check` (run by the tests) fails when regenerating them would change a byte, so the
+// committed files are always what this code produces. avatar-lite.glb is the same design at half the grid
+// resolution (a third of the triangles), which the page draws on software WebGL (docs: ARCHITECTURE.md, 3D avatar).
 
 import { readFileSync, writeFileSync } from "node:fs";
 import { dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
-import { buildAvatar } from "./head.mjs";
+import { buildAvatar, MODELS } from "./head.mjs";
 import { writeGlb } from "./glb.mjs";
 
 const root = join(dirname(fileURLToPath(import.meta.url)), "..", "..");
 const args = process.argv.slice(2);
 const check = args.includes("--check");
 const outAt = args.indexOf("--out");
-const out = outAt >= 0 ? args[outAt + 1] : join(root, "assets", "avatar.glb");
+const dir = outAt >= 0 ? args[outAt + 1] : join(root, "assets");
 
-const bytes = writeGlb(buildAvatar());
-if (check) {
+let stale = false;
+for (const { file, detail } of MODELS) {
+  const out = join(dir, file);
+  const bytes = writeGlb(buildAvatar({ detail }));
+  if (!check) {
+    writeFileSync(out, bytes);
+    console.log(`avatar: wrote ${out} (${bytes.length} bytes)`);
+    continue;
+  }
   let old;
   try {
     old = readFileSync(out);
   } catch (err) {
     console.error(`avatar: ${out} is missing (${err.message}); run node scripts/avatar-gen/make-avatar.mjs`);
-    process.exit(1);
+    stale = true;
+    continue;
   }
   if (Buffer.compare(old, Buffer.from(bytes)) !== 0) {
     console.error(`avatar: ${out} differs from what the generator makes now (${old.length} vs ${bytes.length} bytes)`);
-    process.exit(1);
+    stale = true;
+  } else {
+    console.log(`avatar: ${out} is up to date (${bytes.length} bytes)`);
   }
-  console.log(`avatar: ${out} is up to date (${bytes.length} bytes)`);
-} else {
-  writeFileSync(out, bytes);
-  console.log(`avatar: wrote ${out} (${bytes.length} bytes)`);
 }
+if (stale) process.exit(1);

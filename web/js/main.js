@@ -47,7 +47,8 @@ const { avatar, renderer: avatarRenderer } = await createAvatar(
   params.get("avatar") ?? DEFAULT_RENDERER,
   {
     syncFrames: params.get("avatarsync") === "1",
-    // `avatarquality=full`: GPU settings (PBR materials, antialiasing, full resolution) even on software WebGL.
+    // `avatarquality=full`: GPU settings (the full model, PBR materials, antialiasing, full resolution) even on
+    // software WebGL.
     quality: params.get("avatarquality") === "full" ? { software: false, adaptive: false } : {},
   },
 );

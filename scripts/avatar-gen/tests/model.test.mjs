@@ -5,7 +5,7 @@ import { test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
 import { fileURLToPath } from "node:url";
-import { buildAvatar, VISEME_NAMES } from "../head.mjs";
+import { buildAvatar, MODELS, VISEME_NAMES } from "../head.mjs";
 import { writeGlb, readGlb, accessorFloats } from "../glb.mjs";
 
 const committed = fileURLToPath(new URL("../../../assets/avatar.glb", import.meta.url));
@@ -36,6 +36,29 @@ test("the generator is deterministic and the committed assets/avatar.glb is exac
   assert.equal(Buffer.compare(Buffer.from(writeGlb(buildAvatar())), Buffer.from(bytes)), 0);
   assert.equal(Buffer.compare(readFileSync(committed), Buffer.from(bytes)), 0,
     "assets/avatar.glb is stale: run node scripts/avatar-gen/make-avatar.mjs");
+});
+
+test("the committed assets/avatar-lite.glb is exactly what the generator makes at its detail", () => {
+  const lite = MODELS.find((m) => m.file === "avatar-lite.glb");
+  assert.ok(lite && lite.detail < 1);
+  const path = fileURLToPath(new URL(`../../../assets/${lite.file}`, import.meta.url));
+  assert.equal(Buffer.compare(readFileSync(path), Buffer.from(writeGlb(buildAvatar({ detail: lite.detail })))), 0,
+    "assets/avatar-lite.glb is stale: run node scripts/avatar-gen/make-avatar.mjs");
+});
+
+test("the lite model has the same nodes, meshes, materials and targets with at most 40% of the triangles", () => {
+  const lite = readGlb(writeGlb(buildAvatar({ detail: 0.5 })));
+  const shape = (g) => ({
+    nodes: g.json.nodes.map((n) => n.name),
+    meshes: g.json.meshes.map((m) => [m.name, m.primitives.length, m.extras?.targetNames ?? []]),
+    materials: g.json.materials.map((m) => m.name),
+  });
+  assert.deepEqual(shape(lite), shape(glb));
+  const triangles = (g) => g.json.meshes.flatMap((m) => m.primitives).reduce((n, p) => n + g.json.accessors[p.indices].count / 3, 0);
+  assert.ok(triangles(lite) <= 0.4 * triangles(glb), `${triangles(lite)} of ${triangles(glb)} triangles`);
+  // The features sit where they do on the full model: the eyes (placed on the fine skull) have not moved.
+  const eyes = (g) => g.json.nodes.filter((n) => n.name.startsWith("Eye")).map((n) => n.translation);
+  assert.deepEqual(eyes(lite), eyes(glb));
 });
 
 test("the model is a glTF 2.0 binary with the nodes the page drives", () => {

@@ -1,4 +1,4 @@
-//! The 3D avatar: the generated head (assets/avatar.glb) rendered with three.js, driven like the 2D face.
+//! The 3D avatar: the generated head (assets/avatar.glb, or avatar-lite.glb on software WebGL) rendered with three.js, driven like the 2D face.
 //
 // Same commands and debug fields as avatar.js (blink, lookAt, setMood, scheduleVisemes, stopSpeech,
 // debugState), and the same controllers (blink.js, gaze.js, moods.js), so both renderers behave alike and the
@@ -22,14 +22,22 @@ const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
 const FRAME_LOG = 1200; // frames whose cost the debug hook keeps, as avatar.js does
 const MIN_PIXEL_RATIO = 0.45; // below this the head turns visibly blurry; slower machines get fewer frames
 const VIEW_HEIGHT_M = 0.36; // what the stage shows of the avatar: hair to upper chest, like the 2D face
+/** The generated models (scripts/avatar-gen): the lite one has a third of the triangles, for software WebGL. */
+const MODEL_URL = "assets/avatar.glb";
+const LITE_MODEL_URL = "assets/avatar-lite.glb";
 
 export class Avatar3D {
-  /** Loads the model from `url`; rejects when WebGL or the model is unavailable (the caller falls back to 2D). */
-  static async create(canvas, audioClock, url = "assets/avatar.glb", { syncFrames = false, quality = {} } = {}) {
-    // Software WebGL (SwiftShader, llvmpipe: no GPU) shades every pixel on the CPU: there the head uses Lambert
-    // materials without multisampling, and drops its resolution when frames come late (see `adapt`), so it
-    // stays smooth; a GPU gets physically based materials and antialiasing.
+  /**
+   * Loads the model from `url` (by default the one for this WebGL: see below); rejects when WebGL or the model is
+   * unavailable (the caller falls back to 2D).
+   */
+  static async create(canvas, audioClock, url = null, { syncFrames = false, quality = {} } = {}) {
+    // Software WebGL (SwiftShader, llvmpipe: no GPU) does all the work on the CPU, about 0.5 us per triangle and
+    // more per shaded pixel: there the head is the lite model, with Lambert materials and without multisampling,
+    // and drops its resolution when frames come late (see `adapt`), so it stays smooth; a GPU gets the full
+    // model, physically based materials and antialiasing.
     const software = quality.software ?? softwareWebgl();
+    url ??= quality.model ?? (software ? LITE_MODEL_URL : MODEL_URL);
     const antialias = quality.antialias ?? !software;
     const material = quality.material ?? (software ? "lambert" : "standard");
     const renderer = new THREE.WebGLRenderer({ canvas, antialias, alpha: true, powerPreference: "low-power" });
@@ -44,18 +52,20 @@ export class Avatar3D {
       });
     }
     const avatar = new Avatar3D(canvas, audioClock, renderer, gltf, syncFrames);
-    avatar.quality = { software, antialias, material, pixelRatio: renderer.getPixelRatio(), adaptive: quality.adaptive ?? true };
+    avatar.quality = { software, model: url, antialias, material, pixelRatio: renderer.getPixelRatio(), adaptive: quality.adaptive ?? true };
     if (quality.pixelRatio) avatar.setPixelRatio(quality.pixelRatio);
     return avatar;
   }
 
   /**
-   * `syncFrames` waits for the GPU at the end of each frame (gl.finish), so that a frame's measured cost includes
-   * the drawing itself and not only the commands' submission: for the benchmark, which compares it with the 2D
-   * face, whose software canvas draws synchronously.
+   * `syncFrames` waits for the drawing at the end of each frame with a one-pixel read of the canvas, so that a
+   * frame's measured cost includes the drawing itself and not only the commands' submission: for the benchmark,
+   * which compares it with the 2D face, synchronised the same way. `gl.finish` is not enough: in Chromium it
+   * returns before SwiftShader has drawn (a frame that takes 19 ms to read back "finishes" in 1 ms).
    */
   constructor(canvas, audioClock, renderer, gltf, syncFrames = false) {
     this.syncFrames = syncFrames;
+    this.syncPixel = new Uint8Array(4);
     this.frameMs = [];
     this.canvas = canvas;
     this.audioClock = audioClock;
@@ -220,7 +230,10 @@ export class Avatar3D {
     this.step(now, dt);
     if (this.size.w > 0) {
       this.renderer.render(this.scene, this.camera);
-      if (this.syncFrames) this.renderer.getContext().finish();
+      if (this.syncFrames) {
+        const gl = this.renderer.getContext();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, this.syncPixel);
+      }
     }
     const ms = performance.now() - t0;
     this.drawMs = this.drawMs === undefined ? ms : this.drawMs * 0.95 + ms * 0.05;
@@ -320,7 +333,8 @@ export class Avatar3D {
       trace: this.trace.slice(),
       blinkLog: this.blinkLog.map((b) => b.slice()),
       schedule: this.schedule.slice(),
-      quality: { ...this.quality },
+      // Triangles drawn by the last frame: what software WebGL's per-frame cost mostly follows (bench_avatar).
+      quality: { ...this.quality, triangles: this.renderer.info.render.triangles },
     };
   }
 }

@@ -10,8 +10,8 @@ import { Avatar } from "./avatar.js";
 /**
  * The renderer a page gets without `?avatar=`. The 2D face stays the default: side by side (tests/avatar3d.rs's
  * screenshots) the generated 3D head does not yet look as good (puffy lower lids, a harder, less finished face),
- * and on software WebGL it draws ~20 fps where the 2D face draws 60 (bench_avatar), short of the 30 fps a
- * GPU-less machine must keep.
+ * and on software WebGL, even with its lite model, a frame costs ~20-27 ms of CPU where the 2D face's costs ~4 ms
+ * (bench_avatar, docs/bench-avatar.md).
  */
 export const DEFAULT_RENDERER = "2d";
 
@@ -38,7 +38,7 @@ export async function createAvatar(canvas, audioClock, wanted = DEFAULT_RENDERER
     } else {
       try {
         const { Avatar3D } = await import("./avatar3d.js");
-        const avatar = await Avatar3D.create(canvas, audioClock, "assets/avatar.glb", { syncFrames, quality });
+        const avatar = await Avatar3D.create(canvas, audioClock, null, { syncFrames, quality });
         return { avatar, renderer: "3d", canvas };
       } catch (err) {
         console.warn(`avatar: the 3D head could not start (${err?.message ?? err}), showing the 2D face`);
