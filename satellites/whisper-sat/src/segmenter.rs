@@ -73,7 +73,7 @@ impl Default for SegmenterConfig {
             onset_voiced_ms: 80,
             min_voiced_ms: 200,
             max_utterance_ms: 25_000,
-            post_roll_ms: 50,
+            post_roll_ms: 30,
             energy_floor_dbfs: -50.0,
             tonal_flatness: 0.3,
             min_tonal_ms: 100,
