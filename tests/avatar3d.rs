@@ -517,8 +517,7 @@ async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> 
 
 /// What the 3D page drew last: its model, whether it took its WebGL for software, and its triangles.
 async fn drawn(s: &Stage) -> anyhow::Result<(String, Option<bool>, u64)> {
-    let text = s.eval("JSON.stringify(agentDebug.avatarQuality)").await?;
-    let q: Value = serde_json::from_str(text.as_str().context("avatarQuality")?)?;
+    let q = s.eval("agentDebug.avatarQuality").await?;
     Ok((
         q["model"].as_str().unwrap_or_default().to_owned(),
         q["software"].as_bool(),

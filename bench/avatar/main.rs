@@ -232,16 +232,10 @@ async fn measure(
     let intervals: Vec<f64> =
         serde_json::from_value(browser.eval(&tab, "window.__intervals").await?)?;
     let window_end: f64 = serde_json::from_value(browser.eval(&tab, "performance.now()").await?)?;
-    let pixel_ratio = browser
-        .eval(&tab, "agentDebug.avatarQuality?.pixelRatio ?? 1")
-        .await?
-        .as_f64()
-        .unwrap_or(1.0);
-    let triangles = browser
-        .eval(&tab, "agentDebug.avatarQuality?.triangles ?? 0")
-        .await?
-        .as_u64()
-        .unwrap_or(0);
+    // The 2D face has no quality settings: resolution scale 1, no triangles.
+    let quality = browser.eval(&tab, "agentDebug.avatarQuality ?? {}").await?;
+    let pixel_ratio = quality["pixelRatio"].as_f64().unwrap_or(1.0);
+    let triangles = quality["triangles"].as_u64().unwrap_or(0);
     browser.close(&tab).await?;
     let costs: Vec<f64> = log
         .iter()

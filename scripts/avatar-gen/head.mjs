@@ -276,7 +276,6 @@ function mouthTarget(name, p, info) {
 const outward = (center) => (p) => sub(p, center);
 const towardViewer = () => /** @type {V3} */ ([0, 0, 1]);
 
-/** The skull as a grid before the eye sockets and the mouth are pressed in (for placing features on it). */
 /**
  * Grid cells at a level of detail: `n` at full detail (1), proportionally fewer below it, for the lighter model
  * that software WebGL draws (its frame cost follows the triangles). Counts stay even, so grids symmetric about
@@ -287,6 +286,7 @@ function cells(n, detail) {
   return Math.max(4, 2 * Math.round((n * detail) / 2));
 }
 
+/** The skull as a grid before the eye sockets and the mouth are pressed in (for placing features on it). */
 function skullPart(nu, nv) {
   const part = new Part("skull", outward(C));
   part.grid(nu, nv, (s, t) => ({ p: skull((s - 0.5) * 2 * Math.PI, t * Math.PI), c: SKIN }), true);
@@ -780,7 +780,6 @@ function primitive(part, material, names, displace, withNormals = true) {
   };
 }
 
-/** Builds the whole avatar as a glTF document for `writeGlb`. */
 /**
  * The models the page loads (assets/), by file name, with the detail each is built at: the full model for WebGL
  * on a GPU, and the lite one for software WebGL (SwiftShader, llvmpipe), where a frame costs about 0.5 us of CPU
@@ -792,9 +791,9 @@ export const MODELS = [
 ];
 
 /**
- * The avatar's glTF design. `detail` scales the rendered grids (1: the full model; the page's software-WebGL
- * model, avatar-lite.glb, is 0.5); the skull that places the features stays fine at every detail, so the face is
- * laid out the same.
+ * Builds the whole avatar as a glTF document for `writeGlb`. `detail` scales the rendered grids (1: the full
+ * model; the page's software-WebGL model, avatar-lite.glb, is 0.5); the skull that places the features stays fine
+ * at every detail, so the face is laid out the same.
  */
 export function buildAvatar({ detail = 1 } = {}) {
   const base = skullPart(136, 104); // fine, for placing features on the skull (not rendered)

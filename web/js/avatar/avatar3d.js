@@ -37,7 +37,7 @@ export class Avatar3D {
     // and drops its resolution when frames come late (see `adapt`), so it stays smooth; a GPU gets the full
     // model, physically based materials and antialiasing.
     const software = quality.software ?? softwareWebgl();
-    url ??= quality.model ?? (software ? LITE_MODEL_URL : MODEL_URL);
+    url ??= software ? LITE_MODEL_URL : MODEL_URL;
     const antialias = quality.antialias ?? !software;
     const material = quality.material ?? (software ? "lambert" : "standard");
     const renderer = new THREE.WebGLRenderer({ canvas, antialias, alpha: true, powerPreference: "low-power" });
