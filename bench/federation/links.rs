@@ -155,37 +155,47 @@ impl Hubs {
         })
     }
 
-    /// JPEGs published as fast as hub A takes them; messages per second delivered on B.
+    /// JPEGs published as fast as hub A takes them; messages per second delivered on B, with the producer and the
+    /// reader satellites of each hub (TCP clients in this process).
     pub async fn throughput(&self, jpeg: &[u8], length: Duration) -> anyhow::Result<f64> {
         let producer = self.a.client("bench-burst").await?;
-        let p = producer.publisher("Bench.burst", "{}").await?;
         let remote = self.b.client("bench-burst-reader").await?;
-        until_channel(&remote, "Bench.burst").await?;
-        let sub = remote.subscribe("Bench.burst").await?;
-        until_subscribed(&p).await?;
-        warm_up(&p, &sub).await?;
-        while sub.try_recv().is_some() {}
-        let count = Arc::new(AtomicU64::new(0));
-        let counting = {
-            let count = count.clone();
-            tokio::spawn(async move {
-                while let Ok(Some(_)) =
-                    tokio::time::timeout(Duration::from_secs(1), sub.recv()).await
-                {
-                    count.fetch_add(1, Ordering::Relaxed);
-                }
-            })
-        };
-        let payload = Bytes::copy_from_slice(jpeg);
-        let start = Instant::now();
-        while start.elapsed() < length {
-            p.publish(payload.clone()).await?;
-        }
-        let at_end = count.load(Ordering::Relaxed);
-        let elapsed = start.elapsed().as_secs_f64();
-        counting.abort();
-        Ok(at_end as f64 / elapsed)
+        burst_rate(&producer, &remote, jpeg, length).await
     }
+}
+
+/// The JPEG published on `producer`'s hub as fast as it takes them, for `length`: messages per second that
+/// `reader`, a client of the other hub, receives through the federation.
+pub async fn burst_rate(
+    producer: &flow::Client,
+    reader: &flow::Client,
+    jpeg: &[u8],
+    length: Duration,
+) -> anyhow::Result<f64> {
+    let p = producer.publisher("Bench.burst", "{}").await?;
+    until_channel(reader, "Bench.burst").await?;
+    let sub = reader.subscribe("Bench.burst").await?;
+    until_subscribed(&p).await?;
+    warm_up(&p, &sub).await?;
+    while sub.try_recv().is_some() {}
+    let count = Arc::new(AtomicU64::new(0));
+    let counting = {
+        let count = count.clone();
+        tokio::spawn(async move {
+            while let Ok(Some(_)) = tokio::time::timeout(Duration::from_secs(1), sub.recv()).await {
+                count.fetch_add(1, Ordering::Relaxed);
+            }
+        })
+    };
+    let payload = Bytes::copy_from_slice(jpeg);
+    let start = Instant::now();
+    while start.elapsed() < length {
+        p.publish(payload.clone()).await?;
+    }
+    let at_end = count.load(Ordering::Relaxed);
+    let elapsed = start.elapsed().as_secs_f64();
+    counting.abort();
+    Ok(at_end as f64 / elapsed)
 }
 
 async fn until_channel(client: &flow::Client, name: &str) -> anyhow::Result<()> {
