@@ -6,9 +6,10 @@
 //!   rates, the engine's own floor. Target: added p99 <= 1 ms.
 //! - Throughput: the JPEG published as fast as the producer can, delivered per second on hub B; against the plain
 //!   Zenoh pair flat out and raw TCP (length-prefixed frames over a loopback socket). Target: >= 0.8x the Zenoh pair.
-//!   Measured twice: with the producer and the reader as TCP satellites of two `flow-hub` processes (four
-//!   processes' work on the cores), and with both hubs and their producer and reader modules in this process, as
-//!   the Zenoh pair's two sessions are (`in_process.rs`): the federation against the engine alone.
+//!   Measured with the producer and the reader as TCP satellites of two `flow-hub` processes (four processes' work
+//!   on the cores), and with both hubs and their producer and reader modules in this process, as the Zenoh pair's
+//!   two sessions are, each hub on a runtime of its own (`in_process.rs`): the federation against the engine
+//!   alone, with one worker per core as `flow-hub` runs and with one worker per hub.
 //!
 //! Options: `--seconds N` (per latency phase, default 20), `--burst-seconds N` (per throughput phase, default 5),
 //! `--write PATH` (the Markdown report). Needs release builds of `flow-hub` (`AGENT_BIN_DIR`, as `make bench` sets
@@ -56,7 +57,9 @@ async fn main() -> anyhow::Result<()> {
         .await?;
     let zen = links::zenoh_latency(&jpeg, &pcm, Duration::from_secs(seconds)).await?;
     let hub_rate = hubs.throughput(&jpeg, Duration::from_secs(burst)).await?;
-    let link_rate = in_process::throughput(&jpeg, Duration::from_secs(burst)).await?;
+    let link_rate = in_process::throughput(&jpeg, Duration::from_secs(burst), None).await?;
+    let one_thread_rate =
+        in_process::throughput(&jpeg, Duration::from_secs(burst), Some(1)).await?;
     let zenoh_rate = links::zenoh_throughput(&jpeg, Duration::from_secs(burst)).await?;
     let tcp_rate = links::tcp_throughput(&jpeg, Duration::from_secs(burst)).await?;
 
@@ -95,15 +98,16 @@ async fn main() -> anyhow::Result<()> {
         hub_rate / tcp_rate,
     ));
     lines.push(format!(
-        "SUMMARY federation throughput jpeg, the federation alone (both hubs and their in-server producer and reader \
-         in one process, as the Zenoh pair's sessions are): {:.0} msg/s ({:.1} MB/s); plain Zenoh pair {:.0} msg/s \
-         (ratio {:.2}, target >= 0.8); with satellites over TCP on both sides {:.0} msg/s (ratio {:.2})",
+        "SUMMARY federation throughput jpeg, the federation alone (both hubs in this process, each on a runtime of \
+         its own as in its own process, with an in-server producer and reader): {:.0} msg/s ({:.1} MB/s); plain \
+         Zenoh pair {:.0} msg/s (ratio {:.2}, target >= 0.8); with one worker thread per hub {:.0} msg/s (ratio \
+         {:.2})",
         link_rate,
         link_rate * jpeg.len() as f64 / 1e6,
         zenoh_rate,
         link_rate / zenoh_rate,
-        hub_rate,
-        hub_rate / link_rate,
+        one_thread_rate,
+        one_thread_rate / zenoh_rate,
     ));
     for l in &lines {
         println!("{l}");
@@ -118,10 +122,12 @@ async fn main() -> anyhow::Result<()> {
              that of a subscriber on hub A in the same run: what the federation adds to a local delivery.\n- \
              Throughput counts messages delivered on hub B per second while the producer publishes as fast as its \
              hub takes them; the federation drops (drop-oldest, counted) what the network cannot carry.\n- \
-             The second throughput line runs both hubs inside the benchmark's process with the producer and the \
-             reader as in-server modules (in-process links), as the plain Zenoh pair runs both its sessions in one \
-             process: it compares the federation with the engine alone. The first line adds the satellites' TCP \
-             hops into hub A and out of hub B, and the work of four processes on the same two cores.\n",
+             The second throughput line runs both hubs inside the benchmark's process, each on a tokio runtime of \
+             its own (as in its own process; by default one worker per core, as `flow-hub` has), with the producer \
+             and the reader as in-server modules (in-process links), as the plain Zenoh pair runs both its sessions \
+             in one process: it compares the federation with the engine alone. It is measured again with one \
+             worker thread per hub. The first line adds the satellites' TCP hops into hub A and out of hub B, and \
+             the work of four processes on the same two cores.\n",
             lines.join("\n")
         );
         std::fs::write(&path, doc).with_context(|| format!("writing {}", path.display()))?;

@@ -62,6 +62,17 @@ pub struct FrameReader<R> {
     max_frame: usize,
 }
 
+/// A frame is a view into the read buffer. A small body would keep that whole buffer (64 kB or more) alive for as
+/// long as it waits in subscribers' lanes, so 64 queued 882-byte audio chunks could pin megabytes; it gets its own
+/// copy, which costs next to nothing at that size. Large payloads stay views: they are most of their buffer anyway,
+/// and fan-out shares them uncopied. A tail is a buffer of its own and stays as it is.
+fn own_small_body(mut frame: RawFrame) -> RawFrame {
+    if frame.body.len() < ZERO_COPY_MIN {
+        frame.body = Bytes::copy_from_slice(&frame.body);
+    }
+    frame
+}
+
 impl<R: TransportRead> FrameReader<R> {
     pub fn new(io: R, max_frame: usize) -> Self {
         FrameReader {
@@ -91,6 +102,14 @@ impl<R: TransportRead> FrameReader<R> {
             if let Some(frame) = self.parse_buffered()? {
                 return Ok(Some(frame));
             }
+            // The rest of a begun frame may wait in the transport as one shared buffer (a payload handed over an
+            // in-process link): it becomes the frame's tail as it is, instead of being copied in behind the header.
+            if let Some(need) = self.rest_of_begun_frame()?
+                && let Some(tail) = self.io.take_exact(need).await?
+            {
+                let frame = frame::parse_with_tail(&mut self.buf, tail);
+                return Ok(Some(own_small_body(frame)));
+            }
             if self.io.read_into(&mut self.buf).await? == 0 {
                 return if self.buf.is_empty() {
                     Ok(None)
@@ -101,22 +120,21 @@ impl<R: TransportRead> FrameReader<R> {
         }
     }
 
+    /// How many bytes the frame begun in the buffer still needs, once its header is all there; `None` otherwise.
+    fn rest_of_begun_frame(&self) -> Result<Option<usize>, FrameError> {
+        if self.buf.len() < frame::HEADER_LEN {
+            return Ok(None);
+        }
+        Ok(match frame::check(&self.buf, self.max_frame)? {
+            Check::Incomplete(total) => Some(total - self.buf.len()),
+            Check::Complete(_) => None,
+        })
+    }
+
     /// A frame already in the buffer, if any; never waits.
     pub fn parse_buffered(&mut self) -> Result<Option<RawFrame>, FrameError> {
         match frame::check(&self.buf, self.max_frame)? {
-            Check::Complete(total) => {
-                let mut frame = frame::parse(&mut self.buf, total);
-                // A frame is a view into the read buffer. A small one would keep
-                // that whole buffer (64 kB or more) alive for as long as it waits
-                // in subscribers' lanes, so 64 queued 882-byte audio chunks could
-                // pin megabytes; it gets its own copy, which costs next to nothing
-                // at that size. Large payloads stay views: they are most of
-                // their buffer anyway, and fan-out shares them uncopied.
-                if frame.body.len() < ZERO_COPY_MIN {
-                    frame.body = Bytes::copy_from_slice(&frame.body);
-                }
-                Ok(Some(frame))
-            }
+            Check::Complete(total) => Ok(Some(own_small_body(frame::parse(&mut self.buf, total)))),
             Check::Incomplete(total) => {
                 // Make room only when the rest of the frame does not fit:
                 // every move copies the partial frame, and a large one would
@@ -318,14 +336,20 @@ mod tests {
     use crate::protocol::Event;
     use crate::transport::Transport;
     use crate::transport::memory;
+    use crate::transport::stream::{StreamReader, StreamWriter};
+    use tokio::io::DuplexStream;
+
+    /// A byte stream, as a socket is: the writer's end and the reader's.
+    fn byte_pipe() -> (StreamWriter<DuplexStream>, StreamReader<DuplexStream>) {
+        let (a, b) = tokio::io::duplex(4 * 1024 * 1024);
+        (StreamWriter(a), StreamReader(b))
+    }
 
     /// A small frame owns its bytes, so it does not keep the read buffer alive;
     /// a large one is a view into that buffer.
     #[tokio::test]
     async fn small_frames_do_not_pin_the_read_buffer() {
-        let (a, b) = memory::pair("reader-test");
-        let (_, w) = a.split();
-        let (r, _) = b.split();
+        let (w, r) = byte_pipe();
         let mut writer = FrameWriter::new(w);
         for len in [882usize, 100_000] {
             writer.queue_event(&Event::Data {
@@ -352,9 +376,7 @@ mod tests {
     #[tokio::test]
     async fn read_buffers_are_reused_once_their_frames_are_gone() {
         async fn read_all(keep: bool) -> u64 {
-            let (a, b) = memory::pair("reuse-test");
-            let (_, w) = a.split();
-            let (r, _) = b.split();
+            let (w, r) = byte_pipe();
             let mut writer = FrameWriter::new(w);
             let mut reader = FrameReader::new(r, 1 << 20);
             let mut kept = Vec::new();
@@ -388,6 +410,50 @@ mod tests {
             pinned >= 10,
             "only {pinned} buffers for 60 kept 52 kB frames"
         );
+    }
+
+    /// Over an in-process link a large payload arrives as the frame's tail, the very buffer the writer queued, and
+    /// decodes to it; a small one is copied with its header as over a socket.
+    #[tokio::test]
+    async fn an_in_process_link_hands_a_large_payload_over_uncopied() {
+        let (a, b) = memory::pair("tail-test");
+        let (_, w) = a.split();
+        let (r, _) = b.split();
+        let mut writer = FrameWriter::new(w);
+        let large = Bytes::from(vec![5u8; 100_000]);
+        for (seq, payload) in [
+            (1, Bytes::from(vec![7u8; 882])),
+            (2, large.clone()),
+            (3, Bytes::from_static(b"end")),
+        ] {
+            writer.queue_event(&Event::Data {
+                chan: 1,
+                seq,
+                ts_us: 0,
+                payload,
+            });
+        }
+        writer.flush().await.expect("flush");
+        let mut reader = FrameReader::new(r, 1 << 20);
+        let mut got = Vec::new();
+        for _ in 0..3 {
+            let frame = reader.read_frame().await.expect("read").expect("frame");
+            let tail = frame.tail.len();
+            let Event::Data { seq, payload, .. } =
+                crate::protocol::decode_event(frame).expect("decode")
+            else {
+                panic!("not data");
+            };
+            got.push((seq, tail, payload));
+        }
+        assert_eq!((got[0].0, got[0].1, got[0].2.len()), (1, 0, 882));
+        assert_eq!((got[1].0, got[1].1), (2, 100_000));
+        assert_eq!(
+            got[1].2.as_ptr(),
+            large.as_ptr(),
+            "the large payload was copied"
+        );
+        assert_eq!((got[2].0, got[2].1, &got[2].2[..]), (3, 0, &b"end"[..]));
     }
 
     /// Small and large payloads, mixed with other events, arrive byte-identical

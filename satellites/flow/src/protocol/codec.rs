@@ -335,7 +335,7 @@ fn kind_code(kind: ChannelKind) -> u8 {
 
 /// Decodes a client frame into a command.
 pub fn decode_command(frame: RawFrame) -> Result<Envelope, DecodeError> {
-    let mut r = BodyReader(frame.body);
+    let mut r = BodyReader::new(frame.body, frame.tail);
     let command = match frame.op {
         op::LOGIN => Command::Login {
             version: r.u16("version")?,
@@ -409,7 +409,7 @@ pub fn decode_command(frame: RawFrame) -> Result<Envelope, DecodeError> {
 
 /// Decodes a hub frame into an event.
 pub fn decode_event(frame: RawFrame) -> Result<Event, DecodeError> {
-    let mut r = BodyReader(frame.body);
+    let mut r = BodyReader::new(frame.body, frame.tail);
     let event = match frame.op {
         op::REPLY => Event::Reply {
             req: frame.req,
@@ -451,11 +451,26 @@ pub fn decode_event(frame: RawFrame) -> Result<Event, DecodeError> {
 }
 
 /// Reads primitives off a frame body, failing cleanly on truncation.
-struct BodyReader(Bytes);
+///
+/// The body may come in two parts (`RawFrame::tail`): the fields are read from the first, and the payload at the
+/// end of a message is the tail itself when the first part ends where the payload begins, which is how an
+/// in-process link delivers a shared payload. Any other split is joined (copied) before a field reads across it.
+struct BodyReader {
+    head: Bytes,
+    tail: Bytes,
+}
 
 impl BodyReader {
-    fn need(&self, n: usize, what: &'static str) -> Result<(), DecodeError> {
-        if self.0.remaining() < n {
+    fn new(head: Bytes, tail: Bytes) -> Self {
+        BodyReader { head, tail }
+    }
+    fn need(&mut self, n: usize, what: &'static str) -> Result<(), DecodeError> {
+        if self.head.remaining() < n && !self.tail.is_empty() {
+            let joined = [&self.head[..], &self.tail[..]].concat();
+            self.head = Bytes::from(joined);
+            self.tail = Bytes::new();
+        }
+        if self.head.remaining() < n {
             Err(DecodeError::Truncated(what))
         } else {
             Ok(())
@@ -463,27 +478,27 @@ impl BodyReader {
     }
     fn u8(&mut self, what: &'static str) -> Result<u8, DecodeError> {
         self.need(1, what)?;
-        Ok(self.0.get_u8())
+        Ok(self.head.get_u8())
     }
     fn u16(&mut self, what: &'static str) -> Result<u16, DecodeError> {
         self.need(2, what)?;
-        Ok(self.0.get_u16_le())
+        Ok(self.head.get_u16_le())
     }
     fn u32(&mut self, what: &'static str) -> Result<u32, DecodeError> {
         self.need(4, what)?;
-        Ok(self.0.get_u32_le())
+        Ok(self.head.get_u32_le())
     }
     fn u64(&mut self, what: &'static str) -> Result<u64, DecodeError> {
         self.need(8, what)?;
-        Ok(self.0.get_u64_le())
+        Ok(self.head.get_u64_le())
     }
     fn f32(&mut self, what: &'static str) -> Result<f32, DecodeError> {
         self.need(4, what)?;
-        Ok(self.0.get_f32_le())
+        Ok(self.head.get_f32_le())
     }
     fn chan_id(&mut self) -> Result<ChanId, DecodeError> {
         self.need(2, "channel id")?;
-        let id = self.0.get_i16_le();
+        let id = self.head.get_i16_le();
         if id < 0 {
             return Err(DecodeError::BadValue {
                 field: "channel id",
@@ -494,7 +509,7 @@ impl BodyReader {
     }
     fn utf8(&mut self, len: usize, what: &'static str) -> Result<String, DecodeError> {
         self.need(len, what)?;
-        let raw = self.0.split_to(len);
+        let raw = self.head.split_to(len);
         String::from_utf8(raw.to_vec()).map_err(|_| DecodeError::Utf8(what))
     }
     fn str(&mut self, what: &'static str) -> Result<String, DecodeError> {
@@ -506,10 +521,16 @@ impl BodyReader {
         self.utf8(len, what)
     }
     fn rest(&mut self) -> Bytes {
-        std::mem::take(&mut self.0)
+        let head = std::mem::take(&mut self.head);
+        let tail = std::mem::take(&mut self.tail);
+        match (head.is_empty(), tail.is_empty()) {
+            (_, true) => head,
+            (true, false) => tail,
+            (false, false) => Bytes::from([&head[..], &tail[..]].concat()),
+        }
     }
     fn end(&self) -> Result<(), DecodeError> {
-        match self.0.remaining() {
+        match self.head.remaining() + self.tail.len() {
             0 => Ok(()),
             n => Err(DecodeError::Trailing(n)),
         }
@@ -566,7 +587,8 @@ impl BodyReader {
                 let count = self.u16("channel count")?;
                 // Each entry takes well over 2 bytes, so the body bounds the count
                 // and a lying count fails as truncation, not as a huge allocation.
-                let mut list = Vec::with_capacity((count as usize).min(self.0.remaining() / 8));
+                let left = self.head.remaining() + self.tail.len();
+                let mut list = Vec::with_capacity((count as usize).min(left / 8));
                 for _ in 0..count {
                     list.push(self.channel()?);
                 }
@@ -575,7 +597,7 @@ impl BodyReader {
             4 => Reply::Value(self.text("value")?),
             5 => {
                 let count = self.u32("name count")?;
-                let mut names = Vec::with_capacity((count as usize).min(self.0.remaining() / 2));
+                let mut names = Vec::with_capacity((count as usize).min(self.head.remaining() / 2));
                 for _ in 0..count {
                     names.push(self.str("name")?);
                 }

@@ -37,11 +37,16 @@ pub enum Check {
 }
 
 /// A frame cut out of the stream: the opcode, the request id and the body.
+///
+/// The body is `body` followed by `tail`. `tail` is empty except where the end of the frame arrived as a shared
+/// buffer of its own (a payload handed over an in-process link, [`parse_with_tail`]): it is kept apart instead of
+/// being copied behind the rest.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RawFrame {
     pub op: u8,
     pub req: u32,
     pub body: Bytes,
+    pub tail: Bytes,
 }
 
 /// Looks at the front of `buf` and says whether a whole frame is there.
@@ -83,7 +88,19 @@ pub fn parse(buf: &mut BytesMut, total: usize) -> RawFrame {
         op,
         req,
         body: frame.freeze(),
+        tail: Bytes::new(),
     }
+}
+
+/// Splits off the frame whose first bytes are all of `buf` and whose remaining bytes are `tail`.
+///
+/// For a frame `check` found incomplete with at least [`HEADER_LEN`] bytes in `buf` and `tail` exactly the bytes it
+/// still needs; the caller makes sure of both.
+pub fn parse_with_tail(buf: &mut BytesMut, tail: Bytes) -> RawFrame {
+    let held = buf.len();
+    let mut frame = parse(buf, held);
+    frame.tail = tail;
+    frame
 }
 
 /// Writes a frame header for a body of `body_len` bytes.
@@ -115,9 +132,23 @@ mod tests {
             RawFrame {
                 op: 3,
                 req: 9,
-                body: Bytes::from_static(&[1, 2])
+                body: Bytes::from_static(&[1, 2]),
+                tail: Bytes::new(),
             }
         );
+        assert!(frame.is_empty());
+    }
+
+    #[test]
+    fn a_frame_whose_end_came_apart_keeps_it_as_its_tail() {
+        let mut frame = BytesMut::new();
+        put_header(&mut frame, 3, 9, 5);
+        frame.extend_from_slice(&[1, 2]);
+        assert_eq!(check(&frame, 100), Ok(Check::Incomplete(14)));
+        let raw = parse_with_tail(&mut frame, Bytes::from_static(&[3, 4, 5]));
+        assert_eq!((raw.op, raw.req), (3, 9));
+        assert_eq!(&raw.body[..], &[1, 2]);
+        assert_eq!(&raw.tail[..], &[3, 4, 5]);
         assert!(frame.is_empty());
     }
 

@@ -2,10 +2,12 @@
 //! protocol and SDK as satellites without a payload being copied into the pipe on its way.
 //!
 //! The writer hands over the chunks a flush is made of (frame headers and payloads, reference-counted `Bytes`) as
-//! they are; the reader copies them into its read buffer, as a socket read would, and that is the one copy a
-//! message makes on an in-process hop. A byte pipe (`tokio::io::duplex`) copied every payload twice: into the pipe
-//! and out of it.
+//! they are, all of a flush as one batch, so the reader is woken once per flush as by a socket. The reader copies
+//! headers into its read buffer, as a socket read would, and gives a payload chunk to the frame reader as it is
+//! (`take_exact`), so a large payload crosses without a copy. A byte pipe (`tokio::io::duplex`) copied every
+//! payload twice: into the pipe and out of it.
 
+use std::collections::VecDeque;
 use std::io;
 use std::sync::Arc;
 
@@ -21,8 +23,9 @@ const PIPE_BYTES: usize = 4 * 1024 * 1024;
 /// Read size hint when the read buffer is full, as the socket transports use.
 const READ_CHUNK: usize = 64 * 1024;
 
-/// A chunk in flight and its share of the pipe's byte budget, given back once the reader has copied all of it.
-type Chunk = (Bytes, OwnedSemaphorePermit);
+/// The chunks of one flush in flight, and their share of the pipe's byte budget, given back once the reader has
+/// taken all of them.
+type Batch = (VecDeque<Bytes>, OwnedSemaphorePermit);
 
 /// One end of an in-process pipe.
 #[derive(Debug)]
@@ -58,7 +61,7 @@ fn pipe() -> (MemoryReader, MemoryWriter) {
     (
         MemoryReader {
             rx,
-            rest: None,
+            batch: None,
             budget: budget.clone(),
         },
         MemoryWriter {
@@ -84,9 +87,9 @@ impl Transport for MemoryTransport {
 /// Reading half of an in-process pipe.
 #[derive(Debug)]
 pub struct MemoryReader {
-    rx: mpsc::UnboundedReceiver<Chunk>,
-    /// What is left of a chunk the last read had no room for.
-    rest: Option<Chunk>,
+    rx: mpsc::UnboundedReceiver<Batch>,
+    /// What is left of the batch being read (its first chunk possibly in part).
+    batch: Option<Batch>,
     budget: Arc<Semaphore>,
 }
 
@@ -97,37 +100,63 @@ impl Drop for MemoryReader {
     }
 }
 
+impl MemoryReader {
+    /// The chunk to read next, taken off the batch being read or, once that is done, the next batch to arrive;
+    /// `None` once every writer has gone. Cancel-safe: nothing is taken while it waits.
+    async fn next_chunk(&mut self) -> Option<Bytes> {
+        loop {
+            if let Some((chunks, _)) = &mut self.batch {
+                if let Some(chunk) = chunks.pop_front() {
+                    return Some(chunk);
+                }
+                // Done with it: its budget goes back to the writer.
+                self.batch = None;
+            }
+            self.batch = Some(self.rx.recv().await?);
+        }
+    }
+
+    /// Puts back what is left of a chunk, to be read first.
+    fn unread(&mut self, chunk: Bytes) {
+        if let Some((chunks, _)) = &mut self.batch {
+            chunks.push_front(chunk);
+        }
+    }
+}
+
 impl TransportRead for MemoryReader {
-    /// Copies as much as the buffer has room for, as a socket read does: the frame reader reserves room for the
-    /// rest of a frame it has begun, and growing the buffer past that would move the partial frame again. A
-    /// buffer with no room left gets a read chunk's worth.
+    /// Copies one chunk, or as much of it as the buffer has room for, as a socket read does: the frame reader
+    /// reserves room for the rest of a frame it has begun, and growing the buffer past that would move the partial
+    /// frame again. A buffer with no room left gets a read chunk's worth. One chunk per read, so that a payload
+    /// chunk behind a frame header is left for [`TransportRead::take_exact`] rather than copied.
     async fn read_into(&mut self, buf: &mut BytesMut) -> io::Result<usize> {
         if buf.capacity() == buf.len() {
             buf.reserve(READ_CHUNK);
         }
-        let mut copied = 0;
-        loop {
-            let (mut chunk, permit) = match self.rest.take() {
-                Some(rest) => rest,
-                None if copied == 0 => match self.rx.recv().await {
-                    Some(next) => next,
-                    // Every writer has gone: the peer closed.
-                    None => return Ok(0),
-                },
-                None => match self.rx.try_recv() {
-                    Ok(next) => next,
-                    Err(_) => return Ok(copied),
-                },
-            };
-            let room = buf.capacity() - buf.len();
-            let take = chunk.len().min(room);
-            buf.extend_from_slice(&chunk[..take]);
-            chunk.advance(take);
-            copied += take;
-            if !chunk.is_empty() {
-                self.rest = Some((chunk, permit));
-                return Ok(copied);
-            }
+        // Every writer has gone: the peer closed.
+        let Some(mut chunk) = self.next_chunk().await else {
+            return Ok(0);
+        };
+        let room = buf.capacity() - buf.len();
+        let take = chunk.len().min(room);
+        buf.extend_from_slice(&chunk[..take]);
+        chunk.advance(take);
+        if !chunk.is_empty() {
+            self.unread(chunk);
+        }
+        Ok(take)
+    }
+
+    /// The next chunk itself when it is exactly `len` bytes: the payload the writer handed over, uncopied.
+    async fn take_exact(&mut self, len: usize) -> io::Result<Option<Bytes>> {
+        let Some(chunk) = self.next_chunk().await else {
+            return Ok(None);
+        };
+        if chunk.len() == len {
+            Ok(Some(chunk))
+        } else {
+            self.unread(chunk);
+            Ok(None)
         }
     }
 }
@@ -136,17 +165,18 @@ impl TransportRead for MemoryReader {
 #[derive(Debug)]
 pub struct MemoryWriter {
     /// `None` once shut down.
-    tx: Option<mpsc::UnboundedSender<Chunk>>,
+    tx: Option<mpsc::UnboundedSender<Batch>>,
     budget: Arc<Semaphore>,
 }
 
 impl MemoryWriter {
-    /// Sends one chunk once the pipe has room for it.
-    async fn send(&mut self, chunk: Bytes) -> io::Result<()> {
-        if chunk.is_empty() {
+    /// Sends the non-empty chunks as one batch once the pipe has room for them.
+    async fn send(&mut self, chunks: VecDeque<Bytes>) -> io::Result<()> {
+        let bytes: usize = chunks.iter().map(Bytes::len).sum();
+        if bytes == 0 {
             return Ok(());
         }
-        let share = u32::try_from(chunk.len().min(PIPE_BYTES)).unwrap_or(u32::MAX);
+        let share = u32::try_from(bytes.min(PIPE_BYTES)).unwrap_or(u32::MAX);
         let permit = self
             .budget
             .clone()
@@ -154,21 +184,23 @@ impl MemoryWriter {
             .await
             .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))?;
         let tx = self.tx.as_ref().ok_or(io::ErrorKind::BrokenPipe)?;
-        tx.send((chunk, permit))
+        tx.send((chunks, permit))
             .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))
     }
 }
 
 impl TransportWrite for MemoryWriter {
     async fn write_all(&mut self, data: &[u8]) -> io::Result<()> {
-        self.send(Bytes::copy_from_slice(data)).await
+        self.send(VecDeque::from([Bytes::copy_from_slice(data)]))
+            .await
     }
 
-    /// Hands the chunks over as they are: a shared payload crosses without a copy.
+    /// Hands the chunks over as they are: a shared payload crosses without a copy. The chunks are taken (left
+    /// empty) only once the pipe had room for them.
     async fn write_all_chunks(&mut self, chunks: &mut [Bytes]) -> io::Result<()> {
-        for chunk in chunks {
-            self.send(std::mem::take(chunk)).await?;
-        }
+        let batch: VecDeque<Bytes> = chunks.iter().filter(|c| !c.is_empty()).cloned().collect();
+        self.send(batch).await?;
+        chunks.iter_mut().for_each(|c| *c = Bytes::new());
         Ok(())
     }
 

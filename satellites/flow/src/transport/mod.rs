@@ -103,6 +103,13 @@ impl TransportRead for LinkReader {
             LinkReader::Memory(r) => r.read_into(buf).await,
         }
     }
+
+    async fn take_exact(&mut self, len: usize) -> io::Result<Option<Bytes>> {
+        match self {
+            LinkReader::Memory(r) => r.take_exact(len).await,
+            _ => Ok(None),
+        }
+    }
 }
 
 impl TransportWrite for LinkWriter {

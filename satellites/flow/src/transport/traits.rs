@@ -27,6 +27,13 @@ pub trait Transport: Send + 'static {
 pub trait TransportRead: Send + 'static {
     /// Appends the next received bytes to `buf`; `Ok(0)` means the peer closed.
     fn read_into(&mut self, buf: &mut BytesMut) -> impl Future<Output = io::Result<usize>> + Send;
+    /// The next `len` bytes as one shared buffer, when the transport received them so (an in-process link whose
+    /// writer handed a payload over); `None` otherwise, with nothing consumed, and the bytes are then read with
+    /// [`TransportRead::read_into`]. Byte streams never hold such buffers: the default is `None` at once.
+    fn take_exact(&mut self, len: usize) -> impl Future<Output = io::Result<Option<Bytes>>> + Send {
+        let _ = len;
+        async { Ok(None) }
+    }
 }
 
 /// The sending half.
