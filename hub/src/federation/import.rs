@@ -280,7 +280,7 @@ async fn import_stream(
                         g.note(stamp.seq);
                         link.counters.lost_between_hubs.inc_by(g.lost - before);
                     }
-                    let payload = Bytes::from(sample.payload().to_bytes().into_owned());
+                    let payload = super::payload::received(sample.payload());
                     if queue.push(payload) {
                         link.counters.dropped_here.inc();
                     }

@@ -11,6 +11,7 @@ mod export;
 mod import;
 pub mod keys;
 mod link;
+mod payload;
 mod remote_error;
 pub mod settings;
 pub mod stamp;
