@@ -32,14 +32,10 @@ impl Module for Handoff {
 
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
-            let mut stop = ctx.shutdown;
+            let mut ctx = ctx;
             // The benchmark may have gone already; then there is nobody to use the client.
-            let _ = self.client.send(ctx.client);
-            while !*stop.borrow() {
-                if stop.changed().await.is_err() {
-                    break;
-                }
-            }
+            let _ = self.client.send(ctx.client.clone());
+            ctx.stopped().await;
             Ok(())
         })
     }

@@ -85,25 +85,23 @@ fn event_bytes(event: &Event) -> BytesMut {
 /// Decoding normalises (e.g. lossy error text, admin flags to 0/1); after one
 /// encode the bytes must be a fixed point of decode-then-encode.
 fn command_is_stable(env: &Envelope) {
-    let mut once = BytesMut::new();
-    encode_command(env, &mut once);
+    let once = command_bytes(env);
     let again = reframe(&once, |raw| {
         decode_command(raw).unwrap_or_else(|e| panic!("re-encoded command fails: {e} ({env:?})"))
     });
-    let mut twice = BytesMut::new();
-    encode_command(&again, &mut twice);
-    assert_eq!(once, twice, "command encoding is not stable");
+    assert_eq!(
+        once,
+        command_bytes(&again),
+        "command encoding is not stable"
+    );
 }
 
 fn event_is_stable(event: &Event) {
-    let mut once = BytesMut::new();
-    encode_event(event, &mut once);
+    let once = event_bytes(event);
     let again = reframe(&once, |raw| {
         decode_event(raw).unwrap_or_else(|e| panic!("re-encoded event fails: {e} ({event:?})"))
     });
-    let mut twice = BytesMut::new();
-    encode_event(&again, &mut twice);
-    assert_eq!(once, twice, "event encoding is not stable");
+    assert_eq!(once, event_bytes(&again), "event encoding is not stable");
 }
 
 fn reframe<T>(bytes: &[u8], decode: impl FnOnce(frame::RawFrame) -> T) -> T {

@@ -144,13 +144,22 @@ fn split_heads_with_their_payloads_match_the_plain_encoding() {
     }
 }
 
-/// `raw` with its body cut at `at` into the body proper and a tail, as an in-process link delivers a payload.
-fn split_at(raw: &RawFrame, at: usize) -> RawFrame {
-    RawFrame {
-        op: raw.op,
-        req: raw.req,
-        body: raw.body.slice(..at),
-        tail: raw.body.slice(at..),
+/// Decodes `raw` with its body cut at every point (up to 300 bytes in) into the body proper and a tail, as an
+/// in-process link delivers a payload, and asserts each cut decodes as the whole.
+fn assert_every_split_decodes_alike<T: PartialEq + std::fmt::Debug>(
+    raw: &RawFrame,
+    decode: fn(RawFrame) -> T,
+    what: &str,
+) {
+    let whole = decode(raw.clone());
+    for at in 0..=raw.body.len().min(300) {
+        let split = RawFrame {
+            op: raw.op,
+            req: raw.req,
+            body: raw.body.slice(..at),
+            tail: raw.body.slice(at..),
+        };
+        assert_eq!(decode(split), whole, "{what} cut at {at}");
     }
 }
 
@@ -159,28 +168,16 @@ fn a_body_split_anywhere_into_a_tail_decodes_as_the_whole() {
     let base = base_seed("split tail");
     let mut rng = StdRng::seed_from_u64(base);
     for i in 0..(random::COMMAND_VARIANTS * 10) {
-        let env = random::envelope(&mut rng, i);
-        let raw = single_frame(encoded_command(&env), "command");
-        let whole = decode_command(raw.clone());
-        for at in 0..=raw.body.len().min(300) {
-            assert_eq!(
-                decode_command(split_at(&raw, at)),
-                whole,
-                "command {i} cut at {at}, seed {base}"
-            );
-        }
+        let raw = single_frame(encoded_command(&random::envelope(&mut rng, i)), "command");
+        assert_every_split_decodes_alike(
+            &raw,
+            decode_command,
+            &format!("command {i}, seed {base},"),
+        );
     }
     for i in 0..(random::EVENT_VARIANTS * 10) {
-        let event = random::event(&mut rng, i);
-        let raw = single_frame(encoded_event(&event), "event");
-        let whole = decode_event(raw.clone());
-        for at in 0..=raw.body.len().min(300) {
-            assert_eq!(
-                decode_event(split_at(&raw, at)),
-                whole,
-                "event {i} cut at {at}, seed {base}"
-            );
-        }
+        let raw = single_frame(encoded_event(&random::event(&mut rng, i)), "event");
+        assert_every_split_decodes_alike(&raw, decode_event, &format!("event {i}, seed {base},"));
     }
 }
 

@@ -176,6 +176,8 @@ impl MemoryWriter {
         if bytes == 0 {
             return Ok(());
         }
+        // A writer that was shut down fails at once rather than after waiting for room.
+        let tx = self.tx.as_ref().ok_or(io::ErrorKind::BrokenPipe)?;
         let share = u32::try_from(bytes.min(PIPE_BYTES)).unwrap_or(u32::MAX);
         let permit = self
             .budget
@@ -183,7 +185,6 @@ impl MemoryWriter {
             .acquire_many_owned(share)
             .await
             .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))?;
-        let tx = self.tx.as_ref().ok_or(io::ErrorKind::BrokenPipe)?;
         tx.send((chunks, permit))
             .map_err(|_| io::Error::from(io::ErrorKind::BrokenPipe))
     }
