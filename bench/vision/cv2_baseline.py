@@ -1,6 +1,6 @@
 """Python OpenCV (cv2) baseline for the vision benchmark.
 
-The Rust benchmark (`vision-bench` in server/vision) writes a JSON spec of the work to time, runs this script with
+The Rust benchmark (`vision-bench`, `bench/vision/main.rs`) writes a JSON spec of the work to time, runs this script with
 `opencv-python-headless<5`, and compares the per-call times it prints with its own, measured in the same run. Each
 timed block makes the same OpenCV calls with the same parameters as the Rust detector it is compared with, on the
 same decoded pixels, on one thread.

@@ -4,7 +4,7 @@
 //! the whole, and whatever decodes re-encodes to a frame that decodes to the
 //! same bytes again.
 //!
-//! The same function runs without libFuzzer in `satellites/flow/tests/fuzz_smoke.rs`
+//! The same function runs without libFuzzer in `crates/flow/tests/fuzz_smoke.rs`
 //! (which includes this file), so the property is exercised by every
 //! `cargo test` even where cargo-fuzz is not installed.
 

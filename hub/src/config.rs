@@ -329,7 +329,7 @@ impl FederationSection {
     }
 
     fn validate(&self) -> Result<(), (&'static str, String)> {
-        use crate::federation::keys::{check_hub_name, check_literal};
+        use crate::zenoh_names::{check_endpoint, check_hub_name, check_literal};
         if !self.enabled {
             return Ok(());
         }
@@ -356,7 +356,7 @@ impl FederationSection {
             ("federation.listen", &self.listen),
         ] {
             for endpoint in list {
-                crate::federation::endpoint::check_endpoint(endpoint).map_err(|e| (key, e))?;
+                check_endpoint(endpoint).map_err(|e| (key, e))?;
             }
         }
         for (key, list) in [

@@ -3,6 +3,7 @@
 //! access gate, and the host of in-server modules. It links none of OpenCV, espeak-ng or Whisper: an application
 //! (`robot-agent`) brings its modules and routes through [`server::Application`]. See ARCHITECTURE.md.
 
+pub mod admission;
 pub mod cli;
 pub mod config;
 pub mod federation;
@@ -17,6 +18,7 @@ pub mod server;
 pub mod session;
 pub mod shared;
 pub mod tokens;
+pub mod zenoh_names;
 
 pub use config::Config;
 pub use server::{Application, RunningServer, start};

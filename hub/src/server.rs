@@ -12,12 +12,13 @@ use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tracing::info;
 
+use crate::admission::Admission;
 use crate::config::Config;
 use crate::http::access::{self, Access, PeerInfo};
 use crate::hub::{Hub, HubLimits, OutboxLimits};
 use crate::metrics::Metrics;
 use crate::module::Module;
-use crate::net::{Admission, IoRuntime};
+use crate::net::IoRuntime;
 use crate::pairdb::PairDb;
 use crate::pulse::PulseHub;
 pub use crate::shared::Shared;

@@ -6,10 +6,10 @@ use std::sync::{Arc, Mutex};
 
 use tokio::sync::watch;
 
+use crate::admission::Admission;
 use crate::config::Config;
 use crate::hub::Hub;
 use crate::metrics::Metrics;
-use crate::net::admission::Admission;
 use crate::pairdb::PairDb;
 use crate::pulse::PulseHub;
 use crate::tokens::Tokens;

@@ -1,4 +1,5 @@
-//! The avatar's pure modules against the contract's avatar vectors (contract/vectors/avatar.json): visemes on the
+// @ts-check
+//! The avatar's pure modules against the contract's avatar vectors (crates/contract/vectors/avatar.json): visemes on the
 //! audio clock, the three blink phases, and where the eyes and the head turn.
 
 import assert from "node:assert/strict";
@@ -10,7 +11,7 @@ import { GazeController } from "../js/avatar/gaze.js";
 import { VisemeTrack } from "../js/avatar/viseme-track.js";
 import { VISEMES } from "../js/avatar/visemes.js";
 
-const vectors = JSON.parse(readFileSync(new URL("../../contract/vectors/avatar.json", import.meta.url), "utf8"));
+const vectors = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/avatar.json", import.meta.url), "utf8"));
 const byCmd = (cmd) => vectors.commands.find((c) => c.cmd === cmd);
 
 test("the page knows every viseme the contract names", () => {

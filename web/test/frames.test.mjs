@@ -1,4 +1,5 @@
-//! The link's binary frame layout against the server's codec (contract/vectors/frames.json, written by the
+// @ts-check
+//! The link's binary frame layout against the server's codec (crates/contract/vectors/frames.json, written by the
 //! server's `frame_vectors_match_the_link_codec` test).
 
 import assert from "node:assert/strict";
@@ -7,7 +8,7 @@ import { test } from "node:test";
 
 import { decodeFrame, decodeSpeech, encodeFrame, HEADER_BYTES, KIND } from "../js/link/frames.js";
 
-const vectors = JSON.parse(readFileSync(new URL("../../contract/vectors/frames.json", import.meta.url), "utf8"));
+const vectors = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/frames.json", import.meta.url), "utf8"));
 const frame = (name) => vectors.frames.find((f) => f.name === name);
 const bytes = (hex) => new Uint8Array(hex.match(/../g).map((h) => parseInt(h, 16)));
 const hexOf = (buffer) => Buffer.from(new Uint8Array(buffer)).toString("hex");

@@ -1,4 +1,5 @@
-//! The graph page's layout (web/js/graph/layout.js) on the hub's own graph snapshot (contract/vectors/graph.json,
+// @ts-check
+//! The graph page's layout (web/js/graph/layout.js) on the hub's own graph snapshot (crates/contract/vectors/graph.json,
 //! written by a hub test) and on a graph the size of a busy agent.
 
 import assert from "node:assert/strict";
@@ -7,7 +8,7 @@ import { test } from "node:test";
 
 import { columns, edgeLabel, layout, parseGraph, rate } from "../js/graph/layout.js";
 
-const vector = JSON.parse(readFileSync(new URL("../../contract/vectors/graph.json", import.meta.url), "utf8"));
+const vector = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/graph.json", import.meta.url), "utf8"));
 
 test("the hub's graph snapshot parses and producers sit left of their consumers", () => {
   const g = parseGraph(vector);

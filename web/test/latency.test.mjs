@@ -1,6 +1,7 @@
+// @ts-check
 //! The status strip's latencies (web/js/panels/latency.js) and the server clock estimate (web/js/link/clock.js):
 //! a frame is found by the hub's publish time, the voice figure comes from the observer's message shape
-//! (contract/vectors/latency.json).
+//! (crates/contract/vectors/latency.json).
 
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
@@ -9,7 +10,7 @@ import { test } from "node:test";
 import { ServerClock } from "../js/link/clock.js";
 import { Figure, Latencies } from "../js/panels/latency.js";
 
-const vector = JSON.parse(readFileSync(new URL("../../contract/vectors/latency.json", import.meta.url), "utf8"));
+const vector = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/latency.json", import.meta.url), "utf8"));
 
 test("the clock offset comes from the ping with the shortest round trip", () => {
   const c = new ServerClock();

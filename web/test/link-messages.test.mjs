@@ -1,4 +1,5 @@
-//! The page link's welcome and status messages (contract/vectors/link.json) carry what the page reads of them.
+// @ts-check
+//! The page link's welcome and status messages (crates/contract/vectors/link.json) carry what the page reads of them.
 
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
@@ -7,7 +8,7 @@ import { test } from "node:test";
 import { HEADER_BYTES } from "../js/link/frames.js";
 
 const { welcome, status } = JSON.parse(
-  readFileSync(new URL("../../contract/vectors/link.json", import.meta.url), "utf8"),
+  readFileSync(new URL("../../crates/contract/vectors/link.json", import.meta.url), "utf8"),
 );
 
 test("the welcome names the media formats the page captures in", () => {

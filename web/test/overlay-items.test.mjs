@@ -1,4 +1,5 @@
-//! The overlay's pure functions against the contract's detections vectors (contract/vectors/detections.json).
+// @ts-check
+//! The overlay's pure functions against the contract's detections vectors (crates/contract/vectors/detections.json).
 
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
@@ -6,7 +7,7 @@ import { test } from "node:test";
 
 import { detectionItems, frameToCanvas } from "../js/panels/overlay-items.js";
 
-const vectors = JSON.parse(readFileSync(new URL("../../contract/vectors/detections.json", import.meta.url), "utf8"));
+const vectors = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/detections.json", import.meta.url), "utf8"));
 const [full, empty, otherDetector] = vectors.messages;
 
 test("every face, moving region, moving centre and code of a message becomes one geometry", () => {

@@ -1,3 +1,4 @@
+// @ts-check
 //! The loopback playback route's delay measurement (web/js/media/playback-delay.js): the loudness envelope of what
 //! the player sends, matched against the envelope of what comes out of the route, gives the delay the viseme
 //! schedule is shifted by.

@@ -1,3 +1,4 @@
+// @ts-check
 //! The microphone resampler: 48 kHz and 44.1 kHz input become 22050 Hz with the tone's pitch and level kept and
 //! what lies above the new Nyquist frequency removed instead of folded back.
 

@@ -1,10 +1,11 @@
-//! The rule trace's messages (contract/vectors/rules.json) carry what the page's rule panel shows.
+// @ts-check
+//! The rule trace's messages (crates/contract/vectors/rules.json) carry what the page's rule panel shows.
 
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
 import { test } from "node:test";
 
-const vectors = JSON.parse(readFileSync(new URL("../../contract/vectors/rules.json", import.meta.url), "utf8"));
+const vectors = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/rules.json", import.meta.url), "utf8"));
 
 test("a rule change names its time, program, rule path, actions and reasons", () => {
   for (const m of vectors.messages) {

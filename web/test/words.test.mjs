@@ -1,3 +1,4 @@
+// @ts-check
 //! The page's words: every language has every word, the language is chosen as documented, and values fill in.
 
 import assert from "node:assert/strict";

@@ -16,10 +16,10 @@ use tokio::task::JoinHandle;
 use tracing::{debug, info, warn};
 use zenoh::qos::CongestionControl;
 
-use super::keys::check_literal;
 use super::link::{Counted, Link, lock, selected};
 use super::remote_error::RemoteError;
 use super::stamp::Stamp;
+use crate::zenoh_names::check_literal;
 
 /// The headers of the exported channels, which the header queryable answers from.
 type Headers = Arc<Mutex<HashMap<String, String>>>;

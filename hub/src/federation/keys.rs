@@ -13,42 +13,7 @@
 
 use flow::ChannelKind;
 
-/// Why a name cannot be used in a key expression.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum KeyError {
-    #[error("{0:?} is empty or has an empty part between slashes")]
-    EmptyChunk(String),
-    #[error("{0:?} contains one of the Zenoh wildcard characters * $ # ?")]
-    Wildcard(String),
-    #[error("{0:?} has a part starting with @, which Zenoh reserves")]
-    Verbatim(String),
-}
-
-/// Checks that `text` is usable as one or more literal chunks of a key expression.
-pub fn check_literal(text: &str) -> Result<(), KeyError> {
-    if text.contains(['*', '$', '#', '?']) {
-        return Err(KeyError::Wildcard(text.to_string()));
-    }
-    for chunk in text.split('/') {
-        if chunk.is_empty() {
-            return Err(KeyError::EmptyChunk(text.to_string()));
-        }
-        if chunk.starts_with('@') {
-            return Err(KeyError::Verbatim(text.to_string()));
-        }
-    }
-    Ok(())
-}
-
-/// Checks a hub name: one literal chunk (no slash).
-pub fn check_hub_name(name: &str) -> Result<(), KeyError> {
-    if name.contains('/') {
-        return Err(KeyError::EmptyChunk(format!(
-            "{name} (a hub name is one part, without /)"
-        )));
-    }
-    check_literal(name)
-}
+use crate::zenoh_names::{KeyError, check_literal};
 
 /// One federation's key space: the prefix every key starts with.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -178,21 +143,5 @@ mod tests {
             keys.parse_header(&keys.header("a", "Robot.audio")),
             Some(("a".into(), "Robot.audio".into()))
         );
-    }
-
-    #[test]
-    fn names_that_zenoh_would_read_as_patterns_are_refused() {
-        assert!(check_literal("Robot.audio").is_ok());
-        assert!(check_literal("robot/arm").is_ok());
-        assert!(matches!(check_literal("a*"), Err(KeyError::Wildcard(_))));
-        assert!(matches!(check_literal("a$b"), Err(KeyError::Wildcard(_))));
-        assert!(matches!(
-            check_literal("a//b"),
-            Err(KeyError::EmptyChunk(_))
-        ));
-        assert!(matches!(check_literal("/a"), Err(KeyError::EmptyChunk(_))));
-        assert!(matches!(check_literal("a/@b"), Err(KeyError::Verbatim(_))));
-        assert!(check_hub_name("a/b").is_err());
-        assert!(check_hub_name("hub-a").is_ok());
     }
 }

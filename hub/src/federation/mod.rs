@@ -6,7 +6,6 @@
 //! crosses only while someone listens: a local subscriber of an import declares the Zenoh subscriber, which the
 //! exporting hub's publisher sees as a match, which makes it subscribe on its own hub, which tells the producer.
 
-pub mod endpoint;
 mod export;
 mod import;
 pub mod keys;

@@ -993,7 +993,8 @@ fn the_graph_has_every_connection_and_an_edge_per_channel_to_its_subscribers() {
     );
     // The page's layout tests read this very snapshot.
     let value = serde_json::to_value(&g).expect("graph as JSON");
-    agent_contract::vectors::check_or_write("graph", &value).expect("contract/vectors/graph.json");
+    agent_contract::vectors::check_or_write("graph", &value)
+        .expect("crates/contract/vectors/graph.json");
 }
 
 #[test]

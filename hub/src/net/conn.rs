@@ -3,7 +3,7 @@
 //!
 //! Before login a connection is a stranger: it may send only a small frame,
 //! must log in within the login timeout, and counts against the cap on
-//! unauthenticated connections (see `admission.rs`).
+//! unauthenticated connections (see `crate::admission`).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -13,7 +13,7 @@ use flow::protocol::decode_command;
 use flow::transport::{Transport, TransportWrite};
 use tracing::{debug, info, warn};
 
-use super::admission::Stranger;
+use crate::admission::Stranger;
 use crate::hub::Outbox;
 use crate::session::{Outcome, Session, SessionContext};
 use crate::shared::Shared;

@@ -1,13 +1,11 @@
 //! Network edges: the connection driver shared by every transport, and one
 //! listener module per transport.
 
-pub mod admission;
 pub mod conn;
 pub mod io_runtime;
 pub mod tcp;
 pub mod unix;
 pub mod ws;
 
-pub use admission::Admission;
 pub use conn::{PRE_LOGIN_MAX_FRAME, serve_connection};
 pub use io_runtime::IoRuntime;

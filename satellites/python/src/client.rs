@@ -8,10 +8,11 @@ use flow::token::{TokenKind, resolve_token};
 use flow::{ConnectOptions, FlowAddr};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyString};
+use pyo3::types::PyDict;
 
 use crate::database::Database;
 use crate::errors::{AuthError, IntoPy};
+use crate::header::header_text;
 use crate::message::Message;
 use crate::payload::to_bytes;
 use crate::publisher::Publisher;
@@ -33,29 +34,6 @@ pub struct Client {
 impl Client {
     pub fn inner(&self) -> &flow::Client {
         &self.client
-    }
-}
-
-/// A channel header: a dict (serialised), a JSON string (checked by the SDK), or nothing (`{}`).
-pub fn header_text(header: Option<&Bound<'_, PyAny>>) -> PyResult<String> {
-    match header {
-        None => Ok("{}".into()),
-        Some(h) if h.is_none() => Ok("{}".into()),
-        Some(h) => {
-            if let Ok(s) = h.cast::<PyString>() {
-                return Ok(s.to_str()?.to_owned());
-            }
-            if h.is_instance_of::<PyDict>() {
-                return h
-                    .py()
-                    .import("json")?
-                    .call_method1("dumps", (h,))?
-                    .extract();
-            }
-            Err(PyValueError::new_err(
-                "a channel header is a dict or a JSON object as text",
-            ))
-        }
     }
 }
 

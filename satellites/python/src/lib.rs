@@ -4,7 +4,8 @@
 //! - [`runtime`]: the one tokio runtime of the process and the wait that releases the GIL and lets Ctrl-C through.
 //! - [`errors`]: the `FlowError` exception hierarchy and the mapping from [`flow::FlowError`].
 //! - [`client`]: `Client` (connect, channels, calls), with [`publisher`], [`subscription`], [`service`] and
-//!   [`database`] for what it hands out, and [`message`] for what arrives.
+//!   [`database`] for what it hands out, and [`message`] for what arrives; [`header`] reads the channel headers
+//!   both `Client` and `Publisher` take.
 //! - [`events`]: the pulses and messages of a `Sketch`, merged in Rust.
 //! - [`contract`]: the agent's channels and message shapes from the contract crate.
 
@@ -15,6 +16,7 @@ mod contract;
 mod database;
 mod errors;
 mod events;
+mod header;
 mod message;
 mod payload;
 mod publisher;

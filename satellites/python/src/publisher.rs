@@ -126,7 +126,7 @@ impl Publisher {
 
     /// Replaces the channel's header (dict or JSON text); every peer is told.
     fn set_header(&self, py: Python<'_>, header: &Bound<'_, PyAny>) -> PyResult<()> {
-        let text = crate::client::header_text(Some(header))?;
+        let text = crate::header::header_text(Some(header))?;
         let publisher = self.publisher()?;
         crate::runtime::wait(py, async move { publisher.set_header(&text).await })?.py_err()
     }

@@ -1,7 +1,8 @@
 //! Whisper ASR satellite: model conversion, voice activity detection and transcription.
 //!
-//! The library holds the pieces; `src/main.rs` wires them into the `whisper-sat` command (convert, transcribe, run,
-//! bench).
+//! The library holds the pieces and the satellite's runtime (`satellite`); `src/main.rs` parses the `whisper-sat`
+//! command (convert, transcribe, run, wer) and calls into it. The ASR benchmark (`bench/asr`, `asr-bench`) drives
+//! the same pieces: `recognition` gives its satellite processes `run`'s flags.
 
 pub mod abort;
 pub mod activity;
@@ -12,8 +13,10 @@ pub mod echo;
 pub mod ledger;
 pub mod model_path;
 pub mod offline;
+pub mod recognition;
 pub mod resample;
 pub mod restart_stop;
+pub mod satellite;
 pub mod segmenter;
 pub mod speculation;
 pub mod stream;

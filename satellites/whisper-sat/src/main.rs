@@ -1,4 +1,4 @@
-//! Command-line entry point of the Whisper ASR satellite: `convert`, `transcribe`, `run` and `bench`.
+//! Command-line entry point of the Whisper ASR satellite: `convert`, `transcribe`, `run` and `wer`.
 
 mod cli;
 

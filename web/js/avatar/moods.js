@@ -1,3 +1,4 @@
+// @ts-check
 //! Facial expressions for the `mood` command: how brows, lids, mouth corners and head tilt change per mood.
 
 const MOODS = {

@@ -1,5 +1,5 @@
-//! The 3D head's rig: turns the avatar's controllers (gaze, blink, mood, visemes) into morph weights and rotations.
 // @ts-check
+//! The 3D head's rig: turns the avatar's controllers (gaze, blink, mood, visemes) into morph weights and rotations.
 //
 // Pure functions, so the mapping is unit-tested without a browser. Angles are radians in three.js's frame (the
 // head looks along +z, +x is the viewer's right): a positive yaw turns the eyes or head towards the viewer's

@@ -1,5 +1,5 @@
-//! Co-articulated visemes on the audio clock: how much of each mouth shape is on at a given audio time.
 // @ts-check
+//! Co-articulated visemes on the audio clock: how much of each mouth shape is on at a given audio time.
 //
 // Each cue blends into the next over a short transition that starts a little before the cue (the mouth
 // anticipates the next sound, as it does in speech) and ends at most `LAG_S` after it. The weights are a pure

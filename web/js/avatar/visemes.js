@@ -1,3 +1,4 @@
+// @ts-check
 //! The viseme set the page understands (the 15 Oculus visemes) and the mouth shape each one makes.
 //
 // A shape is a set of mouth parameters for `face.js`: `jaw` (0 closed .. 1 wide open), `mouthWidth` (relative to

@@ -2,7 +2,7 @@
 /**
  * @file The application graph's shape and layout: the hub's `/api/graph` snapshot checked, laid out in columns
  * (producers left, consumers right, by longest path from a source) and turned into boxes and curves. Pure: no DOM,
- * so `node --test` checks it against the vector the hub writes (`contract/vectors/graph.json`).
+ * so `node --test` checks it against the vector the hub writes (`crates/contract/vectors/graph.json`).
  */
 
 /** @typedef {{id: number, name: string, label: string, transport: string}} GraphNode */
@@ -182,7 +182,7 @@ export function edgeLabel(e) {
 
 /**
  * A channel's rate as people read it: "15.0 msg/s, 812 kB/s".
- * @param {GraphChannel} c
+ * @param {Pick<GraphChannel, "msgs_per_s" | "bytes_per_s">} c the two figures it reads
  * @returns {string}
  */
 export function rate(c) {

@@ -1,3 +1,4 @@
+// @ts-check
 //! Turns getUserMedia failures into messages a user can act on.
 
 export function explainMediaError(err, device) {

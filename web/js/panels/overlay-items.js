@@ -1,6 +1,6 @@
 // @ts-check
 //! What the overlay draws for one `Agent.detections` message, and where: pure functions, unit-tested against the
-//! contract's JSON vectors (contract/vectors/detections.json, web/test/overlay-items.test.mjs).
+//! contract's JSON vectors (crates/contract/vectors/detections.json, web/test/overlay-items.test.mjs).
 
 /**
  * @typedef {{x: number, y: number, w: number, h: number}} Box

@@ -1,17 +1,12 @@
 //! The `whisper-sat` subcommands.
+//!
+//! Argument parsing only: each subcommand calls into the library (the satellite's runtime is
+//! `whisper_sat::satellite`). The ASR benchmark is a binary of its own, `asr-bench` in `bench/asr`.
 
-mod bench;
-mod bench_clips;
 mod convert;
-mod faster_whisper;
-mod fleet;
-mod fleet_bench;
 mod progress;
-mod recognition;
 mod run;
-mod satellite;
 mod transcribe;
-mod wer_bench;
 
 use clap::{Parser, Subcommand};
 
@@ -31,11 +26,6 @@ enum Action {
     Transcribe(transcribe::Args),
     /// Run as a satellite: segment Agent.audio, claim and transcribe utterances, publish Agent.transcript.
     Run(run::Args),
-    /// Benchmark against faster-whisper: RTF, end-of-speech latency, 1, 2 and 3 satellites, peak RSS.
-    Bench(bench::Args),
-    /// One satellite process of `bench`'s fleets (decodes the jobs it is handed on stdin).
-    #[command(hide = true)]
-    BenchWorker(fleet::WorkerArgs),
     /// Print the word error rate of a hypothesis against a reference (case and punctuation ignored).
     Wer {
         /// Reference transcript.
@@ -52,8 +42,6 @@ impl Command {
             Action::Convert(a) => convert::run(a),
             Action::Transcribe(a) => transcribe::run(a),
             Action::Run(a) => run::run(a),
-            Action::Bench(a) => bench::run(a),
-            Action::BenchWorker(a) => fleet::worker(a),
             Action::Wer {
                 reference,
                 hypothesis,

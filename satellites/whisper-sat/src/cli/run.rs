@@ -6,10 +6,9 @@ use std::time::Duration;
 use anyhow::Context;
 use flow::token::{TokenKind, resolve_token};
 use flow::{Client, ConnectOptions, FlowAddr};
+use whisper_sat::recognition::RecognitionArgs;
+use whisper_sat::satellite::{self, Settings};
 use whisper_sat::transcriber::Transcriber;
-
-use super::recognition::RecognitionArgs;
-use super::satellite::{self, Settings};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -89,6 +88,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         tracing::info!(%name, model = %model.display(), "whisper satellite connected to {addr}");
         let result = satellite::run(client.clone(), transcriber, settings).await;
         client.close();
-        result
+        Ok(result?)
     })
 }

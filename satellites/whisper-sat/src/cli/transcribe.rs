@@ -4,9 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use whisper_sat::offline::{UtteranceResult, joined_text, transcribe_clip};
+use whisper_sat::recognition::RecognitionArgs;
 use whisper_sat::transcriber::{Outcome, Transcriber};
-
-use super::recognition::RecognitionArgs;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {

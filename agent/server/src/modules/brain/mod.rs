@@ -1,0 +1,411 @@
+//! The brain module: runs the teleo-reactive program (`agent-brain`) on the hub. Percepts come from
+//! `Agent.transcript`, `Agent.detections` and the agent's own speech; the effects speak, publish, call services
+//! and run whitelisted commands; every rule change is published on `Agent.rules`. See docs/brain.md.
+
+mod actuators;
+mod params;
+mod percepts;
+mod program_file;
+mod speech;
+mod wire;
+
+use std::collections::BTreeMap;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use agent_brain::{
+    Action, Brain, Capabilities, EchoFilter, Effect, Language, Now, PerceptError, Value, WallClock,
+};
+use agent_contract::channels;
+use flow::tick::Tick;
+use flow::{Client, Data, Publisher, Subscription};
+use tokio::sync::mpsc;
+use tokio::time::Instant;
+use tracing::{debug, info, warn};
+
+use actuators::{Actuators, OUTCOME_QUEUE, Outcome};
+use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+use params::BrainParams;
+use percepts::{Hearing, Percept};
+use program_file::{ProgramFile, Reload};
+use speech::{PlayoutClock, Speech};
+
+/// The built-in brain module (`[modules.brain]`), conversing in the agent's language.
+#[derive(Debug, Default)]
+pub struct BrainModule {
+    pub language: Language,
+}
+
+impl Module for BrainModule {
+    fn name(&self) -> &'static str {
+        "brain"
+    }
+
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        let params = BrainParams::from_json(params)?;
+        let capabilities = Capabilities {
+            commands: params.commands.keys().cloned().collect(),
+        };
+        ProgramFile::new(params.program(self.language), capabilities)
+            .load()
+            .map(drop)
+            .map_err(|e| anyhow::anyhow!("[modules.brain] program: {e:#}"))
+    }
+
+    fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
+        Box::pin(run(ctx, self.language))
+    }
+}
+
+/// Counters shown at `/api/status`.
+#[derive(Debug, Default)]
+struct Counters {
+    transcripts: u64,
+    echoes_dropped: u64,
+    bad_messages: u64,
+    steps: u64,
+    rule_changes: u64,
+    reloads: u64,
+    reload_errors: u64,
+    last_reload_error: Option<String>,
+}
+
+/// Everything the loop works on.
+struct Mind {
+    brain: Brain,
+    file: ProgramFile,
+    actuators: Actuators,
+    echo: EchoFilter,
+    rules: Publisher,
+    playout: PlayoutClock,
+    db: BTreeMap<String, Value>,
+    client: Client,
+    utc_offset_s: i32,
+    /// The language of the clock's words.
+    language: Language,
+    counters: Counters,
+    /// The last reply asked of the TTS module, for the trace entry of a barge-in that cuts it off.
+    saying: Option<String>,
+}
+
+async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
+    let params = BrainParams::from_json(&ctx.params)?;
+    let capabilities = Capabilities {
+        commands: params.commands.keys().cloned().collect(),
+    };
+    let mut file = ProgramFile::new(params.program(language), capabilities);
+    let program = file.load()?;
+    info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
+
+    let client = ctx.client.clone();
+    let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
+    let detections = client.subscribe(channels::DETECTIONS.name).await?;
+    let speech_out = client.subscribe(channels::SPEECH.name).await?;
+    let avatar = client.subscribe(channels::AVATAR.name).await?;
+    let rules = client
+        .publisher(channels::RULES.name, channels::headers::RULES)
+        .await?;
+    let (outcome_tx, mut outcomes) = mpsc::channel(OUTCOME_QUEUE);
+    let mut mind = Mind {
+        brain: Brain::new(program),
+        file,
+        actuators: Actuators::new(
+            client.clone(),
+            Speech::start(client.clone()),
+            &params,
+            outcome_tx,
+        ),
+        echo: EchoFilter::new(params.echo_window(), params.echo_threshold),
+        rules,
+        playout: PlayoutClock::default(),
+        db: BTreeMap::new(),
+        client: client.clone(),
+        utc_offset_s: params
+            .utc_offset_minutes
+            .map_or_else(wire::local_utc_offset_s, |minutes| minutes * 60),
+        language,
+        counters: Counters::default(),
+        saying: None,
+    };
+    mind.refresh_db().await;
+    mind.step().await;
+
+    let mut ticks = ctx.ticks();
+    loop {
+        // Sleep until the brain's next deadline (a fact going stale, the end of the agent's speech), or forever.
+        let wake = mind.next_wakeup();
+        let deadline = async move {
+            match wake {
+                Some(at) => tokio::time::sleep_until(at).await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            () = ctx.stopped() => break,
+            data = transcripts.recv() => match data {
+                Some(data) => mind.heard(&data),
+                None => break,
+            },
+            data = detections.recv() => match data {
+                Some(data) => mind.seen(&data),
+                None => break,
+            },
+            data = speech_out.recv() => match data {
+                Some(data) => mind.spoke(&data, &speech_out),
+                None => break,
+            },
+            data = avatar.recv() => match data {
+                Some(data) => mind.avatar(&data),
+                None => break,
+            },
+            Some(outcome) = outcomes.recv() => mind.outcome(outcome),
+            tick = ticks.recv() => {
+                if matches!(tick, Ok(Tick::OneSec)) {
+                    mind.each_second(&ctx).await;
+                }
+            }
+            () = deadline => {}
+        }
+        mind.step().await;
+    }
+    Ok(())
+}
+
+impl Mind {
+    fn now(&self) -> Now {
+        let unix_ms = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as i64);
+        Now {
+            at: Instant::now().into_std(),
+            clock: WallClock::from_unix_ms(unix_ms, self.utc_offset_s).in_language(self.language),
+        }
+    }
+
+    fn next_wakeup(&self) -> Option<Instant> {
+        let now = Instant::now();
+        let brain = self
+            .brain
+            .next_wakeup(now.into_std())
+            .map(Instant::from_std);
+        let speech_end = self.playout.speaking_until(now);
+        [brain, speech_end].into_iter().flatten().min()
+    }
+
+    fn perceive(&mut self, name: &str, args: Vec<Value>) {
+        if let Err(e) = self.brain.perceive(Instant::now().into_std(), name, args) {
+            self.percept_rejected(name, &e);
+        }
+    }
+
+    fn percept_rejected(&mut self, name: &str, error: &PerceptError) {
+        self.counters.bad_messages += 1;
+        warn!(
+            percept = name,
+            "brain: the program's declaration does not fit: {error}"
+        );
+    }
+
+    /// A transcript: dropped when it is the agent hearing itself, otherwise `heard(text)`; voice activity
+    /// makes `listening` hold while the user speaks.
+    fn heard(&mut self, data: &Data) {
+        let text = match percepts::hearing(&data.payload) {
+            Ok(Hearing::Said(text)) => text,
+            Ok(Hearing::Speaking) => {
+                self.perceive("listening", Vec::new());
+                return;
+            }
+            Ok(Hearing::Paused) => {
+                self.brain.retract("listening");
+                return;
+            }
+            Ok(Hearing::Nothing) => return,
+            Err(e) => {
+                self.counters.bad_messages += 1;
+                warn!("brain: bad message on Agent.transcript: {e}");
+                return;
+            }
+        };
+        // A final transcript means the user has finished this utterance.
+        self.brain.retract("listening");
+        if let Some(said) = self.echo.echo_of(Instant::now().into_std(), &text) {
+            self.counters.echoes_dropped += 1;
+            info!(transcript = %text, said, "brain: dropped a transcript of the agent's own voice");
+            return;
+        }
+        self.counters.transcripts += 1;
+        debug!(transcript = %text, "brain: heard");
+        self.perceive("heard", vec![Value::Text(text)]);
+    }
+
+    fn seen(&mut self, data: &Data) {
+        match percepts::detections(&data.payload) {
+            Ok(found) => {
+                for percept in found {
+                    match percept {
+                        Percept::One { name, args } => self.perceive(name, args),
+                        Percept::Set { name, sets } => {
+                            if let Err(e) =
+                                self.brain
+                                    .perceive_set(Instant::now().into_std(), name, sets)
+                            {
+                                self.percept_rejected(name, &e);
+                            }
+                        }
+                    }
+                }
+            }
+            Err(e) => {
+                self.counters.bad_messages += 1;
+                debug!("brain: bad message on Agent.detections: {e}");
+            }
+        }
+    }
+
+    /// The agent's own speech: `speaking` holds while it is audible.
+    fn spoke(&mut self, data: &Data, channel: &Subscription) {
+        let framed = channel
+            .info()
+            .is_some_and(|info| wire::speech_is_framed(&info.header));
+        self.playout
+            .chunk(Instant::now(), data.payload.len(), framed);
+    }
+
+    /// A `speech_stop` on `Agent.avatar` ends speech at once; one from a barge-in while the agent was audible
+    /// is recorded in the rule trace with the reply it cut off.
+    fn avatar(&mut self, data: &Data) {
+        let Some(stop) = wire::speech_stop(&data.payload) else {
+            return;
+        };
+        let audible = self.playout.speaking_until(Instant::now()).is_some();
+        if stop.barge_in
+            && audible
+            && let Some(said) = self.saying.clone()
+        {
+            let now = self.now();
+            let active = wire::rule_path(&self.active_rules());
+            info!(said, "brain: the user barged in");
+            let message = wire::interruption_message(
+                now.clock.unix_ms,
+                self.brain.program().origin(),
+                &active,
+                &said,
+            );
+            if let Ok(false) = self.rules.try_publish(message) {
+                debug!("brain: the barge-in entry was dropped, the link is busy");
+            }
+        }
+        self.playout.stop();
+    }
+
+    fn outcome(&mut self, outcome: Outcome) {
+        debug!(?outcome, "brain: outcome");
+        let (name, args) = outcome.percept();
+        self.perceive(name, args);
+    }
+
+    async fn each_second(&mut self, ctx: &ModuleContext) {
+        match self.file.reload_if_changed() {
+            Reload::Unchanged => {}
+            Reload::Loaded(program) => {
+                self.counters.reloads += 1;
+                self.counters.last_reload_error = None;
+                info!(rules = program.rule_count(), "brain: program reloaded");
+                self.brain.reload(program);
+            }
+            Reload::Failed(message) => {
+                self.counters.reload_errors += 1;
+                warn!(
+                    "brain: the changed program does not load, the previous one keeps running:\n{message}"
+                );
+                self.counters.last_reload_error = Some(message);
+            }
+        }
+        self.refresh_db().await;
+        ctx.report(self.status());
+    }
+
+    /// Re-reads the pair-database keys the program uses (none for most programs, then this costs nothing).
+    async fn refresh_db(&mut self) {
+        let keys: Vec<String> = self.brain.program().db_keys().map(str::to_owned).collect();
+        self.db.retain(|key, _| keys.contains(key));
+        for key in keys {
+            match self.client.var_get(&key).await {
+                Ok(Some(value)) => {
+                    self.db.insert(key, wire::value_from_json(value));
+                }
+                Ok(None) => {
+                    self.db.remove(&key);
+                }
+                Err(e) => debug!(key, "brain: pair database read failed: {e}"),
+            }
+        }
+    }
+
+    /// Re-evaluates the program and performs what changed.
+    async fn step(&mut self) {
+        let now = self.now();
+        // `speaking` follows the play-out of the agent's speech.
+        let speaking = self
+            .playout
+            .speaking_until(Instant::from_std(now.at))
+            .is_some();
+        let was_speaking = self.brain.store().named("speaking").next().is_some();
+        if speaking && !was_speaking {
+            self.perceive("speaking", Vec::new());
+        } else if !speaking && was_speaking {
+            self.brain.retract("speaking");
+        }
+        let step = self.brain.step(&now, &self.db);
+        self.counters.steps += 1;
+        for warning in &step.warnings {
+            warn!("brain: {warning}");
+        }
+        for trace in &step.traces {
+            self.counters.rule_changes += 1;
+            info!("brain: {trace}");
+            let message = wire::trace_message(trace, self.brain.program().origin());
+            if let Ok(false) = self.rules.try_publish(message) {
+                debug!("brain: a trace was dropped, the link is busy");
+            }
+        }
+        for effect in step.effects {
+            if let Effect::Fire(Action::Say { text }) | Effect::Start(Action::Say { text }) =
+                &effect
+            {
+                self.echo.said(now.at, text);
+                self.saying = Some(text.clone());
+            }
+            if matches!(effect, Effect::Fire(Action::Cancel)) {
+                self.playout.stop();
+            }
+            self.actuators.perform(effect).await;
+        }
+    }
+
+    /// The active rules, outermost first, as traces name them.
+    fn active_rules(&self) -> Vec<String> {
+        self.brain
+            .active()
+            .iter()
+            .map(ToString::to_string)
+            .collect()
+    }
+
+    fn status(&self) -> serde_json::Value {
+        let c = &self.counters;
+        let active = self.active_rules();
+        serde_json::json!({
+            "program": self.file.path().display().to_string(),
+            "active": active,
+            "transcripts": c.transcripts,
+            "echoes_dropped": c.echoes_dropped,
+            "bad_messages": c.bad_messages,
+            "steps": c.steps,
+            "rule_changes": c.rule_changes,
+            "reloads": c.reloads,
+            "reload_errors": c.reload_errors,
+            "last_reload_error": c.last_reload_error,
+            "outcomes_dropped": self.actuators.dropped_outcomes,
+        })
+    }
+}

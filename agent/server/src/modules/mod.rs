@@ -1,0 +1,31 @@
+//! The built-in modules and the switch that picks them from the configuration.
+
+use agent_brain::Language;
+
+use flow_hub::module::Module;
+
+pub mod audio_fft;
+pub mod brain;
+mod luma;
+pub mod observer;
+mod on_demand;
+pub mod recorder;
+pub mod spectrum;
+pub mod tts;
+pub mod video_y;
+pub mod vision;
+
+/// The built-in modules besides the browser link, in start order (the server starts those enabled), conversing
+/// in `language`. The TTS module starts before any other publisher of avatar commands: it owns
+/// `Agent.avatar` (the behaviour controllers publish through it).
+pub fn builtin(language: Language) -> Vec<Box<dyn Module>> {
+    vec![
+        Box::new(tts::TtsModule { language }),
+        Box::new(brain::BrainModule { language }),
+        Box::new(vision::VisionModule),
+        Box::new(video_y::VideoY),
+        Box::new(audio_fft::AudioFft),
+        Box::new(observer::ObserverModule),
+        Box::new(recorder::RecorderModule),
+    ]
+}

@@ -1,0 +1,317 @@
+//! The `observer` module: the agent's figures at `/metrics`, read off the contract channels like any other
+//! consumer reads them: vision stage times from `Agent.detections`, ASR per satellite from `Agent.transcript` and
+//! the claim channels, and the stages of each conversational turn from the VAD events, transcripts, rule trace and
+//! speech ([`turns`]), which it also publishes turn by turn on `Agent.latency` for the page's status strip. It
+//! reads and reports only, so switching it off changes nothing else.
+
+mod claims;
+mod turns;
+
+use agent_contract::channels;
+use agent_contract::detections::DetectionsMsg;
+use agent_contract::latency::TurnLatency;
+use agent_contract::rules::RuleChange;
+use agent_contract::transcript::{TranscriptMessage, VadKind, VadMessage};
+use flow::{ClientEvent, Data};
+use flow_hub::metrics::{HistogramFamily, Metrics, latency_family};
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use serde::Deserialize;
+use tokio::sync::broadcast::error::RecvError;
+
+use claims::{ClaimNews, Claims};
+use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+use turns::{Stage, TurnDone, Turns};
+
+/// The `observer` module.
+#[derive(Debug, Default)]
+pub struct ObserverModule;
+
+/// `[modules.observer]`: only the switch.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct ObserverParams {
+    enabled: bool,
+}
+
+impl Default for ObserverParams {
+    fn default() -> Self {
+        ObserverParams { enabled: true }
+    }
+}
+
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct StageLabel {
+    stage: &'static str,
+}
+
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct SatelliteLabel {
+    satellite: String,
+}
+
+/// The families this module keeps up to date.
+#[derive(Debug, Clone)]
+struct Figures {
+    vision: HistogramFamily<StageLabel>,
+    asr_utterances: Family<SatelliteLabel, Counter>,
+    asr_processing: HistogramFamily<SatelliteLabel>,
+    asr_claims: Family<SatelliteLabel, Counter>,
+    asr_claims_lost: Family<SatelliteLabel, Counter>,
+    asr_claims_retried: Family<SatelliteLabel, Counter>,
+    conversation: HistogramFamily<StageLabel>,
+}
+
+impl Figures {
+    fn register(metrics: &Metrics) -> Self {
+        let f = Figures {
+            vision: latency_family(),
+            asr_utterances: Family::default(),
+            asr_processing: latency_family(),
+            asr_claims: Family::default(),
+            asr_claims_lost: Family::default(),
+            asr_claims_retried: Family::default(),
+            conversation: latency_family(),
+        };
+        metrics.register(
+            "agent_vision_stage_seconds",
+            "Time the vision module spent per frame, by stage (decode, faces, motion, codes, total)",
+            f.vision.clone(),
+        );
+        metrics.register(
+            "agent_asr_utterances",
+            "Final transcripts by the satellite that made them",
+            f.asr_utterances.clone(),
+        );
+        metrics.register(
+            "agent_asr_processing_seconds",
+            "Transcription time of each final transcript, by satellite",
+            f.asr_processing.clone(),
+        );
+        metrics.register(
+            "agent_asr_claims",
+            "Utterances claimed, by satellite",
+            f.asr_claims.clone(),
+        );
+        metrics.register(
+            "agent_asr_claims_lost",
+            "Claims whose holder vanished before it was done, by satellite",
+            f.asr_claims_lost.clone(),
+        );
+        metrics.register(
+            "agent_asr_claims_retried",
+            "Utterances claimed again after a lost claim, by the satellite that retried",
+            f.asr_claims_retried.clone(),
+        );
+        metrics.register(
+            "agent_conversation_seconds",
+            "Stages of a conversational turn: speech_end_to_vad_end, vad_end_to_transcript, transcript_to_rule, \
+             rule_to_reply_audio and the whole speech_end_to_reply_audio",
+            f.conversation.clone(),
+        );
+        f
+    }
+
+    fn stages(&self, done: Vec<(Stage, u64)>) {
+        for (stage, us) in done {
+            self.conversation
+                .get_or_create(&StageLabel {
+                    stage: stage.label(),
+                })
+                .observe(us as f64 / 1e6);
+        }
+    }
+
+    /// The two stages a reply completes (the earlier ones were observed as they happened).
+    fn reply(&self, turn: &TurnDone) {
+        self.stages(vec![
+            (Stage::RuleToReplyAudio, turn.reply_us),
+            (Stage::SpeechEndToReplyAudio, turn.total_us),
+        ]);
+    }
+
+    fn detections(&self, data: &Data) {
+        let Ok(d) = serde_json::from_slice::<DetectionsMsg>(&data.payload) else {
+            return;
+        };
+        let Some(t) = d.timing else { return };
+        let stages = [
+            ("decode", Some(t.decode_ms)),
+            ("faces", t.faces_ms),
+            ("motion", t.motion_ms),
+            ("codes", t.codes_ms),
+            ("total", Some(t.total_ms)),
+        ];
+        for (stage, ms) in stages {
+            if let Some(ms) = ms {
+                self.vision
+                    .get_or_create(&StageLabel { stage })
+                    .observe(ms / 1000.0);
+            }
+        }
+    }
+
+    fn claim(&self, news: ClaimNews) {
+        match news {
+            ClaimNews::Taken { satellite, retry } => {
+                let label = SatelliteLabel { satellite };
+                self.asr_claims.get_or_create(&label).inc();
+                if retry {
+                    self.asr_claims_retried.get_or_create(&label).inc();
+                }
+            }
+            ClaimNews::Lost { satellite } => {
+                self.asr_claims_lost
+                    .get_or_create(&SatelliteLabel { satellite })
+                    .inc();
+            }
+        }
+    }
+}
+
+/// What one `Agent.transcript` message is, read strictly through the contract's types.
+enum Heard {
+    VadEnd { utterance: String, at_ms: u64 },
+    Final(TranscriptMessage),
+    Other,
+}
+
+fn heard(payload: &[u8]) -> Heard {
+    let Ok(value) = serde_json::from_slice::<serde_json::Value>(payload) else {
+        return Heard::Other;
+    };
+    if value.get("vad").is_some() {
+        return match serde_json::from_value::<VadMessage>(value) {
+            Ok(VadMessage {
+                vad: VadKind::End,
+                at_ms,
+                utterance: Some(utterance),
+                ..
+            }) => Heard::VadEnd { utterance, at_ms },
+            _ => Heard::Other,
+        };
+    }
+    match serde_json::from_value::<TranscriptMessage>(value) {
+        Ok(t) if t.is_final => Heard::Final(t),
+        _ => Heard::Other,
+    }
+}
+
+/// A finished turn as the contract's `Agent.latency` message.
+fn latency_message(turn: &TurnDone) -> TurnLatency {
+    let ms = |us: u64| us as f64 / 1000.0;
+    TurnLatency {
+        kind: "voice".into(),
+        speech_end_ms: turn.speech_end_us / 1000,
+        vad_ms: ms(turn.vad_us),
+        transcript_ms: ms(turn.transcript_us),
+        rule_ms: ms(turn.rule_us),
+        reply_ms: ms(turn.reply_us),
+        total_ms: ms(turn.total_us),
+    }
+}
+
+/// The first chunk of a reply's speech: `[utterance u32][offset u32][PCM]` with offset 0.
+fn starts_utterance(payload: &[u8]) -> bool {
+    payload.len() > 8 && payload[4..8] == [0, 0, 0, 0]
+}
+
+impl Module for ObserverModule {
+    fn name(&self) -> &'static str {
+        "observer"
+    }
+
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        serde_path_to_error::deserialize::<_, ObserverParams>(params)
+            .map(drop)
+            .map_err(|e| anyhow::anyhow!("[modules.observer] {}: {}", e.path(), e.inner()))
+    }
+
+    fn run(self: Box<Self>, mut ctx: ModuleContext) -> ModuleFuture {
+        Box::pin(async move {
+            let figures = Figures::register(&ctx.metrics());
+            let client = ctx.client.clone();
+            let mut events = client.events();
+            let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
+            let detections = client.subscribe(channels::DETECTIONS.name).await?;
+            let rules = client.subscribe(channels::RULES.name).await?;
+            let speech = client.subscribe(channels::SPEECH.name).await?;
+            let latency = client
+                .publisher(channels::LATENCY.name, channels::headers::LATENCY)
+                .await?;
+            // Claims already open when the module starts are counted from their next change.
+            let mut claims = Claims::default();
+            let mut turns = Turns::default();
+            loop {
+                tokio::select! {
+                    _ = ctx.stopped() => return Ok(()),
+                    Some(d) = transcripts.recv() => match heard(&d.payload) {
+                        Heard::VadEnd { utterance, at_ms } => {
+                            figures.stages(turns.vad_end(&utterance, at_ms, d.ts_us));
+                        }
+                        Heard::Final(t) => {
+                            let label = SatelliteLabel { satellite: t.satellite.clone() };
+                            figures.asr_utterances.get_or_create(&label).inc();
+                            figures
+                                .asr_processing
+                                .get_or_create(&label)
+                                .observe(t.processing_ms as f64 / 1000.0);
+                            figures.stages(turns.transcript(&t.utterance, d.ts_us));
+                        }
+                        Heard::Other => {}
+                    },
+                    Some(d) = detections.recv() => figures.detections(&d),
+                    Some(d) = rules.recv() => {
+                        if let Ok(r) = serde_json::from_slice::<RuleChange>(&d.payload) {
+                            let on_speech = r.because.iter().any(|b| b.starts_with("heard("));
+                            let at_ms = u64::try_from(r.ts_ms).unwrap_or(0);
+                            figures.stages(turns.rule(at_ms, on_speech));
+                        }
+                    }
+                    Some(d) = speech.recv() => {
+                        if starts_utterance(&d.payload)
+                            && let Some(turn) = turns.reply_audio(d.ts_us)
+                        {
+                            figures.reply(&turn);
+                            // One small message per turn; a full send queue drops it (counted by the SDK).
+                            let message = serde_json::to_vec(&latency_message(&turn)).unwrap_or_default();
+                            let _ = latency.try_publish(message);
+                        }
+                    }
+                    event = events.recv() => match event {
+                        Ok(ClientEvent::ChannelAdded(info)) => {
+                            if let Some(u) = info.name.strip_prefix(channels::ASR_CLAIM_PREFIX) {
+                                let header = serde_json::from_str(&info.header).unwrap_or_default();
+                                figures.claim(claims.added(u, &claims::holder(&header, &info.owner)));
+                            }
+                        }
+                        Ok(ClientEvent::HeaderChanged { name, header, .. }) => {
+                            if let Some(u) = name.strip_prefix(channels::ASR_CLAIM_PREFIX) {
+                                let header: serde_json::Value =
+                                    serde_json::from_str(&header).unwrap_or_default();
+                                if header.get("done").and_then(|d| d.as_bool()) == Some(true) {
+                                    claims.done(u);
+                                }
+                            }
+                        }
+                        Ok(ClientEvent::ChannelRemoved { name, .. }) => {
+                            if let Some(u) = name.strip_prefix(channels::ASR_CLAIM_PREFIX)
+                                && let Some(news) = claims.removed(u)
+                            {
+                                figures.claim(news);
+                            }
+                        }
+                        Ok(_) => {}
+                        // Missed events only cost a count or two; the channel of news goes on.
+                        Err(RecvError::Lagged(n)) => {
+                            tracing::debug!(missed = n, "observer fell behind the hub's channel news");
+                        }
+                        Err(RecvError::Closed) => return Ok(()),
+                    },
+                    else => return Ok(()),
+                }
+            }
+        })
+    }
+}

@@ -1,0 +1,226 @@
+//! The vision module (`[modules.vision]`): runs the `agent-vision` detectors on the camera channel and publishes
+//! what they find on `Agent.faces`, `Agent.motion`, `Agent.codes` and `Agent.detections` (and optionally a `gaze`
+//! command on `Agent.avatar`). See docs/vision.md for the messages.
+//!
+//! Frames are never queued for the detectors: while one frame is being processed on a blocking thread, newer
+//! frames replace older ones in the subscription's drop-oldest queue, and the next round takes only the newest,
+//! counting the rest as skipped. The subscription is sticky, so when the camera channel disappears and comes back
+//! (a browser reconnects, a test publishes again) frames flow again by themselves; a sequence number that starts
+//! over resets the detectors' memory of the old stream.
+
+use std::collections::VecDeque;
+
+use agent_vision::pipeline::FaceDetection;
+use agent_vision::settings::VisionSettings;
+use agent_vision::wire::{self, CountersMsg};
+use agent_vision::{FrameDetections, ProcessError, VisionPipeline};
+use anyhow::Context;
+use bytes::Bytes;
+use flow::Publisher;
+use flow::tick::Tick;
+use serde::Serialize;
+use tracing::{debug, info, warn};
+
+use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+
+use agent_contract::channels::{self, AVATAR, CODES, DETECTIONS, FACES, MOTION};
+
+/// How many recent frame times the status report summarises.
+const RECENT_FRAMES: usize = 64;
+
+/// The built-in vision module.
+#[derive(Debug, Default)]
+pub struct VisionModule;
+
+impl Module for VisionModule {
+    fn name(&self) -> &'static str {
+        "vision"
+    }
+
+    fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
+        let settings = VisionSettings::from_json(params).context("[modules.vision]")?;
+        let pipeline = settings.pipeline_params().context("[modules.vision]")?;
+        // The network's file is checked here too, so that a missing model stops the server at start with the key
+        // named, before any module runs.
+        if let Some(FaceDetection::CenterFace(net)) = &pipeline.faces {
+            net.check_model().context("[modules.vision]")?;
+        }
+        Ok(())
+    }
+
+    fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
+        Box::pin(run(ctx))
+    }
+}
+
+/// The module's output channels.
+struct Outputs {
+    faces: Publisher,
+    motion: Publisher,
+    codes: Publisher,
+    detections: Publisher,
+    avatar: Option<Publisher>,
+}
+
+/// Counters and recent frame times for `/api/status` and `Agent.detections`.
+#[derive(Debug, Default)]
+struct Figures {
+    counters: CountersMsg,
+    dropped_by_queue: u64,
+    recent_ms: VecDeque<f64>,
+    last_seq: Option<u64>,
+    stream_restarts: u64,
+}
+
+async fn run(mut ctx: ModuleContext) -> anyhow::Result<()> {
+    let settings = VisionSettings::from_json(&ctx.params).context("[modules.vision]")?;
+    let params = settings.pipeline_params().context("[modules.vision]")?;
+    agent_vision::set_opencv_threads(settings.threads).context("[modules.vision] threads")?;
+    // Loading the network (7 MB) or the cascades (a megabyte of XML each) blocks: keep it off the async threads.
+    let mut pipeline = tokio::task::spawn_blocking(move || VisionPipeline::new(params))
+        .await
+        .context("starting the vision detectors")?
+        .context("[modules.vision]")?;
+
+    let client = ctx.client.clone();
+    let outputs = Outputs {
+        faces: client
+            .publisher(FACES.name, &channels::headers::vision("faces"))
+            .await?,
+        motion: client
+            .publisher(MOTION.name, &channels::headers::vision("motion"))
+            .await?,
+        codes: client
+            .publisher(CODES.name, &channels::headers::vision("codes"))
+            .await?,
+        detections: client
+            .publisher(DETECTIONS.name, &channels::headers::vision("detections"))
+            .await?,
+        avatar: if settings.avatar_gaze {
+            match client
+                .publisher(
+                    AVATAR.name,
+                    r#"{"format":"json","commands":["gaze"],"source":"vision"}"#,
+                )
+                .await
+            {
+                Ok(publisher) => Some(publisher),
+                Err(e) => {
+                    warn!(
+                        "vision: not publishing gaze on {} ({e}); it stays in {}",
+                        AVATAR.name, DETECTIONS.name
+                    );
+                    None
+                }
+            }
+        } else {
+            None
+        },
+    };
+    let source = client.subscribe(&settings.source).await?;
+    info!(source = %settings.source, "vision: watching {} for faces, motion and codes", settings.source);
+
+    let mut figures = Figures::default();
+    let mut ticks = ctx.ticks();
+    loop {
+        tokio::select! {
+            () = ctx.stopped() => break,
+            latest = source.recv_latest() => {
+                let Some((frame, skipped)) = latest else { break };
+                figures.counters.skipped += skipped as u64;
+                figures.dropped_by_queue = source.dropped();
+                if figures.last_seq.is_some_and(|last| frame.seq <= last) {
+                    // The channel was removed and added again: a new stream starts at sequence 1.
+                    figures.stream_restarts += 1;
+                    pipeline.reset_stream();
+                    debug!(seq = frame.seq, "vision: source stream restarted");
+                }
+                figures.last_seq = Some(frame.seq);
+                let (back, result) = tokio::task::spawn_blocking(move || {
+                    let result = pipeline.process_jpeg(&frame.payload, frame.seq, frame.ts_us);
+                    (pipeline, result)
+                })
+                .await
+                .context("vision worker panicked")?;
+                pipeline = back;
+                match result {
+                    Ok(detections) => {
+                        figures.counters.processed += 1;
+                        if figures.recent_ms.len() == RECENT_FRAMES {
+                            figures.recent_ms.pop_front();
+                        }
+                        figures.recent_ms.push_back(detections.timings.total.as_secs_f64() * 1000.0);
+                        publish(&outputs, &detections, figures.counters).await;
+                    }
+                    Err(ProcessError::Frame(reason)) => {
+                        figures.counters.bad += 1;
+                        // Every bad frame is counted; the log shows the first ones and then every hundredth.
+                        if figures.counters.bad <= 10 || figures.counters.bad % 100 == 0 {
+                            warn!(bad_frames = figures.counters.bad, "vision: skipped a bad frame on {}: {reason}", settings.source);
+                        }
+                    }
+                    Err(ProcessError::Detector(e)) => return Err(e).context("vision detector failed"),
+                }
+            }
+            tick = ticks.recv() => {
+                if matches!(tick, Ok(Tick::OneSec)) {
+                    ctx.report(status(&figures));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+async fn publish(outputs: &Outputs, detections: &FrameDetections, counters: CountersMsg) {
+    if let Some(faces) = wire::faces_msg(detections) {
+        send(&outputs.faces, &faces).await;
+    }
+    if let Some(motion) = wire::motion_msg(detections) {
+        send(&outputs.motion, &motion).await;
+    }
+    if let Some(codes) = wire::codes_msg(detections) {
+        send(&outputs.codes, &codes).await;
+    }
+    send(
+        &outputs.detections,
+        &wire::detections_msg(detections, counters),
+    )
+    .await;
+    if let Some(avatar) = &outputs.avatar {
+        send(avatar, &wire::gaze_command(detections)).await;
+    }
+}
+
+async fn send<T: Serialize>(publisher: &Publisher, message: &T) {
+    match serde_json::to_vec(message) {
+        Ok(json) => {
+            if let Err(e) = publisher.publish(Bytes::from(json)).await {
+                debug!("vision: publishing on {} failed: {e}", publisher.name());
+            }
+        }
+        Err(e) => warn!(
+            "vision: cannot encode a message for {}: {e}",
+            publisher.name()
+        ),
+    }
+}
+
+fn status(figures: &Figures) -> serde_json::Value {
+    let mut recent: Vec<f64> = figures.recent_ms.iter().copied().collect();
+    recent.sort_by(f64::total_cmp);
+    let at = |q: f64| {
+        recent
+            .get(((recent.len() as f64 * q) as usize).min(recent.len().saturating_sub(1)))
+            .copied()
+    };
+    serde_json::json!({
+        "processed": figures.counters.processed,
+        "skipped": figures.counters.skipped,
+        "dropped_by_queue": figures.dropped_by_queue,
+        "bad": figures.counters.bad,
+        "stream_restarts": figures.stream_restarts,
+        "frame_ms_median": at(0.5),
+        "frame_ms_p95": at(0.95),
+    })
+}

@@ -1,0 +1,183 @@
+//! The agent's channels: name, kind (1:N stream or 1:1 service) and, where the producer is fixed, its header.
+//! A channel name appears nowhere else in the workspace (`tests/contract.rs` greps for stray literals).
+
+/// A stream (1:N) or a service (1:1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    Stream,
+    Service,
+}
+
+/// One channel of the agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Channel {
+    pub name: &'static str,
+    pub kind: Kind,
+    /// Who publishes it and what it carries.
+    pub doc: &'static str,
+}
+
+const fn stream(name: &'static str, doc: &'static str) -> Channel {
+    Channel {
+        name,
+        kind: Kind::Stream,
+        doc,
+    }
+}
+
+const fn service(name: &'static str, doc: &'static str) -> Channel {
+    Channel {
+        name,
+        kind: Kind::Service,
+        doc,
+    }
+}
+
+/// The microphone: s16le mono PCM at 22050 Hz in 20 ms chunks, from the page holding the role (or any satellite).
+pub const AUDIO: Channel = stream("Agent.audio", "microphone PCM (browser link)");
+/// The camera: 640x360 JPEG frames at up to 15 fps.
+pub const VIDEO: Channel = stream("Agent.video", "camera JPEG frames (browser link)");
+/// The camera in grey (the Y plane as JPEG), only while someone subscribes.
+pub const VIDEO_Y: Channel = stream("Agent.video.y", "grey camera frames (video_y module)");
+/// Spectra of the microphone (f32le magnitudes), only while someone subscribes.
+pub const AUDIO_FFT: Channel = stream("Agent.audio.fft", "microphone spectra (audio_fft module)");
+/// Control messages from the page (`{"say": ...}`, `{"asr": bool}`...).
+pub const CTRL: Channel = stream("Agent.ctrl", "page control messages (browser link)");
+/// Avatar commands: blink, gaze, mood, visemes, speech_stop, say captions.
+pub const AVATAR: Channel = stream("Agent.avatar", "avatar commands (tts module)");
+/// Synthesised speech: `[utterance u32][offset u32][s16le PCM]`.
+pub const SPEECH: Channel = stream("Agent.speech", "speech PCM (tts module)");
+/// The `Agent.say` service: text in, utterance number out.
+pub const SAY: Channel = service("Agent.say", "speak a text (tts module)");
+/// Final transcripts and voice-activity events.
+pub const TRANSCRIPT: Channel = stream("Agent.transcript", "transcripts (whisper-sat relay)");
+/// Faces of each processed frame ([`crate::detections::Faces`]).
+pub const FACES: Channel = stream("Agent.faces", "face boxes (vision module)");
+/// Motion of each processed frame ([`crate::detections::MotionReport`]).
+pub const MOTION: Channel = stream("Agent.motion", "motion (vision module)");
+/// New appearances of codes ([`crate::detections::Codes`]).
+pub const CODES: Channel = stream("Agent.codes", "QR and barcodes (vision module)");
+/// Everything seen in one frame ([`crate::detections::Detections`]): what the overlay draws, the gaze follows and
+/// the brain perceives.
+pub const DETECTIONS: Channel = stream(
+    "Agent.detections",
+    "all detections of a frame (vision module)",
+);
+/// The rule trace of the brain.
+pub const RULES: Channel = stream("Agent.rules", "rule trace (brain module)");
+/// Whether the session is being recorded, and where ([`crate::recording::RecordingState`]).
+pub const RECORDING: Channel = stream("Agent.recording", "recording state (recorder module)");
+/// One message per conversational turn with its stage latencies ([`crate::latency::TurnLatency`]).
+pub const LATENCY: Channel = stream("Agent.latency", "turn latencies (observer module)");
+/// Where whisper satellites submit transcripts for the relay to publish once.
+pub const ASR_SUBMIT: Channel = service(
+    "Agent.asr.submit",
+    "transcript submission (whisper-sat relay)",
+);
+/// The prefix of the per-utterance claim channels of whisper satellites (`Agent.asr.claim.<start>`).
+pub const ASR_CLAIM_PREFIX: &str = "Agent.asr.claim.";
+/// The prefix of the presence channels of whisper satellites (`Agent.asr.sat.<name>`).
+pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
+
+/// Every channel with a fixed name.
+pub const ALL: &[Channel] = &[
+    AUDIO, VIDEO, VIDEO_Y, AUDIO_FFT, CTRL, AVATAR, SPEECH, SAY, TRANSCRIPT, FACES, MOTION, CODES,
+    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT,
+];
+
+/// Headers of the channels whose producer is fixed.
+pub mod headers {
+    /// `Agent.audio` from the page.
+    pub const AUDIO: &str =
+        r#"{"format":"s16le","rate":22050,"channels":1,"chunk_ms":20,"source":"browser"}"#;
+    /// `Agent.video` from the page.
+    pub const VIDEO: &str =
+        r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;
+    /// `Agent.ctrl` from the page.
+    pub const CTRL: &str = r#"{"format":"json","source":"browser"}"#;
+    /// `Agent.video.y`.
+    pub const VIDEO_Y: &str =
+        r#"{"format":"jpeg","colour":"grey","width":640,"height":360,"source":"Agent.video"}"#;
+    /// `Agent.avatar`.
+    pub const AVATAR: &str = r#"{"format":"json","commands":["blink","gaze","mood","visemes","speech_stop","say"],"source":"tts"}"#;
+    /// `Agent.say`: what it takes and answers.
+    pub const SAY: &str = r#"{"request":{"text":"string","voice":"optional espeak-ng voice","rate_wpm":"optional","pitch":"optional"},"cancel":{"cancel":"all | utterance number"},"answer":{"utterance":"number","cancelled":"[numbers]"}}"#;
+    /// `Agent.rules`.
+    pub const RULES: &str = r#"{"format":"json","content":"rule trace","doc":"docs/brain.md"}"#;
+    /// `Agent.transcript`.
+    pub const TRANSCRIPT: &str = r#"{"mime":"application/json"}"#;
+    /// `Agent.recording`.
+    pub const RECORDING: &str = r#"{"format":"json","content":"recording state","source":"recorder","doc":"docs/recording.md"}"#;
+    /// `Agent.latency`.
+    pub const LATENCY: &str = r#"{"format":"json","content":"turn latencies","source":"observer","doc":"docs/metrics.md"}"#;
+
+    /// The header of one of the vision module's JSON channels (`content`: faces, motion, codes or detections).
+    pub fn vision(content: &str) -> String {
+        serde_json::json!({"format": "json", "source": "vision", "content": content, "doc": "docs/vision.md"})
+            .to_string()
+    }
+
+    /// `Agent.audio.fft`: spectra every `hop` samples ([`crate::spectrum`]).
+    pub fn audio_fft(hop: usize) -> String {
+        use crate::spectrum::{BINS, FFT_SIZE, FORMAT, RATE, SCALE, WINDOW};
+        serde_json::json!({
+            "format": FORMAT, "size": FFT_SIZE, "bins": BINS, "rate": RATE, "window": WINDOW, "hop": hop,
+            "scale": SCALE,
+        })
+        .to_string()
+    }
+
+    /// `Agent.speech`: PCM framed per utterance (docs/browser-link.md).
+    pub fn speech(rate: u32, chunk_ms: u32) -> String {
+        serde_json::json!({
+            "format": "s16le", "rate": rate, "channels": 1, "chunk_ms": chunk_ms,
+            "framing": "utterance-offset", "source": "tts",
+        })
+        .to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_unique_and_valid_hub_names() {
+        let mut names: Vec<&str> = ALL.iter().map(|c| c.name).collect();
+        names.sort_unstable();
+        let before = names.len();
+        names.dedup();
+        assert_eq!(before, names.len(), "a name is listed twice");
+        for c in ALL {
+            assert!(c.name.starts_with("Agent."), "{}", c.name);
+            assert!(
+                c.name
+                    .chars()
+                    .all(|ch| ch.is_ascii_alphanumeric() || ch == '.' || ch == '_')
+            );
+        }
+    }
+
+    #[test]
+    fn fixed_headers_are_json_objects() {
+        for h in [
+            headers::AUDIO,
+            headers::VIDEO,
+            headers::CTRL,
+            headers::VIDEO_Y,
+            headers::AVATAR,
+            headers::SAY,
+            headers::RULES,
+            headers::TRANSCRIPT,
+            headers::LATENCY,
+            headers::RECORDING,
+            &headers::vision("faces"),
+            &headers::speech(22050, 20),
+            &headers::audio_fft(1024),
+        ] {
+            let v: serde_json::Value = serde_json::from_str(h).expect(h);
+            assert!(v.is_object(), "{h}");
+        }
+        assert!(headers::VIDEO_Y.contains(VIDEO.name));
+    }
+}

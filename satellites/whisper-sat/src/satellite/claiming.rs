@@ -1,0 +1,145 @@
+//! The hub side of a claim: taking an utterance by creating its claim channel, and finishing it by submitting the
+//! transcript to the relay and marking the claim done in its header (`crate::claim` has the protocol).
+
+use std::time::{Duration, Instant};
+
+use flow::{Client, ErrorCode, Publisher};
+
+use super::relay;
+use super::worker::Finished;
+use crate::claim::{self, CLAIM_PREFIX, ClaimHeader, PauseTurn};
+use crate::ledger::{Ledger, Pending, SAME_SPEECH_US, Standing};
+use crate::transcriber::{Outcome, TranscribeError};
+use crate::transcript::TranscriptMessage;
+
+/// How long one submission of a transcript waits for the relay's answer.
+const SUBMIT_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Takes the next claimable utterance (paused or ended) and tries to claim it. Returns it with its claim channel on
+/// success, and, when turns are judged and it is paused, the pause its header names as being decided.
+pub(super) async fn try_claim(
+    client: &Client,
+    ledger: &mut Ledger,
+    name: &str,
+    judge_turns: bool,
+    now: Instant,
+) -> Option<(Pending, Publisher, Option<PauseTurn>)> {
+    while let Some(p) = ledger.next_claimable(now) {
+        let u = &p.utterance;
+        // A satellite whose segmentation differs slightly names the same speech differently: an overlapping claim
+        // by another name means it is taken too.
+        let span = (u.start_us, u.speech_end_us);
+        let overlapping = match client.channels().await {
+            Ok(list) => list.into_iter().any(|c| {
+                c.name.starts_with(CLAIM_PREFIX)
+                    && claim::claimed_utterance(&c.name) != Some(u.id.as_str())
+                    && ClaimHeader::parse(&c.header)
+                        .is_some_and(|h| claim::overlaps(h.interval(), span, SAME_SPEECH_US))
+            }),
+            Err(e) => {
+                tracing::warn!("listing channels: {e}");
+                ledger.put_back(p, Standing::Waiting, now + Duration::from_secs(1));
+                return None;
+            }
+        };
+        if overlapping {
+            ledger.put_back(p, Standing::Taken, now);
+            continue;
+        }
+        // A paused utterance is claimed to decode that pause: the others hold their end of the turn for its
+        // verdict from the moment they see the claim.
+        let pause = (judge_turns && !p.ended).then_some(PauseTurn {
+            speech_end_us: u.speech_end_us,
+            verdict: None,
+        });
+        let header = ClaimHeader {
+            pause,
+            ..ClaimHeader::new(u.start_us, u.speech_end_us, name, !p.ended)
+        }
+        .to_json();
+        match client
+            .publisher(&claim::claim_channel(&u.id), &header)
+            .await
+        {
+            Ok(claim) => {
+                tracing::info!(id = %u.id, speculative = !p.ended, "claimed utterance");
+                return Some((p, claim, pause));
+            }
+            Err(e) if e.code() == Some(ErrorCode::Exists) => {
+                tracing::debug!(id = %u.id, "utterance taken by another satellite");
+                ledger.put_back(p, Standing::Taken, now);
+            }
+            Err(e) => {
+                tracing::warn!(id = %u.id, "claiming: {e}");
+                let id = u.id.clone();
+                ledger.put_back(p, Standing::Waiting, now);
+                ledger.retry_later(&id, now + Duration::from_secs(1));
+                return None;
+            }
+        }
+    }
+    None
+}
+
+/// Submits an accepted transcript (retrying while the relay role changes hands) and marks the claim done.
+pub(super) async fn finish(
+    client: &Client,
+    satellite: &str,
+    model: &str,
+    f: &Finished,
+    ledger: &mut Ledger,
+) {
+    let u = &f.utterance;
+    match &f.outcome {
+        Ok(Outcome::Speech(d)) => {
+            let msg = TranscriptMessage {
+                utterance: u.id.clone(),
+                text: d.text.clone(),
+                start_us: u.start_us,
+                end_us: u.speech_end_us,
+                satellite: satellite.to_owned(),
+                model: model.to_owned(),
+                processing_ms: d.processing.as_millis() as u64,
+                is_final: true,
+                speculative: f.speculative,
+                full_window_retry: d.full_window_retry,
+                turn: f.turn,
+                threads: u32::try_from(d.threads).ok(),
+            };
+            tracing::info!(id = %u.id, ms = msg.processing_ms, threads = d.threads, speculative = f.speculative, turn = ?f.turn, text = %msg.text, "transcribed");
+            let payload = serde_json::to_vec(&msg).unwrap_or_default();
+            let deadline = Instant::now() + Duration::from_secs(15);
+            loop {
+                match client
+                    .call(relay::SUBMIT, payload.clone(), SUBMIT_TIMEOUT)
+                    .await
+                {
+                    Ok(_) => break,
+                    Err(e) if Instant::now() < deadline => {
+                        tracing::debug!("submitting transcript: {e}; retrying");
+                        tokio::time::sleep(Duration::from_millis(200)).await;
+                    }
+                    Err(e) => {
+                        tracing::error!(id = %u.id, "transcript lost: {e}");
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(Outcome::Rejected(why, d)) => {
+            tracing::info!(id = %u.id, ?why, text = %d.text, "no transcript: filtered as non-speech");
+        }
+        Err(TranscribeError::Aborted) => {
+            tracing::info!(id = %u.id, "no transcript: recognition was switched off during the utterance");
+        }
+        Err(e) => tracing::error!(id = %u.id, "transcription failed: {e}"),
+    }
+    ledger.finished(&u.id, u.start_us, u.speech_end_us);
+    let header = ClaimHeader {
+        done: true,
+        ..ClaimHeader::new(u.start_us, u.speech_end_us, satellite, f.speculative)
+    };
+    if let Err(e) = f.claim.set_header(&header.to_json()).await {
+        tracing::warn!(id = %u.id, "marking the claim done: {e}");
+    }
+}
