@@ -42,28 +42,29 @@ test: deps build-debug model model-base model-face python
 	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
 
 ## Benchmarks against their baselines, side by side (not part of the tests): every one is a binary of one crate,
-## `agent-bench` (bench/). Each bench's output is kept in artifacts/bench/NAME.log, and `bench-summary` then writes
-## their SUMMARY lines into docs/benchmarks.md's marked blocks with the date and commit they were taken at.
+## `agent-bench` (bench/), run from the release build that `make run` uses. Each bench's output is kept in
+## artifacts/bench/NAME.log, and `bench-summary` then writes their SUMMARY lines into docs/benchmarks.md's marked
+## blocks with the date and commit they were taken at.
 BENCH_LOGS := artifacts/bench
 bench: .SHELLFLAGS := -o pipefail -c
 bench: deps model-release model-face build
 	mkdir -p $(BENCH_LOGS)
-	$(CARGO) run --release -p agent-bench --bin hub-bench -- --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
-	$(CARGO) run --release -p agent-bench --bin voice-bench | tee $(BENCH_LOGS)/voice-bench.log
+	$(TARGET_DIR)/release/hub-bench --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
+	$(TARGET_DIR)/release/voice-bench | tee $(BENCH_LOGS)/voice-bench.log
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
-	VISION_PYTHON=bench/vision/.venv/bin/python $(CARGO) run --release -p agent-bench --bin vision-bench -- --iterations 15 --rounds 3 --write-doc docs/bench-vision.md | tee $(BENCH_LOGS)/vision-bench.log
-	$(CARGO) run --release -p agent-bench --bin vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_browser | tee $(BENCH_LOGS)/bench_browser.log
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_avatar | tee $(BENCH_LOGS)/bench_avatar.log
+	VISION_PYTHON=bench/vision/.venv/bin/python $(TARGET_DIR)/release/vision-bench --iterations 15 --rounds 3 --write-doc docs/bench-vision.md | tee $(BENCH_LOGS)/vision-bench.log
+	$(TARGET_DIR)/release/vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_browser | tee $(BENCH_LOGS)/bench_browser.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_avatar | tee $(BENCH_LOGS)/bench_avatar.log
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
-	$(CARGO) run --release -p agent-bench --bin asr-bench -- --write docs/bench-asr.md | tee $(BENCH_LOGS)/asr-bench.log
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin voice-latency -- --write docs/bench-voice-latency.md | tee $(BENCH_LOGS)/voice-latency.log
+	$(TARGET_DIR)/release/asr-bench --write docs/bench-asr.md | tee $(BENCH_LOGS)/asr-bench.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/voice-latency --write docs/bench-voice-latency.md | tee $(BENCH_LOGS)/voice-latency.log
 	$(MAKE) python
 	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PYTHONUNBUFFERED=1 satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md | tee $(BENCH_LOGS)/bench_python.log
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin bench_record -- --write docs/bench-record.md | tee $(BENCH_LOGS)/bench_record.log
-	AGENT_BIN_DIR=$(TARGET_DIR)/release $(CARGO) run --release -p agent-bench --bin federation-bench -- --write docs/bench-federation.md | tee $(BENCH_LOGS)/federation-bench.log
-	$(CARGO) run --release -p agent-bench --bin bench-summary -- --logs $(BENCH_LOGS) --doc docs/benchmarks.md
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_record --write docs/bench-record.md | tee $(BENCH_LOGS)/bench_record.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/federation-bench --write docs/bench-federation.md | tee $(BENCH_LOGS)/federation-bench.log
+	$(TARGET_DIR)/release/bench-summary --logs $(BENCH_LOGS) --doc docs/benchmarks.md
 
 ## Coverage-guided fuzzing of the protocol decoder and the federation's sample stamp (not in CI).
 fuzz:

@@ -9,7 +9,7 @@ import pytest
 from conftest import REPO, fits
 from flow import _native, agent
 
-VECTORS = REPO / "contract" / "vectors"
+VECTORS = REPO / "crates" / "contract" / "vectors"
 
 
 def vector(name):
