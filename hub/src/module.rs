@@ -31,7 +31,7 @@ pub trait Module: Send + 'static {
     fn check(&self, _params: &serde_json::Value) -> anyhow::Result<()> {
         Ok(())
     }
-    /// Runs until `ctx.shutdown` fires (return `Ok`) or a fatal error.
+    /// Runs until `ctx.stopped()` resolves (return `Ok`) or a fatal error.
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture;
 }
 
@@ -44,6 +44,26 @@ pub struct ModuleContext {
     pub params: serde_json::Value,
     pub shutdown: watch::Receiver<bool>,
     shared: Arc<Shared>,
+}
+
+/// The server's shutdown signal as a module's helpers hold it ([`ModuleContext::stopping`]).
+#[derive(Debug, Clone)]
+pub struct Stopping(watch::Receiver<bool>);
+
+impl Stopping {
+    /// Resolves once the server stops its modules, exactly as [`ModuleContext::stopped`] does.
+    pub async fn stopped(&mut self) {
+        until_stopped(&mut self.0).await;
+    }
+}
+
+/// Waits until the shutdown flag is set (or its sender is gone, which also means the server is stopping).
+async fn until_stopped(shutdown: &mut watch::Receiver<bool>) {
+    while !*shutdown.borrow() {
+        if shutdown.changed().await.is_err() {
+            return;
+        }
+    }
 }
 
 impl ModuleContext {
@@ -59,11 +79,13 @@ impl ModuleContext {
 
     /// Resolves when the server shuts down.
     pub async fn stopped(&mut self) {
-        while !*self.shutdown.borrow() {
-            if self.shutdown.changed().await.is_err() {
-                return;
-            }
-        }
+        until_stopped(&mut self.shutdown).await;
+    }
+
+    /// The same signal for the module's own helpers, which cannot borrow the context: a module that hands its work
+    /// to functions of its own gives them this, and they wait on [`Stopping::stopped`].
+    pub fn stopping(&self) -> Stopping {
+        Stopping(self.shutdown.clone())
     }
 
     /// The registry behind `/metrics`, where a module adds its own figures.

@@ -8,7 +8,7 @@ use super::on_demand;
 use super::spectrum::{SpectrumAnalyser, to_le_bytes};
 use agent_contract::channels;
 use agent_contract::spectrum::MAX_HOP;
-use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+use flow_hub::module::{Module, ModuleContext, ModuleFuture, Stopping};
 
 /// The `audio_fft` module.
 #[derive(Debug, Default)]
@@ -59,27 +59,23 @@ impl Module for AudioFft {
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
             let hop = AudioFftParams::from_json(&ctx.params)?.hop;
-            run(ctx.client.clone(), hop, ctx.shutdown.clone()).await;
+            run(ctx.client.clone(), hop, ctx.stopping()).await;
             Ok(())
         })
     }
 }
 
 /// Runs until shutdown.
-pub async fn run(
-    client: flow::Client,
-    hop: usize,
-    mut shutdown: tokio::sync::watch::Receiver<bool>,
-) {
+pub async fn run(client: flow::Client, hop: usize, mut stop: Stopping) {
     let header = channels::headers::audio_fft(hop);
     let Some(publisher) =
-        on_demand::output(&client, channels::AUDIO_FFT.name, &header, &mut shutdown).await
+        on_demand::output(&client, channels::AUDIO_FFT.name, &header, &mut stop).await
     else {
         return;
     };
     let mut listening = publisher.subscribers();
     loop {
-        if !on_demand::until_listened(&mut listening, &mut shutdown).await {
+        if !on_demand::until_listened(&mut listening, &mut stop).await {
             return;
         }
         let source = match client.subscribe(channels::AUDIO.name).await {
@@ -93,7 +89,7 @@ pub async fn run(
         let mut analyser = SpectrumAnalyser::new(hop);
         loop {
             tokio::select! {
-                _ = shutdown.changed() => return,
+                () = stop.stopped() => return,
                 _ = on_demand::unlistened(&mut listening) => break,
                 got = source.recv() => {
                     let Some(data) = got else { return };

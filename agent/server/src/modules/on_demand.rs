@@ -2,6 +2,7 @@
 
 use std::time::Duration;
 
+use flow_hub::module::Stopping;
 use tokio::sync::watch;
 
 /// Creates the module's output channel, retrying every 2 s (the hub may still be starting); `None` at shutdown.
@@ -9,7 +10,7 @@ pub async fn output(
     client: &flow::Client,
     name: &str,
     header: &str,
-    shutdown: &mut watch::Receiver<bool>,
+    stop: &mut Stopping,
 ) -> Option<flow::Publisher> {
     loop {
         match client.publisher(name, header).await {
@@ -17,7 +18,7 @@ pub async fn output(
             Err(e) => {
                 tracing::warn!(error = %e, "cannot create {name}; retrying");
                 tokio::select! {
-                    _ = shutdown.changed() => return None,
+                    () = stop.stopped() => return None,
                     _ = tokio::time::sleep(Duration::from_secs(2)) => {}
                 }
             }
@@ -26,13 +27,10 @@ pub async fn output(
 }
 
 /// Waits until someone subscribes; false at shutdown.
-pub async fn until_listened(
-    listening: &mut watch::Receiver<bool>,
-    shutdown: &mut watch::Receiver<bool>,
-) -> bool {
+pub async fn until_listened(listening: &mut watch::Receiver<bool>, stop: &mut Stopping) -> bool {
     while !*listening.borrow_and_update() {
         tokio::select! {
-            _ = shutdown.changed() => return false,
+            () = stop.stopped() => return false,
             r = listening.changed() => if r.is_err() { return false },
         }
     }

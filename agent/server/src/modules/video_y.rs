@@ -8,12 +8,11 @@ use std::time::Instant;
 
 use serde::Deserialize;
 use serde_json::json;
-use tokio::sync::watch;
 
 use super::luma::grey_jpeg;
 use super::on_demand;
 use agent_contract::channels;
-use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+use flow_hub::module::{Module, ModuleContext, ModuleFuture, Stopping};
 
 /// The `video_y` module.
 #[derive(Debug, Default)]
@@ -64,11 +63,8 @@ impl Module for VideoY {
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
             let quality = VideoYParams::from_json(&ctx.params)?.quality;
-            let (client, shutdown) = (ctx.client.clone(), ctx.shutdown.clone());
-            run(client, quality, shutdown, move |figures| {
-                ctx.report(figures)
-            })
-            .await;
+            let (client, stop) = (ctx.client.clone(), ctx.stopping());
+            run(client, quality, stop, move |figures| ctx.report(figures)).await;
             Ok(())
         })
     }
@@ -81,14 +77,14 @@ const REPORT_EVERY: u64 = 30;
 pub async fn run(
     client: flow::Client,
     quality: u8,
-    mut shutdown: watch::Receiver<bool>,
+    mut stop: Stopping,
     report: impl Fn(serde_json::Value),
 ) {
     let Some(publisher) = on_demand::output(
         &client,
         channels::VIDEO_Y.name,
         channels::headers::VIDEO_Y,
-        &mut shutdown,
+        &mut stop,
     )
     .await
     else {
@@ -101,7 +97,7 @@ pub async fn run(
     let mut busy_us: u64 = 0;
     loop {
         // Idle until someone subscribes.
-        if !on_demand::until_listened(&mut listening, &mut shutdown).await {
+        if !on_demand::until_listened(&mut listening, &mut stop).await {
             return;
         }
         let source = match client.subscribe(channels::VIDEO.name).await {
@@ -114,7 +110,7 @@ pub async fn run(
         tracing::info!("{} has subscribers: converting", channels::VIDEO_Y.name);
         loop {
             tokio::select! {
-                _ = shutdown.changed() => return,
+                () = stop.stopped() => return,
                 _ = on_demand::unlistened(&mut listening) => break,
                 got = source.recv_latest() => {
                     let Some((data, older)) = got else { return };
