@@ -12,6 +12,7 @@
 //! Options: `--seconds N` per renderer and round (default 10), `--rounds N` (default 3). Needs a built
 //! `robot-agent` (found like the integration tests find it) and chromium.
 
+use agent_bench::percentile;
 use agent_contract::channels as ch;
 use std::time::Duration;
 
@@ -257,13 +258,4 @@ async fn measure(
         pixel_ratio,
         triangles,
     })
-}
-
-fn percentile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    s[((s.len() - 1) as f64 * q).round() as usize]
 }

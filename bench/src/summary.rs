@@ -2,6 +2,8 @@
 //! block between `<!-- summary:NAME -->` and `<!-- /summary:NAME -->` rewritten with them and when they were taken,
 //! so that no figure there is copied by hand.
 
+use agent_brain::WallClock;
+
 /// Why a document's blocks cannot be read or rewritten.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SummaryError {
@@ -122,34 +124,12 @@ pub fn replace_block(doc: &str, name: &str, body: &str) -> Result<String, Summar
     Ok(out)
 }
 
-/// Whether `year` has a 29th of February.
-fn is_leap(year: u64) -> bool {
-    (year.is_multiple_of(4) && !year.is_multiple_of(100)) || year.is_multiple_of(400)
-}
-
-/// The UTC day of a Unix time, `YYYY-MM-DD`, counted out year by year and month by month.
+/// The UTC day of a Unix time, `YYYY-MM-DD`, from the brain's calendar (`agent_brain::WallClock`).
 pub fn utc_date(unix_secs: u64) -> String {
-    let mut days = unix_secs / 86_400;
-    let mut year = 1970;
-    loop {
-        let in_year = if is_leap(year) { 366 } else { 365 };
-        if days < in_year {
-            break;
-        }
-        days -= in_year;
-        year += 1;
-    }
-    let february = if is_leap(year) { 29 } else { 28 };
-    let lengths = [31, february, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
-    let mut month = 1;
-    for length in lengths {
-        if days < length {
-            break;
-        }
-        days -= length;
-        month += 1;
-    }
-    format!("{year:04}-{month:02}-{:02}", days + 1)
+    // Seconds since 1970 fit i64 for the next 292 billion years; past that the date saturates.
+    let ms = i64::try_from(unix_secs).unwrap_or(i64::MAX / 1000) * 1000;
+    let day = WallClock::from_unix_ms(ms, 0);
+    format!("{:04}-{:02}-{:02}", day.year, day.month, day.day)
 }
 
 #[cfg(test)]
