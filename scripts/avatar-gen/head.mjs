@@ -30,7 +30,7 @@ const D = 0.09;
 const EYE_R = 0.0165; // eyeball radius: stylised, large eyes like the 2D face's
 const EYE_X = 0.034;
 const EYE_Y = C[1] + 0.003;
-const EYE_OUT = 0.0056; // how far the eyeball's front stands out of the skin
+const EYE_OUT = 0.0046; // how far the eyeball's front stands out of the skin
 const LID_R = EYE_R * 1.08;
 const MOUTH_Y = C[1] - 0.059;
 const MOUTH_W = 0.0195; // half-width of the lips
@@ -67,7 +67,7 @@ export const MATERIALS = [
   { name: "tongue", baseColor: linear(0xc9566a), roughness: 0.5 },
   { name: "sclera", baseColor: [1, 1, 1], roughness: 0.18 },
   { name: "iris", baseColor: [1, 1, 1], roughness: 0.15 },
-  { name: "hair", baseColor: [1, 1, 1], roughness: 0.42, doubleSided: true },
+  { name: "hair", baseColor: [1, 1, 1], roughness: 0.62, doubleSided: true },
   { name: "cloth", baseColor: [1, 1, 1], roughness: 0.82 },
   { name: "brows", baseColor: linear(0x35212c), roughness: 0.7 },
   { name: "lashes", baseColor: linear(0x1a1016), roughness: 0.6, doubleSided: true },
@@ -121,14 +121,20 @@ const gauss = (dx, sx, dy, sy) => Math.exp(-((dx / sx) ** 2) - (dy / sy) ** 2);
 /** The face's relief in front (nose, brow ridge, cheekbones, muzzle, chin) at (x, y) relative to the skull centre. */
 function relief(x, y) {
   const ax = Math.abs(x);
-  // Nose: a ridge that widens and rises from the bridge to a rounded tip, then ends sharply above the lip.
-  const tipY = -0.036;
-  const k = clamp((0.008 - y) / (0.008 - tipY), 0, 1);
-  let profile = y > 0.008 ? 0 : 0.22 + 0.78 * Math.pow(k, 1.4);
-  if (y < tipY) profile = Math.exp(-(((y - tipY) / 0.0075) ** 2));
-  const sigma = lerp(0.0052, 0.0105, k);
-  let z = 0.0115 * profile * Math.exp(-((x / sigma) ** 2));
-  z += 0.0024 * gauss(ax - 0.0095, 0.0042, y - (tipY - 0.001), 0.005); // nostril wings
+  // Nose: a narrow bridge from between the eyes that rises to a rounded tip, wings (alae) either side of the tip
+  // and a short underside (columella) that turns back into the lip sharply, so it casts its own small shadow.
+  const tipY = -0.034;
+  const k = clamp((0.012 - y) / (0.012 - tipY), 0, 1);
+  const under = y < tipY ? Math.exp(-(((y - tipY) / 0.0042) ** 2)) : 1;
+  const bridge = y > 0.012 ? Math.exp(-(((y - 0.012) / 0.006) ** 2)) * 0.2 : 0.2 + 0.8 * Math.pow(k, 1.25);
+  const sigma = lerp(0.0042, 0.0062, k);
+  let z = 0.0108 * bridge * under * Math.exp(-((x / sigma) ** 2));
+  z += 0.0032 * gauss(x, 0.0058, y - (tipY + 0.0005), 0.0052); // the ball of the tip
+  z += 0.0046 * gauss(ax - 0.0098, 0.0036, y - (tipY - 0.0022), 0.0036); // wings
+  z -= 0.0016 * gauss(ax - 0.0046, 0.0022, y - (tipY - 0.0062), 0.0018); // nostrils, under the tip
+  z -= 0.0012 * gauss(ax - 0.0145, 0.0018, y - (tipY - 0.001), 0.0055); // the crease behind each wing
+  // The philtrum: two soft ridges from the nose to the cupid's bow, a groove between them.
+  z += 0.0007 * gauss(ax - 0.0042, 0.0017, y + 0.05, 0.006) - 0.0004 * gauss(x, 0.0022, y + 0.05, 0.006);
   z += 0.0032 * Math.exp(-(((y - 0.034) / 0.009) ** 2)) * smoothstep(0.066, 0.03, ax); // brow ridge
   z += 0.0042 * gauss(ax - 0.043, 0.015, y + 0.014, 0.014); // cheekbones
   z += 0.0062 * gauss(x, 0.026, y + 0.062, 0.017); // the muzzle the lips sit on
@@ -217,7 +223,7 @@ const FIELDS = {
   tuck(p, info, k) {
     if (!info.lip || (info.upper ?? 1) > 0.5) return [0, 0, 0];
     const f = gauss(p[0], 0.03, 0, 1) * (1 - (info.upper ?? 0));
-    return [0, 0.0032 * k * f, -0.0042 * k * f];
+    return [0, 0.0012 * k * f, -0.0032 * k * f];
   },
   tongueOut(p, info, k) {
     if (!info.tongue) return [0, 0, 0];
@@ -234,7 +240,7 @@ const FIELDS = {
     if (info.rigid) return [0, 0, 0];
     const corner = gauss(p[0] - side * MOUTH_W, 0.013, p[1] - MOUTH_Y, 0.012);
     const cheek = info.lip ? 0 : gauss(p[0] - side * 0.038, 0.017, p[1] - MOUTH_Y - 0.03, 0.016);
-    return [side * 0.0028 * corner, 0.0036 * corner + 0.0022 * cheek, -0.0018 * corner + 0.0022 * cheek];
+    return [side * 0.0036 * corner, 0.005 * corner + 0.0028 * cheek, -0.0022 * corner + 0.0026 * cheek];
   },
   frown(p, info, side) {
     if (info.rigid) return [0, 0, 0];
@@ -243,8 +249,21 @@ const FIELDS = {
   },
 };
 
-/** The displacement of mouth target `name` at `p`. */
+/**
+ * The displacement of mouth target `name` at `p`. Skin under and around the lips (`info.lipBlend` > 0) moves
+ * partly as the lips do, so that pressing, tucking or parting them never opens a gap beside them.
+ */
 function mouthTarget(name, p, info) {
+  if (info.lipBlend) {
+    const { lipBlend, ...rest } = info;
+    const asSkin = lipTarget(name, p, rest);
+    const asLip = lipTarget(name, p, { ...rest, lip: true });
+    return add(scale(asSkin, 1 - lipBlend), scale(asLip, lipBlend));
+  }
+  return lipTarget(name, p, info);
+}
+
+function lipTarget(name, p, info) {
   /** @type {V3} */
   let d = [0, 0, 0];
   const addField = (field, amount) => {
@@ -258,7 +277,11 @@ function mouthTarget(name, p, info) {
     addField("round", s.round);
     addField("press", s.lipPress);
     addField("part", Math.max(0, s.teeth - 0.5) * 2 * (1 - s.jaw) * (1 - s.lipPress));
-    if (name === "viseme_FF") addField("tuck", 1);
+    if (name === "viseme_FF") {
+      // The lower lip rolls in under the upper teeth, which show under the lifted upper lip.
+      addField("tuck", 1);
+      addField("part", 0.8);
+    }
     if (name === "viseme_TH") addField("tongueOut", s.tongue);
     else if (name === "viseme_DD" || name === "viseme_nn") addField("tongueUp", s.tongue);
     return d;
@@ -293,6 +316,56 @@ function skullPart(nu, nv) {
   return part;
 }
 
+/**
+ * The skin around the eyes: it drapes over the eyeball (a sphere just inside the lids', blended smoothly into the
+ * face, so no ring shows where they meet) and, inside the eye's opening plus a margin the lids cover, sinks behind
+ * it: the grid's jagged edge there stays hidden under the lids.
+ */
+function eyeHug(p, eyes, sink = true) {
+  const [x, y] = p;
+  let q = p;
+  eyes.forEach((e, k) => {
+    const hugR = EYE_R * 1.0;
+    const dx = x - e[0];
+    const dy = y - e[1];
+    const rho = Math.hypot(dx, dy);
+    if (rho >= hugR * 1.6) return;
+    const g = lidGeometry(e, k === 0 ? 1 : -1);
+    const l = Math.asin(clamp(dy / hugR, -1, 1));
+    const h = Math.asin(clamp(dx / (hugR * Math.cos(l)), -1, 1));
+    const m = 0.1;
+    const inside = rho < hugR && Math.abs(h) < g.hc + m && l < g.upperEdge(h) + m && l > g.lowerEdge(h) - m;
+    if (inside && sink) q = [x, y, e[2] - 0.002];
+    else {
+      const hug = rho < hugR ? e[2] + Math.sqrt(hugR * hugR - rho * rho) : -Infinity;
+      q = [x, y, smax(q[2], hug, 0.005)];
+    }
+  });
+  return /** @type {V3} */ (q);
+}
+
+/** The skin's colour at (x, y) on the front of the face (the lids take the same, so they blend into it). */
+function skinColour(x, y) {
+  // Blush on the cheeks.
+  const blush = gauss(Math.abs(x) - 0.043, 0.016, y - (MOUTH_Y + 0.034), 0.013);
+  let c = mix3(SKIN, BLUSH, 0.3 * blush);
+  // Skin is not one colour: warmer on the nose's tip and wings, a touch lighter and cooler on the forehead
+  // and the bridge, darker in the nostrils and the creases behind the nose's wings.
+  const ry = y - C[1];
+  const ax = Math.abs(x);
+  c = mix3(c, BLUSH, 0.16 * gauss(x, 0.011, ry + 0.035, 0.007));
+  c = mix3(c, linear(0xf8d9c2), 0.35 * smoothstep(0.02, 0.05, ry) + 0.25 * gauss(x, 0.004, ry + 0.012, 0.014));
+  c = mix3(c, linear(0x7a3a36), 0.45 * gauss(ax - 0.0046, 0.0018, ry + 0.0402, 0.0014));
+  c = mix3(c, SKIN_SHADE, 0.3 * gauss(ax - 0.0145, 0.002, ry + 0.035, 0.005));
+  // The "white roll": skin a touch lighter just outside the lips' border, which makes the border crisp.
+  if (ax < MOUTH_W) {
+    const dy = y - MOUTH_Y;
+    const e = Math.abs(dy) / Math.max(1e-4, lipOutline(x, dy > 0));
+    c = mix3(c, linear(0xfbe0cf), 0.5 * Math.exp(-(((e - 1.18) / 0.14) ** 2)) * smoothstep(MOUTH_W, MOUTH_W * 0.6, ax));
+  }
+  return c;
+}
+
 function buildFace(base, eyes, zAt, detail) {
   const part = new Part("face", outward(C));
   // ~4 mm cells: finer grids cost software WebGL frames and change nothing visible (the lips, lids and
@@ -300,60 +373,67 @@ function buildFace(base, eyes, zAt, detail) {
   const nu = cells(96, detail);
   const nv = cells(72, detail);
   part.grid(nu, nv, (s, t) => {
-    const u = (s - 0.5) * 2 * Math.PI;
-    const v = t * Math.PI;
+    // Cells are about 2.5 times as dense over the face as over the back of the head, which the hair hides:
+    // the nose, lips and lids need the detail, and the triangles cost software WebGL frame time.
+    const xs = 2 * s - 1;
+    const u = Math.PI * (0.42 * xs + 0.58 * xs * xs * xs);
+    const v = Math.PI * (t - (0.5 / (2 * Math.PI)) * (Math.sin(2 * Math.PI * (t - 0.6)) - Math.sin(-2 * Math.PI * 0.6)));
     let p = skull(u, v);
+    let np = p;
+    let lipInfo = {};
     const front = p[2] > C[2];
     let c = SKIN;
     if (front) {
       const x = p[0];
       const y = p[1];
-      // Around each eye the skin drapes over the eyeball (a sphere a little inside the lids', blended smoothly into
-      // the face, so no ring shows where they meet) and, inside the eye's opening plus a margin the lids cover,
-      // sinks behind it: the grid's jagged edge there stays hidden under the lids.
-      eyes.forEach((e, k) => {
-        const hugR = EYE_R * 1.015;
-        const dx = x - e[0];
-        const dy = y - e[1];
-        const rho = Math.hypot(dx, dy);
-        if (rho < hugR * 1.6) {
-          const g = lidGeometry(e, k === 0 ? 1 : -1);
-          const l = Math.asin(clamp(dy / hugR, -1, 1));
-          const h = Math.asin(clamp(dx / (hugR * Math.cos(l)), -1, 1));
-          const m = 0.16;
-          const inside = rho < hugR && Math.abs(h) < g.hc + m && l < g.upperEdge(h) + m && l > g.lowerEdge(h) - m;
-          if (inside) p = [p[0], p[1], e[2] - 0.002];
-          else {
-            const hug = rho < hugR ? e[2] + Math.sqrt(hugR * hugR - rho * rho) : -Infinity;
-            p = [p[0], p[1], smax(p[2], hug, 0.002)];
-          }
-        }
-      });
+      np = eyeHug(p, eyes, false);
+      p = eyeHug(p, eyes);
       // The mouth: the skin inside the lips sinks deep behind them, so the open mouth shows its inside.
+      // Only inside the lips' own outline (which tapers towards the corners), so no hole shows beside them.
       const dy = y - MOUTH_Y;
-      const e = Math.hypot(x / (MOUTH_W * 0.98), dy / (dy > 0 ? UPPER_LIP : LOWER_LIP));
-      const sink = smoothstep(0.85, 0.45, e);
-      p = [p[0], p[1], p[2] - 0.03 * sink];
-      // Blush on the cheeks, a little shade under the brow ridge and around the jaw.
-      const blush = gauss(Math.abs(x) - 0.043, 0.016, y - (MOUTH_Y + 0.034), 0.013);
-      c = mix3(SKIN, BLUSH, 0.3 * blush);
+      const outline = Math.max(1e-4, lipOutline(x, dy > 0));
+      const e = Math.abs(dy) / outline;
+      const within = smoothstep(1.0, 0.92, Math.abs(x) / MOUTH_W);
+      const sink = smoothstep(0.75, 0.4, e) * within;
+      // Under the lips' border the skin dips a little, so the lips' edge, not a ragged crossing, is the border.
+      const under = smoothstep(1.12, 0.95, e) * within;
+      p = [p[0], p[1], p[2] - 0.03 * sink - 0.0007 * under];
+      // The skin under the lips moves with them (pressed, tucked, parted), so their moves never open a gap.
+      const follow = smoothstep(1.5, 0.95, e) * within;
+      if (follow > 0) lipInfo = { lipBlend: follow, upper: dy > 0 ? 1 : 0 };
+      // Skin sunk out of sight is the mouth's inside if it ever shows: dark, not skin-coloured.
+      c = mix3(skinColour(x, y), linear(0x3a0e18), smoothstep(0.05, 0.4, sink));
     }
     const side = smoothstep(0.4, 1.3, Math.abs(u));
     c = mix3(c, SKIN_SHADE, 0.45 * side);
-    return { p, c, info: { jaw: skinJawWeight(p), lipSkin: true } };
+    return { p, c, np, info: { jaw: skinJawWeight(p), lipSkin: true, ...lipInfo } };
   }, true);
-  // Ears: flattened ellipsoids half hidden by the hair.
+  // Ears: a curved plate with a rolled rim (helix), a bowl (concha) and a lobe, standing out from the head
+  // towards the back; the hair is tucked behind them.
   for (const side of [-1, 1]) {
-    const centre = /** @type {V3} */ ([side * (A * 0.95), C[1] - 0.01, C[2] - 0.006]);
+    const centre = /** @type {V3} */ ([side * 0.075, C[1] - 0.013, C[2] - 0.014]);
     const first = part.vertexCount;
-    const ear = new Part("ear", outward(centre));
-    ear.grid(cells(20, detail), cells(12, detail), (s, t) => {
-      const u = s * 2 * Math.PI;
-      const v = t * Math.PI;
-      const n = [Math.sin(v) * Math.cos(u), Math.cos(v), Math.sin(v) * Math.sin(u)];
-      const p = /** @type {V3} */ ([centre[0] + side * 0.0085 * (n[0] + 0.6), centre[1] + 0.02 * n[1], centre[2] + 0.011 * n[2]]);
-      const inner = n[0] > 0.5 ? smoothstep(0.5, 0.95, n[0]) : 0;
-      return { p, c: mix3(SKIN_SHADE, linear(0xc98b6b), 0.5 * inner) };
+    const ear = new Part("ear", (p) => [side, 0, 0]);
+    const rings = [0, 0.22, 0.42, 0.58, 0.7, 0.8, 0.88, 0.95, 1];
+    ear.grid(cells(24, detail), rings.length - 1, (s, t, i, j) => {
+      const th = s * 2 * Math.PI; // 0: towards the back, pi/2: up
+      const rho = rings[j];
+      const up = Math.sin(th);
+      const back = Math.cos(th);
+      // Taller than wide, the lobe narrower than the top; the front edge joins the head.
+      const hw = 0.0135 * (up < 0 ? 1 - 0.25 * up * up : 1);
+      const hh = up > 0 ? 0.025 : 0.021;
+      const xl = rho * hw * back;
+      const yl = rho * hh * up;
+      const helix = 0.0026 * Math.exp(-(((rho - 0.88) / 0.09) ** 2)) * (up < -0.6 ? 0.4 : 1);
+      const concha = -0.0022 * smoothstep(0.62, 0.15, rho) * smoothstep(-0.9, -0.2, up + 0.2 * back);
+      const lobe = 0.0012 * smoothstep(-0.4, -0.9, up) * smoothstep(0.9, 0.4, rho);
+      const standOut = 0.012 * smoothstep(-1, 1, xl / hw) * rho + 0.0015 * rho;
+      const out = helix + concha + lobe + standOut;
+      const p = /** @type {V3} */ ([centre[0] + side * out, centre[1] + yl, centre[2] - xl]);
+      let c = mix3(mix3(SKIN, SKIN_SHADE, 0.45), BLUSH, 0.18);
+      c = mix3(c, linear(0xb06a5a), 0.45 * smoothstep(0.6, 0.1, rho) + 0.25 * Math.exp(-(((rho - 0.78) / 0.05) ** 2)));
+      return { p, c };
     }, true);
     for (let i = 0; i < ear.vertexCount; i++) part.vertex(ear.pos[i], ear.col[i], {});
     for (let k = 0; k < ear.idx.length; k += 3) part.idx.push(first + ear.idx[k], first + ear.idx[k + 1], first + ear.idx[k + 2]);
@@ -361,6 +441,19 @@ function buildFace(base, eyes, zAt, detail) {
   void base;
   void zAt;
   return part;
+}
+
+/** The lips' outer contour above (`upper`) or below the mouth line at x: the height of the vermilion there. */
+function lipOutline(x, upper) {
+  const c = clamp(x / MOUTH_W, -1, 1);
+  const sn = Math.sqrt(1 - c * c);
+  const ax = Math.abs(x);
+  // The upper lip's outline has a cupid's bow: two peaks beside a dip in the middle.
+  const height = upper
+    ? UPPER_LIP + 0.0013 * Math.exp(-(((ax - 0.0068) / 0.0042) ** 2)) - 0.0011 * Math.exp(-((ax / 0.0026) ** 2))
+    : LOWER_LIP;
+  const taper = 1 - 0.75 * Math.pow(c * c, 2);
+  return sn * height * (0.35 + 0.65 * taper);
 }
 
 /** The lips (a ring from the meeting line to the outer contour, rolled inwards), the mouth's inside, teeth, tongue. */
@@ -384,11 +477,14 @@ function buildMouth(zAt, detail) {
     const x = lerp(inner[0], outer[0], k);
     const y = lerp(inner[1], outer[1], k);
     const sigma = (s + 0.45) / 1.45;
-    const bulge = 0.0048 * Math.pow(Math.sin(Math.PI * Math.min(1, sigma * 1.08)), 0.7) * taper * (upper ? 0.85 : 1);
+    const bulge = 0.0036 * Math.pow(Math.sin(Math.PI * Math.min(1, sigma * 1.08)), 0.7) * taper * (upper ? 0.85 : 1);
     const recess = s < 0 ? 0.006 * (-s / 0.45) ** 1.2 : 0;
     // Inside the mouth the lips curl inwards (y towards the middle when open) and back.
-    const z = zAt(x, y) + 0.0004 + bulge - recess - 0.0018 * k * k * k;
-    const colour = s < 0.05 ? mix3(LIP_IN, LIP_LINE, 0.5 * Math.max(0, 1 - Math.abs(s) / 0.05)) : mix3(upper ? LIP_UP : LIP_LOW, LIP_IN, 0.3 * (1 - taper));
+    const z = zAt(x, y) + 0.0004 + bulge - recess - 0.0008 * k * k * k;
+    let colour = s < 0.05 ? mix3(mix3(LIP_IN, linear(0x5a1e2e), smoothstep(-0.1, -0.4, s)), LIP_LINE, 0.5 * Math.max(0, 1 - Math.abs(s) / 0.05)) : mix3(upper ? LIP_UP : LIP_LOW, LIP_IN, 0.3 * (1 - taper));
+    // The vermilion's border: a slightly deeper line at its edge; a soft highlight on the lower lip's fullness.
+    if (s > 0.85) colour = mix3(colour, LIP_LINE, 0.35 * smoothstep(0.85, 1, s));
+    if (!upper && s > 0.1) colour = mix3(colour, linear(0xeea0aa), 0.45 * Math.exp(-(((s - 0.45) / 0.2) ** 2)) * Math.exp(-((c / 0.45) ** 2)));
     // How much the point stays with the skull when the jaw opens: split gradually around the corners, so the
     // opening is an oval rather than a slot with square ends.
     const upperShare = 0.5 + 0.5 * Math.sign(sn) * Math.pow(Math.abs(sn), 0.6);
@@ -440,10 +536,10 @@ function buildMouth(zAt, detail) {
 
   // Teeth: two curved strips behind the lips, with a faint line between teeth; the lower row moves with the jaw.
   const teeth = new Part("teeth", towardViewer);
-  for (const row of [{ top: MOUTH_Y + 0.0036, bottom: MOUTH_Y - 0.0013, jaw: 0, z: -0.0078 },
-    { top: MOUTH_Y - 0.0018, bottom: MOUTH_Y - 0.006, jaw: 1, z: -0.0088 }]) {
+  for (const row of [{ top: MOUTH_Y + 0.003, bottom: MOUTH_Y - 0.0024, jaw: 0, z: -0.0062 },
+    { top: MOUTH_Y - 0.0022, bottom: MOUTH_Y - 0.005, jaw: 1, z: -0.0082 }]) {
     teeth.grid(cells(32, detail), 3, (s, t) => {
-      const x = (s - 0.5) * 0.027;
+      const x = (s - 0.5) * 0.025;
       const tooth = Math.abs(Math.sin((x / 0.0042) * Math.PI));
       const shade = 0.86 + 0.14 * Math.pow(tooth, 0.3);
       const y = lerp(row.top, row.bottom, t) + (row.jaw ? 0.0004 : -0.0004) * (1 - tooth) * (t === 1 ? 1 : 0);
@@ -494,7 +590,7 @@ function lidTargets(g) {
   };
 }
 
-function buildLids(eyes, detail) {
+function buildLids(eyes, skinZ, detail) {
   const lids = new Part("lids", towardViewer);
   const lashes = new Part("lashes", towardViewer);
   const catchlight = new Part("catchlight", towardViewer);
@@ -517,13 +613,30 @@ function buildLids(eyes, detail) {
           const far = upper ? LID_TOP : -LID_TOP;
           const f = Math.max(0, rows[j]);
           const l = lerp(edge, far, f);
-          // The lower lid hugs the eye more closely than the upper one, which folds over it.
-          const r = rows[j] < 0 ? EYE_R * 1.01 : (upper ? LID_R : EYE_R * 1.06) * (1 + 0.05 * f);
-          const p = g.dir(h, l, r);
-          const nearEdge = rows[j] <= 0.04 && Math.abs(h) < g.hc * 1.05;
-          let c = mix3(SKIN, SKIN_SHADE, upper ? 0.25 + 0.3 * smoothstep(0.3, 0, Math.abs(rows[j] - 0.2)) : 0.35);
-          if (nearEdge) c = upper ? linear(0x2a1a22) : mix3(SKIN_SHADE, linear(0x8a4a48), 0.5);
-          if (rows[j] < 0) c = linear(0xc98580);
+          // The lower lid hugs the eye closely and tucks under the cheek's skin within a few millimetres; the
+          // upper one folds over the eye and tucks under the skin below the brow at its crease, so neither stands
+          // out of the face as a shell (the skin around is the same colour, so the lids blend into it).
+          const f0 = rows[j];
+          let r;
+          if (f0 < 0) r = EYE_R * 1.01;
+          else if (upper) r = EYE_R * (1.06 + 0.03 * Math.sin(Math.PI * Math.min(1, f / 0.5)));
+          else r = EYE_R * 1.035;
+          let p = g.dir(h, l, r);
+          // Away from the edge each lid merges into the skin, just under it: the lower lid within a few
+          // millimetres, the upper one above its crease. So the lids never stand out of the face as shells, and
+          // the skin (of the same colour) takes over without a seam.
+          const w = upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f);
+          if (w > 0) p = /** @type {V3} */ ([p[0], p[1], lerp(p[2], skinZ(p[0], p[1]) - 0.0004, w)]);
+          const inside = Math.abs(h) < g.hc * 1.05;
+          let c = skinColour(p[0], p[1]);
+          if (upper) {
+            // A soft shade in the crease and along the lid's edge, a thin dark lash line on the rim itself.
+            c = mix3(c, SKIN_SHADE, 0.5 * gauss(f - 0.42, 0.1, 0, 1) + 0.35 * smoothstep(0.12, 0, f));
+            if (f0 <= 0 && inside) c = linear(0x2a1a22);
+          } else {
+            c = mix3(c, mix3(SKIN_SHADE, BLUSH, 0.25), 0.4 * smoothstep(0.2, 0, f));
+            if (f0 < 0) c = linear(0xc98580);
+          }
           row.push(lids.vertex(p, c, { eye: k, upper, h, f: rows[j] }));
         }
         ids.push(row);
@@ -542,10 +655,11 @@ function buildLids(eyes, detail) {
       for (let i = 0; i <= 24; i++) {
         const h = ((i / 24) * 2 - 1) * g.hc * 1.02;
         const outer = Math.max(0, side * h) / g.hc;
-        const len = 0.0022 + 0.0022 * outer;
-        const l = g.upperEdge(h) + (j ? 0.2 + 0.1 * outer : 0);
+        // Short in the middle, a flick towards the outer corner, as the 2D face draws them.
+        const len = 0.0009 + 0.0034 * outer * outer;
+        const l = g.upperEdge(h) + (j ? 0.1 + 0.22 * outer : 0);
         const p = g.dir(h, l, LID_R + (j ? len : 0));
-        row.push(lashes.vertex(p, WHITE, { eye: k, upper: true, h, f: 0, lash: j, lift: j ? 0.2 + 0.1 * outer : 0, len: j ? len : 0 }));
+        row.push(lashes.vertex(p, WHITE, { eye: k, upper: true, h, f: 0, lash: j, lift: j ? 0.1 + 0.22 * outer : 0, len: j ? len : 0 }));
       }
       lid.push(row);
     }
@@ -622,126 +736,185 @@ function browDisplacement(p, info, name, zAt) {
 }
 
 function buildEyeball(detail) {
+  // The white leaves the front cap open where the iris sits (else it would cover the iris's dip); the iris is a
+  // shallow bowl behind where the cornea would be, so it keeps its depth as the eye turns, with a dark limbal
+  // ring that reads as its edge.
+  const irisAngle = 0.5;
   const sclera = new Part("sclera", (p) => p);
-  sclera.grid(cells(36, detail), cells(24, detail), (s, t) => {
+  sclera.grid(cells(36, detail), cells(14, detail), (s, t) => {
     const u = s * 2 * Math.PI;
-    const v = t * Math.PI;
+    const v = irisAngle + t * (1.95 - irisAngle); // the back half never shows, even with the eye turned
     // The pole points forward (+z), so the grid's rings are circles around the iris.
     const n = /** @type {V3} */ ([Math.sin(v) * Math.cos(u), Math.sin(v) * Math.sin(u), Math.cos(v)]);
-    const c = mix3(linear(0xdfe3ea), WHITE, smoothstep(-0.2, 0.9, n[2]));
+    // Whiter in front, greyer and a touch warm towards the corners where the lids shade it.
+    const c = mix3(linear(0xcfc6c8), linear(0xf4f1ee), smoothstep(0.1, 0.85, n[2]));
     return { p: scale(n, EYE_R), c };
   }, true);
   const iris = new Part("iris", (p) => p);
-  const irisAngle = 0.5;
-  iris.grid(cells(40, detail), cells(12, detail), (s, t) => {
+  iris.grid(cells(40, detail), cells(14, detail), (s, t) => {
     const u = s * 2 * Math.PI;
     const a = t * irisAngle;
     const n = /** @type {V3} */ ([Math.sin(a) * Math.cos(u), Math.sin(a) * Math.sin(u), Math.cos(a)]);
     const k = a / irisAngle;
     let c;
-    if (k < 0.4) c = PUPIL;
-    else if (k < 0.8) c = mix3(IRIS_IN, IRIS_OUT, (k - 0.4) / 0.4);
-    else c = mix3(IRIS_OUT, IRIS_RING, (k - 0.8) / 0.2);
-    // Fine radial streaks make the iris read as one at a glance.
-    if (k >= 0.4) c = scale(c, 0.9 + 0.1 * Math.abs(Math.sin(u * 9)));
-    // The iris sits a hair above the white, and dips slightly towards the pupil like a real one under its cornea.
-    const r = EYE_R * (1.004 - 0.012 * (1 - k) * (1 - k));
+    if (k < 0.36) c = PUPIL;
+    else if (k < 0.44) c = mix3(PUPIL, IRIS_IN, (k - 0.36) / 0.08);
+    else if (k < 0.82) c = mix3(IRIS_IN, IRIS_OUT, (k - 0.44) / 0.38);
+    else c = mix3(IRIS_OUT, IRIS_RING, smoothstep(0.82, 0.97, k));
+    // Radial fibres and a lighter upper half (lit through the cornea) make it read as an iris at a glance.
+    if (k >= 0.4 && k < 0.95) c = scale(c, 0.82 + 0.18 * Math.abs(Math.sin(u * 11 + 3 * k)) + 0.12 * Math.max(0, n[1] / Math.sin(a + 1e-6)) * (1 - k));
+    // A bowl: the pupil sits about 0.9 mm behind the limbus.
+    const r = EYE_R * (1 - 0.055 * (1 - k * k));
     return { p: scale(n, r), c };
   }, true);
   return { sclera, iris };
 }
 
+/** Where the hair ends (polar angle from the crown) at azimuth `u`: fringe, temples, tucked behind the ears, bob. */
+function hairEnd(u) {
+  const au = Math.abs(u);
+  // The fringe sweeps from the avatar's right (viewer's left, shorter) across to its left in one smooth curve,
+  // in a few rounded locks, as the 2D face draws it.
+  const sweep = 0.5 + 0.5 * Math.tanh(u * 2.4);
+  const lockPhase = (u + 0.62) / 0.42;
+  const scallop = 0.03 * Math.pow(Math.sin(Math.PI * (lockPhase - Math.floor(lockPhase))), 1.5);
+  const fringe = 1.06 + 0.13 * sweep + scallop * smoothstep(0.9, 0.5, au);
+  // Down the temples to just above the ears (tucked behind them), then the bob: to the jaw at the sides, the
+  // nape behind.
+  let v = lerp(fringe, 1.5, smoothstep(0.5, 1.0, au));
+  v += 0.16 * Math.exp(-(((au - 1.3) / 0.13) ** 2)); // a short sideburn in front of the ear
+  v = lerp(v, 2.9, smoothstep(1.8, 2.1, au));
+  // The bob ends in rounded locks, a little longer at the front of each side.
+  if (au > 1.8) {
+    const ph = (u * 7) / Math.PI;
+    v += 0.05 * Math.pow(Math.sin(Math.PI * (ph - Math.floor(ph))), 0.6) - 0.05 * smoothstep(2.3, 3.1, au);
+  }
+  return v;
+}
+
 function buildHair(detail) {
   const hair = new Part("hair", outward(C));
-  const nu = cells(112, detail);
-  const nv = cells(28, detail);
-  // The hairline: a fringe of pointed locks over the forehead, sweeping from the avatar's left to its right;
-  // above the ears at the sides; a bob down to the nape at the back.
-  const vmax = (u) => {
-    const au = Math.abs(u);
-    // Front fringe, down the temples, then a bob that hangs to the chin at the sides and the nape at the back.
-    let v = lerp(0.93, 1.5, smoothstep(0.3, 0.75, au));
-    v = lerp(v, 2.95, smoothstep(0.75, 1.3, au));
-    if (au < 1.15) {
-      const phase = u / 0.23 + 0.35;
-      const tri = 1 - Math.abs((phase - Math.floor(phase)) * 2 - 1);
-      const sweep = 0.5 + 0.5 * Math.tanh(-u * 2.2); // longer locks on the avatar's right (viewer's left)
-      v += (0.04 + 0.16 * Math.pow(tri, 2.2)) * smoothstep(1.15, 0.6, au) * (0.55 + 0.45 * sweep);
-    }
-    return v;
-  };
+  const nu = cells(128, detail);
+  const nv = cells(30, detail);
+  // Locks: the shell's surface rises and falls across the strands' direction, in rounded ridges with darker
+  // grooves between them. The strands run from the crown down, and sweep sideways across the fringe.
+  const LOCKS = 30;
   hair.grid(nu, nv, (s, t) => {
     const u = (s - 0.5) * 2 * Math.PI;
-    const vm = vmax(u);
+    const vm = hairEnd(u);
     const v = t * vm;
-    const shell = (vv) => {
-      const q = skull(u, Math.min(vv, 1.62));
-      const n = sub(q, C);
-      const nn = [n[0] / (A * A), n[1] / (B * B), n[2] / (D * D)];
-      const l = Math.hypot(nn[0], nn[1], nn[2]);
-      const volume = 0.005 + 0.0075 * smoothstep(0.2, 1.5, vv) * smoothstep(0.3, 1.8, Math.abs(u));
-      // The edge thins out to lie on the skin, so the hairline reads as hair, not as a helmet's rim.
-      const edge = 1 - 0.75 * smoothstep(0.82, 1, t) * smoothstep(1.9, 1.0, Math.abs(u));
-      let p = add(q, scale(nn, (volume * edge + 0.0012) / l));
-      if (vv > 1.62) {
-        // Below the skull's widest line the bob hangs down instead of following the skull inwards.
-        const k = vv - 1.62;
-        p = [p[0] * (1 + 0.04 * k), p[1] - 0.068 * k, p[2] * (1 + 0.04 * k)];
-      }
-      return p;
-    };
-    const p = shell(v);
-    // Shade: lighter at the crown, streaks along the strands.
-    const streak = 0.88 + 0.12 * Math.sin(u * 29 + Math.sin(t * 3) * 1.5) ** 2;
-    const c = scale(mix3(HAIR_MID, HAIR_BASE, smoothstep(0.1, 0.9, t)), streak);
+    const au = Math.abs(u);
+    const q = skull(u, Math.min(v, 1.62));
+    const n = sub(q, C);
+    const nn = [n[0] / (A * A), n[1] / (B * B), n[2] / (D * D)];
+    const l = Math.hypot(nn[0], nn[1], nn[2]);
+    const twist = -0.9 * smoothstep(1.1, 0.3, au) * smoothstep(0.2, 0.9, t) * v;
+    const phase = ((u + twist) * LOCKS) / (2 * Math.PI);
+    const ridge = Math.pow(Math.sin(Math.PI * (phase - Math.floor(phase))), 0.7); // 0 in a groove, 1 on a crest
+    const locks = smoothstep(0.05, 0.3, t); // the crown is smooth where the strands start
+    const volume = 0.0065 + 0.009 * smoothstep(0.2, 1.4, v) * smoothstep(0.3, 1.6, au);
+    // The edge thins out to lie on the skin at the hairline, but keeps a rounded thickness where the bob ends.
+    const hairline = smoothstep(1.9, 1.2, au);
+    const edge = 1 - 0.88 * smoothstep(0.75, 1, t) * hairline;
+    const lift = (volume + 0.0014 * ridge * locks) * edge + 0.0012;
+    let p = add(q, scale(nn, lift / l));
+    if (v > 1.62) {
+      // Below the skull's widest line the bob hangs down instead of following the skull inwards, curling in a
+      // little at its ends.
+      const k = v - 1.62;
+      const curl = 1 + 0.05 * k - 0.06 * smoothstep(0.75, 1, t) * (1 - hairline);
+      p = [p[0] * curl, p[1] - 0.066 * k, p[2] * curl];
+    }
+    // Shade: darker in the grooves and underneath, lighter on the crests; a soft band of sheen across the
+    // crown, as the 2D face's highlight.
+    let c = mix3(HAIR_MID, HAIR_BASE, smoothstep(0.2, 0.95, t));
+    c = scale(c, 0.72 + 0.28 * lerp(1, ridge, locks));
+    const sheen = Math.exp(-(((v - 0.55 - 0.1 * Math.cos(u)) / 0.14) ** 2)) * smoothstep(2.4, 1.2, au) * (0.4 + 0.6 * ridge);
+    c = mix3(c, linear(0x8a6078), 0.45 * sheen);
     return { p, c };
   }, true);
   return hair;
 }
 
+/** The neck's half-width and half-depth at height `y`: it flares at its base into the slope of the shoulders. */
+function neckRadii(y) {
+  const base = smoothstep(0.08, -0.01, y);
+  return [0.03 + 0.05 * base * base, 0.033 + 0.012 * base];
+}
+const NECK_Z = -0.004;
+
+/** The shirt's neckline: its height at angle `a` around the neck (0 = front): a soft scoop in front. */
+const necklineY = (a) => 0.042 - 0.02 * Math.max(0, Math.cos(a)) ** 2;
+
 function buildNeckAndBody(detail) {
-  const neck = new Part("neck", (p) => [p[0], 0, p[2]]);
-  neck.grid(cells(36, detail), cells(8, detail), (s, t) => {
+  const neck = new Part("neck", (p) => [p[0], 0, p[2] - NECK_Z]);
+  neck.grid(cells(36, detail), cells(12, detail), (s, t) => {
     const a = s * 2 * Math.PI;
-    const y = lerp(0.142, 0.0, t);
+    const y = lerp(0.142, -0.005, t);
+    const [rx, rz] = neckRadii(y);
     const front = Math.max(0, Math.cos(a));
-    const shade = smoothstep(0.1, 0.13, y) * front; // the chin's shadow
-    const p = /** @type {V3} */ ([0.031 * Math.sin(a), y, -0.004 + 0.034 * Math.cos(a)]);
-    return { p, c: mix3(SKIN_SHADE, linear(0xb77a5f), 0.5 * shade) };
+    // The chin's shadow on the front of the neck, and the neck a little darker than the face overall.
+    const shade = smoothstep(0.085, 0.125, y) * front;
+    const p = /** @type {V3} */ ([rx * Math.sin(a), y, NECK_Z + rz * Math.cos(a)]);
+    const c = mix3(mix3(SKIN, SKIN_SHADE, 0.4), linear(0xb77a5f), 0.55 * shade);
+    return { p, c };
   }, true);
 
-  const top = 0.042;
-  const W = (d) => 0.036 + 0.1 * (1 - Math.exp(-d / 0.03));
-  const Dp = (d) => 0.036 + 0.058 * (1 - Math.exp(-d / 0.03));
-  const section = (a, d) => {
-    const c = Math.sin(a);
-    const s = Math.cos(a);
-    const x = W(d) * Math.sign(c) * Math.pow(Math.abs(c), 0.62);
-    const z = -0.006 + Dp(d) * Math.sign(s) * Math.pow(Math.abs(s), 0.85);
-    return /** @type {V3} */ ([x, top - d, z]);
+  // The shirt: from the neckline out over the slope of the shoulders (trapezius), round the shoulder and down.
+  const CHEST = [0.158, 0.088];
+  const ROUND = 0.034; // the shoulders' roundness
+  const section = (a, rx, rz) => {
+    const sn = Math.sin(a);
+    const cs = Math.cos(a);
+    // A superellipse: squarer than an ellipse, so the shoulders are broad and the chest flat.
+    return [rx * Math.sign(sn) * Math.pow(Math.abs(sn), 0.7), NECK_Z + rz * Math.sign(cs) * Math.pow(Math.abs(cs), 0.8)];
   };
-  const body = new Part("body", (p) => [p[0], 0.2, p[2] + 0.006]);
-  body.grid(cells(64, detail), cells(18, detail), (s, t) => {
+  const TOP = 8;
+  const ROUNDS = 5;
+  const DOWN = 6;
+  const rowsOf = TOP + ROUNDS + DOWN;
+  const body = new Part("body", (p) => [p[0], 0.25, p[2] - NECK_Z]);
+  body.grid(cells(64, detail), cells(rowsOf, detail), (s, t) => {
     const a = s * 2 * Math.PI;
-    const d = 0.25 * Math.pow(t, 1.6);
-    const p = section(a, d);
-    return { p, c: mix3(CLOTH_LIGHT, CLOTH, smoothstep(0.02, 0.2, d)) };
+    const yN = necklineY(a);
+    const [nx, nz] = neckRadii(yN);
+    const r = t * rowsOf;
+    let rx;
+    let rz;
+    let y;
+    const yS = yN - 0.05 * (1 - 0.5 * Math.abs(Math.cos(a))); // where the slope meets the shoulder's roundness
+    if (r <= TOP) {
+      const w = r / TOP;
+      rx = lerp(nx + 0.001, CHEST[0] - ROUND, Math.pow(w, 0.9));
+      rz = lerp(nz + 0.001, CHEST[1] - ROUND * 0.6, w);
+      y = yN + (yS - yN) * Math.pow(w, 1.4);
+    } else if (r <= TOP + ROUNDS) {
+      const phi = ((r - TOP) / ROUNDS) * (Math.PI / 2);
+      rx = CHEST[0] - ROUND * (1 - Math.sin(phi));
+      rz = CHEST[1] - ROUND * 0.6 * (1 - Math.sin(phi));
+      y = yS - ROUND * (1 - Math.cos(phi));
+    } else {
+      const w = (r - TOP - ROUNDS) / DOWN;
+      rx = CHEST[0] * (1 - 0.04 * w);
+      rz = CHEST[1];
+      y = yS - ROUND - 0.22 * w;
+    }
+    const [x, z] = section(a, rx, rz);
+    const c = mix3(CLOTH_LIGHT, CLOTH, smoothstep(0.01, -0.12, y));
+    return { p: /** @type {V3} */ ([x, y, z]), c };
   }, true);
-  // The collar: a thin accent piping in a V below the neck, as on the 2D face.
-  const zBody = (x, y) => frontZ(body, x, y, 0.05);
+
+  // The collar: a thin accent piping along the neckline's front, as on the 2D face.
   const collar = new Part("collar", towardViewer);
-  const path = [];
-  for (let i = 0; i <= 24; i++) {
-    const k = i / 24;
-    const x = (k - 0.5) * 0.06;
-    const y = top - 0.008 - 0.026 * (1 - (2 * k - 1) ** 2);
-    path.push([x, y, zBody(x, y) + 0.0008]);
-  }
-  collar.grid(cells(24, detail), 4, (s, t) => {
-    const q = path[Math.round(s * 24)];
-    const a = t * Math.PI;
-    const r = 0.0018;
-    return { p: /** @type {V3} */ ([q[0], q[1] + r * Math.cos(a), q[2] + r * Math.sin(a)]), c: COLLAR };
+  const n = cells(24, detail);
+  collar.grid(n, 4, (s, t) => {
+    const a = (s - 0.5) * 2.2;
+    const yN = necklineY(a);
+    const [nx, nz] = neckRadii(yN);
+    const [x, z] = section(a, nx + 0.0025, nz + 0.0025);
+    const b = t * Math.PI;
+    const r = 0.0017;
+    return { p: /** @type {V3} */ ([x, yN - 0.001 + r * Math.cos(b), z + r * Math.sin(b)]), c: COLLAR };
   });
   return { neck, body, collar };
 }
@@ -806,7 +979,8 @@ export function buildAvatar({ detail = 1 } = {}) {
 
   const face = buildFace(base, eyes, zAt, detail);
   const mouth = buildMouth(zAt, detail);
-  const { lids, lashes, catchlight } = buildLids(eyes, detail);
+  const skinZ = (x, y) => eyeHug([x, y, zAt(x, y)], eyes, false)[2];
+  const { lids, lashes, catchlight } = buildLids(eyes, skinZ, detail);
   const brows = buildBrows(zAt);
   const { sclera, iris } = buildEyeball(detail);
   const hair = buildHair(detail);

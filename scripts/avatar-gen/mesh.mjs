@@ -16,14 +16,22 @@ export class Part {
     this.pos = [];
     /** @type {V3[]} */
     this.col = [];
+    /**
+     * Where each vertex is for shading (its normal): usually where it is, but skin pushed out of sight (behind
+     * the lids, inside the lips) keeps the normal of the surface it was pushed from, so that the visible skin
+     * next to it does not shade as if it bent into a hole.
+     * @type {V3[]}
+     */
+    this.npos = [];
     /** @type {object[]} */
     this.info = [];
     /** @type {number[]} */
     this.idx = [];
   }
 
-  vertex(p, c, info = {}) {
+  vertex(p, c, info = {}, np = p) {
     this.pos.push(p);
+    this.npos.push(np);
     this.col.push(c);
     this.info.push(info);
     return this.pos.length - 1;
@@ -63,7 +71,7 @@ export class Part {
       const row = [];
       for (let i = 0; i < cols; i++) {
         const v = f(i / nu, j / nv, i, j);
-        row.push(this.vertex(v.p, v.c, v.info ?? {}));
+        row.push(this.vertex(v.p, v.c, v.info ?? {}, v.np ?? v.p));
       }
       if (wrapU) row.push(row[0]);
       ids.push(row);
@@ -80,7 +88,7 @@ export class Part {
 }
 
 /** Area-weighted vertex normals of `positions` (flat V3 list) over the part's triangles. */
-export function normals(part, positions = part.pos) {
+export function normals(part, positions = part.npos) {
   const acc = positions.map(() => [0, 0, 0]);
   for (let k = 0; k < part.idx.length; k += 3) {
     const [a, b, c] = [part.idx[k], part.idx[k + 1], part.idx[k + 2]];

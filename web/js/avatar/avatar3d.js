@@ -42,16 +42,17 @@ export class Avatar3D {
     const material = quality.material ?? (software ? "lambert" : "standard");
     const renderer = new THREE.WebGLRenderer({ canvas, antialias, alpha: true, powerPreference: "low-power" });
     const gltf = await new GLTFLoader().loadAsync(url);
-    if (material === "lambert" || material === "phong") {
-      gltf.scene.traverse((o) => {
-        if (!o.isMesh) return;
-        const m = o.material;
-        const opts = { color: m.color, vertexColors: m.vertexColors, side: m.side, emissive: m.emissive };
+    gltf.scene.traverse((o) => {
+      if (!o.isMesh) return;
+      const m = o.material;
+      if (material === "lambert" || material === "phong") {
+        const opts = { name: m.name, color: m.color, vertexColors: m.vertexColors, side: m.side, emissive: m.emissive };
         if (material === "lambert") o.material = new THREE.MeshLambertMaterial(opts);
         else o.material = new THREE.MeshPhongMaterial({ ...opts, shininess: (1 - m.roughness) * 80, specular: 0x333333 });
-      });
-    }
-    const avatar = new Avatar3D(canvas, audioClock, renderer, gltf, syncFrames);
+      }
+      if (SKIN_MATERIALS.has(m.name)) softSkin(o.material);
+    });
+    const avatar = new Avatar3D(canvas, audioClock, renderer, gltf, syncFrames, quality.view);
     avatar.quality = { software, model: url, antialias, material, pixelRatio: renderer.getPixelRatio(), adaptive: quality.adaptive ?? true };
     if (quality.pixelRatio) avatar.setPixelRatio(quality.pixelRatio);
     return avatar;
@@ -63,7 +64,7 @@ export class Avatar3D {
    * which compares it with the 2D face, synchronised the same way. `gl.finish` is not enough: in Chromium it
    * returns before SwiftShader has drawn (a frame that takes 19 ms to read back "finishes" in 1 ms).
    */
-  constructor(canvas, audioClock, renderer, gltf, syncFrames = false) {
+  constructor(canvas, audioClock, renderer, gltf, syncFrames = false, view = {}) {
     this.syncFrames = syncFrames;
     this.syncPixel = new Uint8Array(4);
     this.frameMs = [];
@@ -139,7 +140,7 @@ export class Avatar3D {
 
     this.camera = new THREE.PerspectiveCamera(22, 1, 0.05, 5);
     const c = this.extras.eyeCentre ?? [0, 0.16, 0.08];
-    this.lookY = c[1] - 0.012; // centred just below the eyes, as the 2D face's 1000-unit box is
+    this.lookY = c[1] - 0.012 + (view.y ?? 0); // centred just below the eyes, as the 2D face's 1000-unit box is
     this.size = { w: 0, h: 0 };
     const fit = () => {
       const w = canvas.clientWidth;
@@ -150,9 +151,12 @@ export class Avatar3D {
       this.camera.aspect = w / h;
       // Fit VIEW_HEIGHT_M into the smaller of the two sides, as the 2D face fits its 1000 units.
       const half = ((this.camera.fov / 2) * Math.PI) / 180;
-      const fitH = VIEW_HEIGHT_M / Math.min(1, w / h);
+      const fitH = (view.height ?? VIEW_HEIGHT_M) / Math.min(1, w / h);
       const dist = fitH / 2 / Math.tan(half);
-      this.camera.position.set(0, this.lookY + 0.012, dist);
+      // `view.yaw` orbits the camera around the head (radians, positive: from the avatar's left), for the
+      // three-quarter screenshots; the page itself looks straight on.
+      const yaw = view.yaw ?? 0;
+      this.camera.position.set(dist * Math.sin(yaw), this.lookY + 0.012, dist * Math.cos(yaw));
       this.camera.lookAt(0, this.lookY, 0);
       this.camera.updateProjectionMatrix();
       this.lastDraw = 0; // redraw at once
@@ -338,6 +342,33 @@ export class Avatar3D {
     };
   }
 }
+
+/** The materials lit as skin (see `softSkin`). */
+const SKIN_MATERIALS = new Set(["skin", "lips", "lids"]);
+
+/**
+ * Skin is not plastic: light scatters under it and comes out past the shadow's edge, warm. An approximation of
+ * that: besides the usual diffuse term, each light adds a "wrapped" one (n.l shifted by SKIN_WRAP) tinted towards
+ * red, which softens the terminator and warms it, as on the 2D face's shading. Works on three.js's Lambert
+ * (software WebGL) and physically based (GPU) materials alike; it costs a few instructions per pixel.
+ */
+function softSkin(material) {
+  const chunk = material.isMeshStandardMaterial ? "lights_physical_pars_fragment" : "lights_lambert_pars_fragment";
+  const plain = "vec3 irradiance = dotNL * directLight.color;";
+  const source = THREE.ShaderChunk[chunk];
+  if (!source.includes(plain)) return; // another three.js: keep its plain lighting
+  const wrapped = `${plain}
+	{
+		float ndl = dot( geometryNormal, directLight.direction );
+		float scatter = saturate( ( ndl + ${SKIN_WRAP.toFixed(2)} ) / ${(1 + SKIN_WRAP).toFixed(2)} ) - dotNL;
+		reflectedLight.directDiffuse += scatter * vec3( 0.62, 0.3, 0.2 ) * directLight.color * BRDF_Lambert( material.diffuseColor );
+	}`;
+  material.onBeforeCompile = (shader) => {
+    shader.fragmentShader = shader.fragmentShader.replace(`#include <${chunk}>`, source.replace(plain, wrapped));
+  };
+  material.customProgramCacheKey = () => `soft-skin-${chunk}`;
+}
+const SKIN_WRAP = 0.55;
 
 /** Whether WebGL here is a software rasteriser (no GPU): SwiftShader, llvmpipe, softpipe. */
 function softwareWebgl() {
