@@ -28,6 +28,16 @@ pub struct Args {
     /// FlowProtocol Unix socket path ("" disables).
     #[arg(long)]
     flow_unix: Option<String>,
+    /// Serve the page over HTTPS (`[http] tls`): with a certificate made for this machine, unless --tls-cert and
+    /// --tls-key name one.
+    #[arg(long)]
+    https: bool,
+    /// PEM certificate chain for HTTPS (with --tls-key).
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// PEM private key for HTTPS (with --tls-cert).
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
     /// Directory for tokens, the pair database and the socket.
     #[arg(long)]
     data_dir: Option<PathBuf>,
@@ -78,6 +88,13 @@ async fn run(
     if let Some(v) = args.data_dir {
         config.server.data_dir = v;
     }
+    if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
+        config.http.tls = "files".into();
+        config.http.tls_cert = cert.display().to_string();
+        config.http.tls_key = key.display().to_string();
+    } else if args.https && !config.http.tls_on() {
+        config.http.tls = "self-signed".into();
+    }
     if let Some(file) = &args.record {
         config.modules.entry("recorder".into()).or_default().insert(
             "file".into(),
@@ -86,9 +103,11 @@ async fn run(
     }
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
+    // Logs go to stderr; stdout carries only what the operator reads (the address to open).
     tracing_subscriber::fmt()
         .with_env_filter(quiet_frames(filter))
-        .with_ansi(std::io::stdout().is_terminal())
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .init();
 
     let app = build(&config)?;
@@ -107,6 +126,12 @@ async fn run(
         .await
         .with_context(|| format!("starting {name}"))?;
     println!("{name} ready: open {}", server.page_url);
+    if let Some(fp) = &server.tls_fingerprint {
+        println!("  certificate SHA-256 {fp}");
+        println!(
+            "  (the browser warns about a certificate it does not know: compare this fingerprint, then accept it)"
+        );
+    }
     if server.http.ip().is_unspecified() {
         println!(
             "  (from another machine, put this machine's address in place of {})",

@@ -62,6 +62,10 @@ pub struct HubSection {
     pub io_threads: usize,
     pub login_timeout_ms: u64,
     pub max_unauthenticated: usize,
+    /// Places among the strangers one address may hold (`admission.rs`).
+    pub max_unauthenticated_per_address: usize,
+    /// How long a logged-in client may take to finish a frame it has begun.
+    pub frame_timeout_ms: u64,
 }
 
 /// `[http]`: who may use the page and the HTTP API (docs/security.md).
@@ -75,6 +79,23 @@ pub struct HttpSection {
     pub open_on_loopback: bool,
     /// How long a page session cookie stays valid.
     pub cookie_days: u64,
+    /// `"off"`: plain HTTP; `"self-signed"`: HTTPS with a certificate generated once into the data directory;
+    /// `"files"`: HTTPS with `tls_cert` and `tls_key`.
+    pub tls: String,
+    /// PEM certificate chain and private key for `tls = "files"` (relative paths are inside data_dir).
+    pub tls_cert: String,
+    pub tls_key: String,
+    /// How long a connection may take to send a request's headers, and may stay idle between requests (ms).
+    pub header_timeout_ms: u64,
+    /// HTTP connections served at once (those that showed no credential also count among the strangers).
+    pub max_connections: usize,
+}
+
+impl HttpSection {
+    /// Whether the page is served over HTTPS.
+    pub fn tls_on(&self) -> bool {
+        self.tls != "off"
+    }
 }
 
 /// `[agent]`: what the application running on the hub is about, read by its modules (the hub itself ignores it).
@@ -260,6 +281,11 @@ impl Config {
             ("hub.control_queue", h.control_queue),
             ("hub.service_inflight", h.service_inflight),
             ("hub.max_unauthenticated", h.max_unauthenticated),
+            (
+                "hub.max_unauthenticated_per_address",
+                h.max_unauthenticated_per_address,
+            ),
+            ("http.max_connections", self.http.max_connections),
         ] {
             if v == 0 {
                 return Err((key, "must be at least 1".into()));
@@ -270,6 +296,37 @@ impl Config {
                 "hub.login_timeout_ms",
                 format!("{} is outside 100..=600000", h.login_timeout_ms),
             ));
+        }
+        if !(1000..=3_600_000).contains(&h.frame_timeout_ms) {
+            return Err((
+                "hub.frame_timeout_ms",
+                format!("{} is outside 1000..=3600000", h.frame_timeout_ms),
+            ));
+        }
+        if !(500..=600_000).contains(&self.http.header_timeout_ms) {
+            return Err((
+                "http.header_timeout_ms",
+                format!("{} is outside 500..=600000", self.http.header_timeout_ms),
+            ));
+        }
+        match self.http.tls.as_str() {
+            "off" | "self-signed" => {}
+            "files" => {
+                for (key, v) in [
+                    ("http.tls_cert", &self.http.tls_cert),
+                    ("http.tls_key", &self.http.tls_key),
+                ] {
+                    if v.is_empty() {
+                        return Err((key, "tls = \"files\" needs a PEM file here".into()));
+                    }
+                }
+            }
+            other => {
+                return Err((
+                    "http.tls",
+                    format!("{other:?} is not one of \"off\", \"self-signed\", \"files\""),
+                ));
+            }
         }
         if self.ticks.fast_ms == 0 {
             return Err(("ticks.fast_ms", "must be at least 1".into()));

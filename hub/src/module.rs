@@ -103,7 +103,12 @@ impl ModuleContext {
 pub async fn spawn(shared: Arc<Shared>, module: Box<dyn Module>) -> anyhow::Result<JoinHandle<()>> {
     let name = module.name();
     let (hub_end, module_end) = memory::pair(name);
-    tokio::spawn(serve_connection(hub_end, shared.clone(), true));
+    tokio::spawn(serve_connection(
+        hub_end,
+        shared.clone(),
+        true,
+        crate::admission::Stranger::trusted(),
+    ));
     let opts = ConnectOptions::new(name, shared.tokens.admin());
     let client = Client::connect_link(Link::Memory(module_end), opts).await?;
     let ctx = ModuleContext {

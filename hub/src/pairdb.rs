@@ -4,8 +4,14 @@
 //! durability (fsync) before the call returns, so an acknowledged write
 //! survives a `kill -9` of the server. Methods block on disk I/O; async callers
 //! run them on the blocking pool.
+//!
+//! After an I/O error (a full disk) redb refuses every later call until the
+//! database is opened again, so the store closes and reopens it itself at the
+//! next call: the failed write is reported to its writer with the reason, and
+//! writes succeed again once the disk has room, without a restart.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{RwLock, RwLockReadGuard};
 
 use redb::{Database, ReadableTable, TableDefinition};
 use thiserror::Error;
@@ -26,16 +32,28 @@ pub enum PairDbError {
     Exists(String),
     #[error("storage: {0}")]
     Storage(String),
+    /// The disk failed (full, gone): the database is opened again at the next call.
+    #[error("storage I/O: {0}")]
+    Io(String),
 }
 
-fn storage(e: impl std::fmt::Display) -> PairDbError {
-    PairDbError::Storage(e.to_string())
+/// A redb failure as the store reports it; an I/O failure also marks the database for reopening.
+fn storage(e: impl Into<redb::Error>) -> PairDbError {
+    let e: redb::Error = e.into();
+    if matches!(e, redb::Error::Io(_) | redb::Error::PreviousIo) {
+        PairDbError::Io(e.to_string())
+    } else {
+        PairDbError::Storage(e.to_string())
+    }
 }
 
 /// Handle on the store; cheap to share behind an `Arc`.
 #[derive(Debug)]
 pub struct PairDb {
-    db: Database,
+    path: PathBuf,
+    /// `None` after an I/O error until a reopen succeeds. Calls share the read lock; a reopen takes the write lock,
+    /// so the old handle is gone (redb allows one per file) before the new one opens.
+    db: RwLock<Option<Database>>,
 }
 
 impl PairDb {
@@ -43,132 +61,211 @@ impl PairDb {
     pub fn open(path: &Path) -> Result<Self, PairDbError> {
         let db = Database::create(path)
             .map_err(|e| PairDbError::Storage(format!("{}: {e}", path.display())))?;
-        let this = PairDb { db };
+        let this = PairDb {
+            path: path.to_path_buf(),
+            db: RwLock::new(Some(db)),
+        };
         if !this.exists(DEFAULT_DB)? {
             this.create(DEFAULT_DB)?;
         }
         Ok(this)
     }
 
-    pub fn exists(&self, name: &str) -> Result<bool, PairDbError> {
-        let tx = self.db.begin_read().map_err(storage)?;
-        match tx.open_table(DATABASES) {
-            Ok(t) => Ok(t.get(name).map_err(storage)?.is_some()),
-            Err(redb::TableError::TableDoesNotExist(_)) => Ok(false),
-            Err(e) => Err(storage(e)),
+    /// Runs `op` on the open database; after an I/O error, closes it so that the next call opens it again.
+    fn with<T>(
+        &self,
+        op: impl FnOnce(&Database) -> Result<T, PairDbError>,
+    ) -> Result<T, PairDbError> {
+        let result = {
+            let guard = self.handle()?;
+            let Some(store) = guard.as_ref() else {
+                return Err(PairDbError::Io(
+                    "the database is closed after an I/O error".into(),
+                ));
+            };
+            op(store)
+        };
+        if let Err(PairDbError::Io(e)) = &result {
+            tracing::warn!(
+                path = %self.path.display(),
+                "pair database: {e}; it is opened again at the next call"
+            );
+            *self
+                .db
+                .write()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
         }
+        result
+    }
+
+    /// The open database, reopening it first if an I/O error closed it.
+    fn handle(&self) -> Result<RwLockReadGuard<'_, Option<Database>>, PairDbError> {
+        {
+            let guard = self
+                .db
+                .read()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if guard.is_some() {
+                return Ok(guard);
+            }
+        }
+        {
+            let mut slot = self
+                .db
+                .write()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if slot.is_none() {
+                let db = Database::create(&self.path).map_err(|e| {
+                    PairDbError::Io(format!(
+                        "{} cannot be opened again after an I/O error: {e}",
+                        self.path.display()
+                    ))
+                })?;
+                tracing::info!(path = %self.path.display(), "pair database opened again after an I/O error");
+                *slot = Some(db);
+            }
+        }
+        Ok(self
+            .db
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner))
+    }
+
+    pub fn exists(&self, name: &str) -> Result<bool, PairDbError> {
+        self.with(|store| {
+            let tx = store.begin_read().map_err(storage)?;
+            match tx.open_table(DATABASES) {
+                Ok(t) => Ok(t.get(name).map_err(storage)?.is_some()),
+                Err(redb::TableError::TableDoesNotExist(_)) => Ok(false),
+                Err(e) => Err(storage(e)),
+            }
+        })
     }
 
     pub fn create(&self, name: &str) -> Result<(), PairDbError> {
-        let tx = self.db.begin_write().map_err(storage)?;
-        {
-            let mut t = tx.open_table(DATABASES).map_err(storage)?;
-            if t.get(name).map_err(storage)?.is_some() {
-                return Err(PairDbError::Exists(name.into()));
+        self.with(|store| {
+            let tx = store.begin_write().map_err(storage)?;
+            {
+                let mut t = tx.open_table(DATABASES).map_err(storage)?;
+                if t.get(name).map_err(storage)?.is_some() {
+                    return Err(PairDbError::Exists(name.into()));
+                }
+                let now = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_secs())
+                    .unwrap_or(0);
+                t.insert(name, now).map_err(storage)?;
             }
-            let now = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(0);
-            t.insert(name, now).map_err(storage)?;
-        }
-        tx.commit().map_err(storage)
+            tx.commit().map_err(storage)
+        })
     }
 
     /// Removes a database and every variable in it.
     pub fn remove(&self, name: &str) -> Result<(), PairDbError> {
-        let tx = self.db.begin_write().map_err(storage)?;
-        {
-            let mut dbs = tx.open_table(DATABASES).map_err(storage)?;
-            if dbs.remove(name).map_err(storage)?.is_none() {
-                return Err(PairDbError::NoDatabase(name.into()));
+        self.with(|store| {
+            let tx = store.begin_write().map_err(storage)?;
+            {
+                let mut dbs = tx.open_table(DATABASES).map_err(storage)?;
+                if dbs.remove(name).map_err(storage)?.is_none() {
+                    return Err(PairDbError::NoDatabase(name.into()));
+                }
+                let mut vars = tx.open_table(VARS).map_err(storage)?;
+                let keys: Vec<String> = vars
+                    .range((name, "")..)
+                    .map_err(storage)?
+                    .map_while(|entry| {
+                        let (k, _) = entry.ok()?;
+                        let (db, key) = k.value();
+                        (db == name).then(|| key.to_string())
+                    })
+                    .collect();
+                for key in keys {
+                    vars.remove((name, key.as_str())).map_err(storage)?;
+                }
             }
-            let mut vars = tx.open_table(VARS).map_err(storage)?;
-            let keys: Vec<String> = vars
-                .range((name, "")..)
-                .map_err(storage)?
-                .map_while(|entry| {
-                    let (k, _) = entry.ok()?;
-                    let (db, key) = k.value();
-                    (db == name).then(|| key.to_string())
-                })
-                .collect();
-            for key in keys {
-                vars.remove((name, key.as_str())).map_err(storage)?;
-            }
-        }
-        tx.commit().map_err(storage)
+            tx.commit().map_err(storage)
+        })
     }
 
     pub fn list(&self) -> Result<Vec<String>, PairDbError> {
-        let tx = self.db.begin_read().map_err(storage)?;
-        let t = tx.open_table(DATABASES).map_err(storage)?;
-        let mut names = Vec::new();
-        for entry in t.iter().map_err(storage)? {
-            let (k, _) = entry.map_err(storage)?;
-            names.push(k.value().to_string());
-        }
-        Ok(names)
+        self.with(|store| {
+            let tx = store.begin_read().map_err(storage)?;
+            let t = tx.open_table(DATABASES).map_err(storage)?;
+            let mut names = Vec::new();
+            for entry in t.iter().map_err(storage)? {
+                let (k, _) = entry.map_err(storage)?;
+                names.push(k.value().to_string());
+            }
+            Ok(names)
+        })
     }
 
     /// Stores `json` (already validated) under `key`; durable on return.
     pub fn set(&self, db: &str, key: &str, json: &str) -> Result<(), PairDbError> {
-        let tx = self.db.begin_write().map_err(storage)?;
-        {
-            let dbs = tx.open_table(DATABASES).map_err(storage)?;
-            if dbs.get(db).map_err(storage)?.is_none() {
-                return Err(PairDbError::NoDatabase(db.into()));
+        self.with(|store| {
+            let tx = store.begin_write().map_err(storage)?;
+            {
+                let dbs = tx.open_table(DATABASES).map_err(storage)?;
+                if dbs.get(db).map_err(storage)?.is_none() {
+                    return Err(PairDbError::NoDatabase(db.into()));
+                }
+                let mut vars = tx.open_table(VARS).map_err(storage)?;
+                vars.insert((db, key), json).map_err(storage)?;
             }
-            let mut vars = tx.open_table(VARS).map_err(storage)?;
-            vars.insert((db, key), json).map_err(storage)?;
-        }
-        tx.commit().map_err(storage)
+            tx.commit().map_err(storage)
+        })
     }
 
     pub fn get(&self, db: &str, key: &str) -> Result<Option<String>, PairDbError> {
         self.require(db)?;
-        let tx = self.db.begin_read().map_err(storage)?;
-        let vars = match tx.open_table(VARS) {
-            Ok(t) => t,
-            Err(redb::TableError::TableDoesNotExist(_)) => return Ok(None),
-            Err(e) => return Err(storage(e)),
-        };
-        Ok(vars
-            .get((db, key))
-            .map_err(storage)?
-            .map(|v| v.value().to_string()))
+        self.with(|store| {
+            let tx = store.begin_read().map_err(storage)?;
+            let vars = match tx.open_table(VARS) {
+                Ok(t) => t,
+                Err(redb::TableError::TableDoesNotExist(_)) => return Ok(None),
+                Err(e) => return Err(storage(e)),
+            };
+            Ok(vars
+                .get((db, key))
+                .map_err(storage)?
+                .map(|v| v.value().to_string()))
+        })
     }
 
     /// Removes a variable; returns whether it existed.
     pub fn del(&self, db: &str, key: &str) -> Result<bool, PairDbError> {
         self.require(db)?;
-        let tx = self.db.begin_write().map_err(storage)?;
-        let existed = {
-            let mut vars = tx.open_table(VARS).map_err(storage)?;
-            vars.remove((db, key)).map_err(storage)?.is_some()
-        };
-        tx.commit().map_err(storage)?;
-        Ok(existed)
+        self.with(|store| {
+            let tx = store.begin_write().map_err(storage)?;
+            let existed = {
+                let mut vars = tx.open_table(VARS).map_err(storage)?;
+                vars.remove((db, key)).map_err(storage)?.is_some()
+            };
+            tx.commit().map_err(storage)?;
+            Ok(existed)
+        })
     }
 
     pub fn keys(&self, db: &str) -> Result<Vec<String>, PairDbError> {
         self.require(db)?;
-        let tx = self.db.begin_read().map_err(storage)?;
-        let vars = match tx.open_table(VARS) {
-            Ok(t) => t,
-            Err(redb::TableError::TableDoesNotExist(_)) => return Ok(Vec::new()),
-            Err(e) => return Err(storage(e)),
-        };
-        let mut keys = Vec::new();
-        for entry in vars.range((db, "")..).map_err(storage)? {
-            let (k, _) = entry.map_err(storage)?;
-            let (d, key) = k.value();
-            if d != db {
-                break;
+        self.with(|store| {
+            let tx = store.begin_read().map_err(storage)?;
+            let vars = match tx.open_table(VARS) {
+                Ok(t) => t,
+                Err(redb::TableError::TableDoesNotExist(_)) => return Ok(Vec::new()),
+                Err(e) => return Err(storage(e)),
+            };
+            let mut keys = Vec::new();
+            for entry in vars.range((db, "")..).map_err(storage)? {
+                let (k, _) = entry.map_err(storage)?;
+                let (d, key) = k.value();
+                if d != db {
+                    break;
+                }
+                keys.push(key.to_string());
             }
-            keys.push(key.to_string());
-        }
-        Ok(keys)
+            Ok(keys)
+        })
     }
 
     fn require(&self, db: &str) -> Result<(), PairDbError> {

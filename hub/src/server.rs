@@ -14,7 +14,7 @@ use tracing::info;
 
 use crate::admission::Admission;
 use crate::config::Config;
-use crate::http::access::{self, Access, PeerInfo};
+use crate::http::access::{self, Access};
 use crate::hub::{Hub, HubLimits, OutboxLimits};
 use crate::metrics::Metrics;
 use crate::module::Module;
@@ -30,6 +30,8 @@ pub struct RunningServer {
     pub http: SocketAddr,
     /// The page's address with its credential (what the operator opens).
     pub page_url: String,
+    /// With `[http] tls`: the certificate's SHA-256 fingerprint, to compare on the browser's warning page.
+    pub tls_fingerprint: Option<String>,
     pub flow_tcp: Option<SocketAddr>,
     pub flow_unix: Option<PathBuf>,
     pub shared: Arc<Shared>,
@@ -93,6 +95,8 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         m.check(&config.module(m.name()))
             .map_err(|e| config.module_error(m.name(), &format!("{e:#}")))?;
     }
+    // Every descriptor the hard limit allows: each satellite, page and stranger holds one.
+    let fd_limit = crate::net::descriptors::raise_limit();
     let data_dir = config.server.data_dir.clone();
     std::fs::create_dir_all(&data_dir)
         .with_context(|| format!("creating data dir {}", data_dir.display()))?;
@@ -122,7 +126,10 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         pairdb: Arc::new(pairdb),
         tokens,
         pulses: pulses.clone(),
-        admission: Arc::new(Admission::new(config.hub.max_unauthenticated)),
+        admission: Arc::new(Admission::new(
+            config.hub.max_unauthenticated,
+            config.hub.max_unauthenticated_per_address,
+        )),
         shutdown,
         modules_stop: watch::channel(false).0,
         reports: Mutex::new(BTreeMap::new()),
@@ -179,41 +186,43 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         .await
         .with_context(|| format!("binding HTTP {http_addr}"))?;
     let http = listener.local_addr()?;
-    let listener = access::HttpListener(listener);
+    let tls = crate::http::tls::load(&shared.config).context("setting up HTTPS ([http] tls)")?;
     let h = &shared.config.http;
-    let access = Arc::new(Access::new(
-        shared.tokens.clone(),
-        http.port(),
-        Duration::from_secs(h.cookie_days * 24 * 3600),
-        h.allowed_hosts.clone(),
-        h.open_on_loopback,
-    ));
+    let access = Arc::new(
+        Access::new(
+            shared.tokens.clone(),
+            http.port(),
+            Duration::from_secs(h.cookie_days * 24 * 3600),
+            h.allowed_hosts.clone(),
+            h.open_on_loopback,
+        )
+        .over_tls(tls.is_some()),
+    );
+    let scheme = if tls.is_some() { "https" } else { "http" };
     let page_url = if access.is_open() {
-        format!("http://{http}/")
+        format!("{scheme}://{http}/")
     } else {
-        format!("http://{http}/?token={}", shared.tokens.page())
+        format!("{scheme}://{http}/?token={}", shared.tokens.page())
     };
-    let app = crate::http::app(shared.clone())
+    let tls_fingerprint = tls.as_ref().map(|t| t.fingerprint.clone());
+    let router = crate::http::app(shared.clone())
         .merge(routes)
-        .layer(axum::middleware::from_fn_with_state(access, access::gate))
-        .into_make_service_with_connect_info::<PeerInfo>();
-    let mut stop = shared.shutdown.subscribe();
-    tasks.push(tokio::spawn(async move {
-        let graceful = axum::serve(listener, app).with_graceful_shutdown(async move {
-            let _ = stop.changed().await;
-        });
-        if let Err(e) = graceful.await {
-            tracing::error!("http server failed: {e}");
-        }
-    }));
+        .layer(axum::middleware::from_fn_with_state(access, access::gate));
+    tasks.push(tokio::spawn(crate::http::serve::run(
+        listener,
+        tls,
+        router,
+        shared.clone(),
+    )));
     let mut module_tasks = Vec::new();
     for module in modules {
         module_tasks.push(crate::module::spawn(shared.clone(), module).await?);
     }
-    info!(%http, ?flow_tcp, ?flow_unix, "robot-agent is up");
+    info!(%http, ?flow_tcp, ?flow_unix, ?fd_limit, "robot-agent is up");
     Ok(RunningServer {
         http,
         page_url,
+        tls_fingerprint,
         flow_tcp,
         flow_unix,
         shared,

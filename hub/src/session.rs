@@ -287,6 +287,11 @@ impl Session {
                 warn!("pair database error: {e}");
                 Err(ErrorReply::new(ErrorCode::Database, e))
             }
+            // Logged by the store itself, which opens the database again at the next call.
+            Ok(Err(PairDbError::Io(e))) => Err(ErrorReply::new(
+                ErrorCode::Database,
+                format!("the disk failed, nothing was written: {e}"),
+            )),
             Err(e) => Err(ErrorReply::new(
                 ErrorCode::Internal,
                 format!("database task failed: {e}"),

@@ -91,6 +91,11 @@ impl<R: TransportRead> FrameReader<R> {
         self.max_frame = max_frame;
     }
 
+    /// Bytes of a frame begun but not complete yet (what a peer that stops mid-frame holds).
+    pub fn partial(&self) -> usize {
+        self.buf.len()
+    }
+
     /// How many read buffers this reader has allocated, the first included.
     pub fn buffers_allocated(&self) -> u64 {
         self.allocated

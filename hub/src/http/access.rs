@@ -9,15 +9,12 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use axum::extract::connect_info::Connected;
 use axum::extract::{ConnectInfo, Query, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{Html, IntoResponse, Response};
-use axum::serve::{IncomingStream, Listener};
 use hmac::{Hmac, KeyInit, Mac};
 use sha2::Sha256;
-use tokio::net::{TcpListener, TcpStream};
 
 use crate::tokens::Tokens;
 
@@ -26,47 +23,6 @@ use crate::tokens::Tokens;
 pub struct PeerInfo {
     pub remote: SocketAddr,
     pub local: Option<SocketAddr>,
-}
-
-/// The HTTP listener: TCP with Nagle off (speech and avatar commands are small writes that must not wait), and
-/// both addresses of each connection for the handlers.
-#[derive(Debug)]
-pub struct HttpListener(pub TcpListener);
-
-impl Listener for HttpListener {
-    type Io = TcpStream;
-    type Addr = PeerInfo;
-
-    async fn accept(&mut self) -> (TcpStream, PeerInfo) {
-        loop {
-            match self.0.accept().await {
-                Ok((stream, remote)) => {
-                    let _ = stream.set_nodelay(true);
-                    let local = stream.local_addr().ok();
-                    return (stream, PeerInfo { remote, local });
-                }
-                // Typically out of file descriptors: back off instead of spinning.
-                Err(e) => {
-                    tracing::warn!("http accept failed: {e}");
-                    tokio::time::sleep(Duration::from_millis(100)).await;
-                }
-            }
-        }
-    }
-
-    fn local_addr(&self) -> std::io::Result<PeerInfo> {
-        let local = self.0.local_addr()?;
-        Ok(PeerInfo {
-            remote: local,
-            local: Some(local),
-        })
-    }
-}
-
-impl Connected<IncomingStream<'_, HttpListener>> for PeerInfo {
-    fn connect_info(stream: IncomingStream<'_, HttpListener>) -> Self {
-        *stream.remote_addr()
-    }
 }
 
 /// What let a request in; the browser link counts its sockets per credential.
@@ -99,6 +55,8 @@ pub struct Access {
     cookie_ttl: Duration,
     allowed_hosts: Vec<String>,
     open: bool,
+    /// Served over HTTPS: the cookie is marked `Secure`, so the browser never sends it over plain HTTP.
+    secure: bool,
 }
 
 type HmacSha256 = Hmac<Sha256>;
@@ -123,7 +81,14 @@ impl Access {
             cookie_ttl,
             allowed_hosts,
             open,
+            secure: false,
         }
+    }
+
+    /// The page is served over HTTPS: cookies are marked `Secure`.
+    pub fn over_tls(mut self, tls: bool) -> Self {
+        self.secure = tls;
+        self
     }
 
     /// Whether no credential is asked (`http.open_on_loopback`).
@@ -145,9 +110,10 @@ impl Access {
         let nonce = format!("{:016x}", rand::random::<u64>());
         let tag = hex(&self.mac(issued, &nonce).finalize().into_bytes());
         format!(
-            "{}={issued}.{nonce}.{tag}; Path=/; HttpOnly; SameSite=Strict; Max-Age={}",
+            "{}={issued}.{nonce}.{tag}; Path=/; HttpOnly; SameSite=Strict; Max-Age={}{}",
             self.cookie_name,
-            self.cookie_ttl.as_secs()
+            self.cookie_ttl.as_secs(),
+            if self.secure { "; Secure" } else { "" }
         )
     }
 
@@ -279,16 +245,25 @@ pub async fn gate(State(access): State<Arc<Access>>, mut req: Request, next: Nex
             .map(|q| q.0)
             .unwrap_or_default();
         if let Some(presented) = query.get("token") {
-            return exchange(
+            let res = exchange(
                 &access,
                 req.uri().query().unwrap_or_default(),
                 presented,
                 now,
             );
+            if res.status() == StatusCode::SEE_OTHER
+                && let Some(conn) = req.extensions().get::<super::serve::HttpConn>()
+            {
+                conn.known();
+            }
+            return res;
         }
     }
     match access.credential(req.headers(), now) {
         Some(credential) => {
+            if let Some(conn) = req.extensions().get::<super::serve::HttpConn>() {
+                conn.known();
+            }
             req.extensions_mut().insert(credential);
             next.run(req).await
         }

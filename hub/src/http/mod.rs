@@ -2,6 +2,8 @@
 //! every route by [`access::gate`].
 
 pub mod access;
+pub mod serve;
+pub mod tls;
 
 use std::sync::Arc;
 
@@ -12,6 +14,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use serde_json::{Value, json};
 
+use crate::admission::Origin;
 use crate::net::serve_connection;
 use crate::net::ws::WsServerTransport;
 use crate::shared::Shared;
@@ -140,6 +143,7 @@ async fn status(State(shared): State<Arc<Shared>>) -> Result<axum::Json<Value>, 
 async fn flow_link(
     State(shared): State<Arc<Shared>>,
     ConnectInfo(peer): ConnectInfo<PeerInfo>,
+    conn: Option<axum::Extension<serve::HttpConn>>,
     headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {
@@ -152,13 +156,22 @@ async fn flow_link(
     }
     // The byte stream arrives in messages of at most WS_MESSAGE_MAX; frames are reassembled and checked by size
     // behind it, so one message never holds more than that before the frame check.
+    // The connection's place among the strangers goes with it until FlowProtocol's login (a router served
+    // without the edge's own loop, as in tests, takes a place here).
+    let stranger = conn
+        .and_then(|c| c.take_stranger())
+        .unwrap_or_else(|| shared.admission.admit(Origin::ip(peer.ip())));
     ws.max_message_size(flow::transport::WS_MESSAGE_MAX)
         .max_frame_size(flow::transport::WS_MESSAGE_MAX)
+        .on_failed_upgrade(move |e| {
+            tracing::warn!(%peer, "flow link: the WebSocket upgrade failed: {e}");
+        })
         .on_upgrade(move |socket| async move {
             serve_connection(
                 WsServerTransport::new(socket, format!("ws:{peer}")),
                 shared,
                 false,
+                stranger,
             )
             .await;
         })

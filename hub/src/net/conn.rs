@@ -2,11 +2,14 @@
 //! commands into the session, and a writer loop that drains the outbox.
 //!
 //! Before login a connection is a stranger: it may send only a small frame,
-//! must log in within the login timeout, and counts against the cap on
-//! unauthenticated connections (see `crate::admission`).
+//! must log in within the login timeout, and holds a place in the table of
+//! strangers, which may evict it to make room (see `crate::admission`). After
+//! login a frame, once begun, must be finished within `hub.frame_timeout_ms`.
 
 use std::sync::Arc;
 use std::time::Duration;
+
+use tokio::time::Instant;
 
 use flow::connection::{ConnError, Connection, FrameWriter};
 use flow::protocol::decode_command;
@@ -31,6 +34,9 @@ const FLUSH_GRACE: Duration = Duration::from_secs(2);
 /// (version, a 40-character token, a name) takes well under 1 kB; a stranger
 /// must not make the hub reserve megabytes for a frame it will never finish.
 pub const PRE_LOGIN_MAX_FRAME: usize = 16 * 1024;
+/// The login deadline of a stranger that came while its table was filling up: a real client logs in within a
+/// round trip, and a flood's places turn over faster.
+pub const PRESSED_LOGIN: Duration = Duration::from_secs(1);
 
 /// Why a connection ended: a normal close is logged at info, a misbehaving
 /// client at warn as `killing spurious client`.
@@ -41,6 +47,8 @@ enum End {
     Closed(String),
     /// The client broke the protocol or a limit.
     Spurious(String),
+    /// A stranger evicted or out of time: logged once per address per interval, as a flood makes many.
+    Stranger(String),
 }
 
 /// How the writer task ended.
@@ -52,29 +60,21 @@ enum WriterEnd {
 }
 
 /// Serves one connection until it closes, misbehaves or the server shuts down.
-/// `internal` connections are the server's own modules: trusted, never capped.
-pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, internal: bool) {
+/// `internal` connections are the server's own modules: trusted, never capped
+/// (their `stranger` is [`Stranger::trusted`]); any other comes with its place
+/// among the strangers, taken at accept.
+pub async fn serve_connection<T: Transport>(
+    transport: T,
+    shared: Arc<Shared>,
+    internal: bool,
+    mut stranger: Stranger,
+) {
     let mut shutdown = shared.shutdown.subscribe();
     let Connection {
         peer,
         mut reader,
         writer,
     } = Connection::new(transport, PRE_LOGIN_MAX_FRAME);
-    let mut stranger = if internal {
-        Stranger::trusted()
-    } else {
-        match shared.admission.admit() {
-            Some(s) => s,
-            None => {
-                warn!(
-                    %peer,
-                    "refusing connection: {} connections are already waiting to log in (hub.max_unauthenticated)",
-                    shared.admission.waiting()
-                );
-                return;
-            }
-        }
-    };
     let (conn, outbox) = shared.hub.connect(&peer);
     debug!(%peer, conn, "connection opened");
     let mut writer_task = tokio::spawn(write_loop(writer, outbox.clone()));
@@ -87,21 +87,42 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
         tokens: shared.tokens.clone(),
     };
     let mut session = Session::new(conn, peer.clone(), outbox.clone(), context, internal);
-    let login_deadline =
-        tokio::time::sleep(Duration::from_millis(shared.config.hub.login_timeout_ms));
+    let login_within = stranger.login_deadline(
+        Duration::from_millis(shared.config.hub.login_timeout_ms),
+        PRESSED_LOGIN,
+    );
+    let login_deadline = tokio::time::sleep(login_within);
     tokio::pin!(login_deadline);
+    let frame_timeout = Duration::from_millis(shared.config.hub.frame_timeout_ms);
+    // When the last whole frame came: a frame begun and left unfinished for `frame_timeout` after it ends the
+    // connection (checked when the timer fires, as a begun frame is not visible while a read is pending).
+    let mut last_frame = Instant::now();
     let mut since_yield = 0usize;
     let end: End = 'serve: loop {
         let awaiting_login = !session.is_logged_in();
         let read = tokio::select! {
             frame = reader.read_frame() => frame,
+            why = stranger.evicted(), if awaiting_login => break End::Stranger(why.to_string()),
+            _ = tokio::time::sleep_until(last_frame + frame_timeout), if !awaiting_login => {
+                if reader.partial() > 0 {
+                    break End::Spurious(format!(
+                        "a frame begun has not been finished within {} ms ({} bytes of it came; hub.frame_timeout_ms)",
+                        frame_timeout.as_millis(), reader.partial()
+                    ));
+                }
+                last_frame = Instant::now();
+                continue;
+            }
             _ = outbox.wait_closed() => {
                 let reason = outbox.closed().unwrap_or_default();
                 break if outbox.overflowed() { End::Spurious(reason) } else { End::Closed(reason) };
             }
             _ = shutdown.changed() => break End::Closed("server shutting down".into()),
-            _ = &mut login_deadline, if awaiting_login => break End::Spurious(format!(
-                "no login within {} ms (hub.login_timeout_ms)", shared.config.hub.login_timeout_ms
+            _ = &mut login_deadline, if awaiting_login => break End::Stranger(format!(
+                "no login within {} ms (hub.login_timeout_ms{})", login_within.as_millis(),
+                if login_within < Duration::from_millis(shared.config.hub.login_timeout_ms) {
+                    ", shortened while many connections wait to log in"
+                } else { "" }
             )),
             ended = &mut writer_task => {
                 writer_done = true;
@@ -112,6 +133,7 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
                 };
             }
         };
+        last_frame = Instant::now();
         let mut next = match read {
             Ok(Some(raw)) => Some(raw),
             Ok(None) => break End::Closed("closed by the peer".into()),
@@ -148,8 +170,15 @@ pub async fn serve_connection<T: Transport>(transport: T, shared: Arc<Shared>, i
             };
         }
     };
+    let origin = stranger.origin();
     drop(stranger);
     let reason = match end {
+        End::Stranger(reason) => {
+            shared.admission.notices().note(&origin, || {
+                format!("killing spurious client {peer}: {reason}")
+            });
+            reason
+        }
         End::Spurious(reason) => {
             warn!(%peer, conn, "killing spurious client: {reason}");
             reason

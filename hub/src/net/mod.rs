@@ -2,6 +2,7 @@
 //! listener module per transport.
 
 pub mod conn;
+pub mod descriptors;
 pub mod io_runtime;
 pub mod tcp;
 pub mod unix;

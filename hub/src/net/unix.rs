@@ -3,13 +3,13 @@
 use std::path::Path;
 use std::sync::Arc;
 
+use super::descriptors::AcceptFailures;
+use super::serve_connection;
+use crate::admission::Origin;
+use crate::shared::Shared;
 use flow::transport::unix::UnixTransport;
 use tokio::net::UnixListener;
 use tokio::task::JoinSet;
-use tracing::warn;
-
-use super::serve_connection;
-use crate::shared::Shared;
 
 /// Binds `path`, replacing a stale socket file left by a killed server.
 pub fn bind(path: &Path) -> std::io::Result<UnixListener> {
@@ -31,18 +31,23 @@ pub async fn accept_loop(listener: UnixListener, path: std::path::PathBuf, share
     let mut shutdown = shared.shutdown.subscribe();
     let mut connections = JoinSet::new();
     let mut next = 0u64;
+    let mut failures = AcceptFailures::new("flow unix");
     loop {
         tokio::select! {
             accepted = listener.accept() => match accepted {
                 Ok((stream, _)) => {
+                    failures.succeeded();
                     next += 1;
                     let peer = format!("unix:{next}");
-                    connections.spawn(serve_connection(UnixTransport::from_stream(stream, peer), shared.clone(), false));
+                    let stranger = shared.admission.admit(Origin::unix());
+                    connections.spawn(serve_connection(
+                        UnixTransport::from_stream(stream, peer),
+                        shared.clone(),
+                        false,
+                        stranger,
+                    ));
                 }
-                Err(e) => {
-                    warn!("unix accept failed: {e}");
-                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-                }
+                Err(e) => failures.failed(&e, || async { drop(listener.accept().await) }).await,
             },
             Some(_) = connections.join_next() => {}
             _ = shutdown.changed() => break,
