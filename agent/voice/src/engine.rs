@@ -1,5 +1,6 @@
-//! The speech engine: one dedicated thread that owns espeak-ng, fed through a bounded request queue, streaming
-//! each utterance back sentence by sentence and buffer by buffer.
+//! The speech engine: one dedicated thread that owns espeak-ng (and, when configured, the Piper voice that
+//! espeak-ng phonemises for), fed through a bounded request queue, streaming each utterance back sentence by
+//! sentence and buffer by buffer.
 //!
 //! Queues and their overflow policy:
 //! - Requests: bounded (`queue_capacity`); when full, [`Synthesizer::speak`] fails at once with
@@ -18,9 +19,11 @@ use tokio::sync::mpsc;
 use crate::data_path::locate_data;
 use crate::error::VoiceError;
 use crate::espeak::{Espeak, Flow, Parameter, SynthOutcome};
+use crate::piper::{PiperConfig, PiperVoice};
 use crate::sentence::split_sentences;
 use crate::timeline::{PhonemeMark, SpeechChunk, TimelineBuilder, VisemeCue};
-use crate::voice::VoiceSettings;
+use crate::viseme::Viseme;
+use crate::voice::{Engine, VoiceSettings};
 
 /// How the engine is started.
 #[derive(Debug, Clone)]
@@ -34,6 +37,9 @@ pub struct SynthesizerConfig {
     pub queue_capacity: usize,
     /// Events of one utterance that may wait for its consumer.
     pub chunk_queue: usize,
+    /// The Piper voice, loaded at start (checksums verified) so that requests for [`Engine::Piper`] can use it;
+    /// `None`: espeak-ng only.
+    pub piper: Option<PiperConfig>,
 }
 
 impl Default for SynthesizerConfig {
@@ -43,6 +49,7 @@ impl Default for SynthesizerConfig {
             chunk_ms: 20,
             queue_capacity: 8,
             chunk_queue: 64,
+            piper: None,
         }
     }
 }
@@ -107,14 +114,35 @@ impl Utterance {
         self.submitted
     }
 
-    /// The next event, or `None` after the last one.
+    /// The next event, or `None` after the last one. Once the utterance is cancelled, the audio still queued is
+    /// skipped: what follows is its end.
     pub async fn next(&mut self) -> Option<SpeechEvent> {
-        self.events.recv().await
+        loop {
+            let event = self.events.recv().await?;
+            if !self.skips(&event) {
+                return Some(event);
+            }
+        }
     }
 
     /// The next event, waiting on this thread; for code outside an async runtime (benchmarks, tools).
     pub fn blocking_next(&mut self) -> Option<SpeechEvent> {
-        self.events.blocking_recv()
+        loop {
+            let event = self.events.blocking_recv()?;
+            if !self.skips(&event) {
+                return Some(event);
+            }
+        }
+    }
+
+    /// Audio and sentence ends of a cancelled utterance are dropped on the consumer's side too, so that a cancel
+    /// stops the stream at once rather than after the chunks the engine had already queued.
+    fn skips(&self, event: &SpeechEvent) -> bool {
+        self.cancel.is_cancelled()
+            && matches!(
+                event,
+                SpeechEvent::Chunk(_) | SpeechEvent::SentenceEnd { .. }
+            )
     }
 
     /// A token that cancels this utterance from elsewhere (a barge-in handler).
@@ -201,6 +229,7 @@ struct Request {
 pub struct Synthesizer {
     requests: mpsc::Sender<Request>,
     sample_rate: u32,
+    piper: bool,
     next_id: Arc<AtomicU64>,
     queue_capacity: usize,
     chunk_queue: usize,
@@ -227,19 +256,50 @@ impl Synthesizer {
             });
         }
         let data = locate_data(config.data_path.as_deref())?;
+        if let Some(piper) = &config.piper {
+            // Before the thread, so that a missing or damaged voice fails here with its own message.
+            piper.verify()?;
+        }
         let (requests, request_rx) = mpsc::channel::<Request>(config.queue_capacity.max(1));
         let (ready_tx, ready_rx) = std::sync::mpsc::sync_channel(1);
         let chunk_ms = config.chunk_ms;
+        let piper_config = config.piper.clone();
+        let piper = piper_config.is_some();
         std::thread::Builder::new()
             .name("espeak-engine".into())
-            .spawn(move || match Espeak::initialize(&data, chunk_ms) {
-                Ok(espeak) => {
-                    // The receiver only goes away if `start` itself is gone, in which case nobody listens.
-                    let _ = ready_tx.send(Ok(espeak.sample_rate()));
-                    run_engine(espeak, request_rx);
-                }
-                Err(error) => {
-                    let _ = ready_tx.send(Err(error));
+            .spawn(move || {
+                // The voice first: a voice that cannot be used is reported as such, even while another
+                // espeak-ng engine holds the process's one slot.
+                let voice = piper_config.as_ref().map(PiperVoice::load).transpose();
+                let started = voice.and_then(|voice| {
+                    let espeak = Espeak::initialize(&data, chunk_ms)?;
+                    if let Some(voice) = &voice
+                        && voice.file.sample_rate != espeak.sample_rate()
+                    {
+                        return Err(VoiceError::Piper(format!(
+                            "the voice speaks at {} Hz, espeak-ng at {} Hz; both must share one clock",
+                            voice.file.sample_rate,
+                            espeak.sample_rate()
+                        )));
+                    }
+                    Ok((espeak, voice))
+                });
+                match started {
+                    Ok((espeak, voice)) => {
+                        // The receiver only goes away if `start` itself is gone, in which case nobody listens.
+                        let _ = ready_tx.send(Ok(espeak.sample_rate()));
+                        run_engine(
+                            Engines {
+                                espeak,
+                                piper: voice,
+                                chunk_ms,
+                            },
+                            request_rx,
+                        );
+                    }
+                    Err(error) => {
+                        let _ = ready_tx.send(Err(error));
+                    }
                 }
             })
             .map_err(|error| VoiceError::Init {
@@ -247,10 +307,11 @@ impl Synthesizer {
                 message: format!("cannot spawn: {error}"),
             })?;
         let sample_rate = ready_rx.recv().map_err(|_| VoiceError::EngineStopped)??;
-        tracing::info!(sample_rate, chunk_ms, "espeak-ng engine started");
+        tracing::info!(sample_rate, chunk_ms, piper, "speech engine started");
         Ok(Synthesizer {
             requests,
             sample_rate,
+            piper,
             next_id: Arc::new(AtomicU64::new(1)),
             queue_capacity: config.queue_capacity.max(1),
             chunk_queue: config.chunk_queue.max(1),
@@ -262,9 +323,17 @@ impl Synthesizer {
         self.sample_rate
     }
 
+    /// Whether a Piper voice is loaded, so that [`Engine::Piper`] requests can be spoken.
+    pub fn has_piper(&self) -> bool {
+        self.piper
+    }
+
     /// Queues `text` to be spoken with `voice`; the returned utterance streams the result.
     pub fn speak(&self, text: &str, voice: &VoiceSettings) -> Result<Utterance, VoiceError> {
         voice.validate()?;
+        if voice.engine == Engine::Piper && !self.piper {
+            return Err(VoiceError::PiperUnavailable);
+        }
         if text.contains('\0') {
             return Err(VoiceError::InvalidText(
                 "it contains a NUL character".into(),
@@ -296,11 +365,27 @@ impl Synthesizer {
     }
 }
 
+/// What the engine thread owns.
+struct Engines {
+    espeak: Espeak,
+    piper: Option<PiperVoice>,
+    chunk_ms: u32,
+}
+
 /// The engine thread's loop: one utterance at a time until every handle is gone.
-fn run_engine(mut espeak: Espeak, mut requests: mpsc::Receiver<Request>) {
+fn run_engine(mut engines: Engines, mut requests: mpsc::Receiver<Request>) {
     let mut current: Option<VoiceSettings> = None;
     while let Some(request) = requests.blocking_recv() {
-        let end = match speak_one(&mut espeak, &mut current, &request) {
+        let spoken = match (request.voice.engine, engines.piper.as_mut()) {
+            (Engine::Espeak, _) => speak_one(&mut engines.espeak, &mut current, &request),
+            (Engine::Piper, Some(piper)) => {
+                // Phonemising switches espeak-ng's voice: the next espeak-ng utterance sets its own again.
+                current = None;
+                speak_piper(&mut engines.espeak, piper, engines.chunk_ms, &request)
+            }
+            (Engine::Piper, None) => Err(VoiceError::PiperUnavailable),
+        };
+        let end = match spoken {
             Ok((total_samples, cancelled)) => SpeechEvent::Finished {
                 total_samples,
                 cancelled,
@@ -315,7 +400,7 @@ fn run_engine(mut espeak: Espeak, mut requests: mpsc::Receiver<Request>) {
         // A consumer that has gone away does not need to hear how it ended.
         let _ = request.out.blocking_send(end);
     }
-    tracing::info!("espeak-ng engine stopped");
+    tracing::info!("speech engine stopped");
 }
 
 /// Applies the voice if it changed since the last utterance.
@@ -397,4 +482,110 @@ fn speak_one(
         tracing::debug!(unmapped = ?builder.unmapped, "phonemes without a viseme kept the previous shape");
     }
     Ok((builder.written(), request.cancel.is_cancelled()))
+}
+
+/// Speaks one request with the Piper voice: espeak-ng phonemises each sentence with the voice's espeak voice, the
+/// network speaks it in one run, and the audio goes out in `chunk_ms` pieces carrying the cues that fall in them.
+/// Cancellation is checked before every sentence and every chunk.
+fn speak_piper(
+    espeak: &mut Espeak,
+    piper: &mut PiperVoice,
+    chunk_ms: u32,
+    request: &Request,
+) -> Result<(u64, bool), VoiceError> {
+    if request.cancel.is_cancelled() {
+        return Ok((0, true));
+    }
+    espeak.set_voice(&piper.file.espeak_voice)?;
+    let rate = piper.file.sample_rate;
+    let chunk_samples = (u64::from(rate) * u64::from(chunk_ms) / 1000).max(1) as usize;
+    // espeak-ng's default rate is the voice's natural pace; other rates stretch or squeeze the phonemes.
+    let length = 175.0 / request.voice.rate_wpm as f32;
+    let gain = request.voice.volume as f32 / 100.0;
+    let mut written = 0u64;
+    let mut last_viseme = None;
+    let mut unknown = Vec::new();
+    let send = |event: SpeechEvent| request.out.blocking_send(event).is_ok();
+    for (index, sentence) in split_sentences(&request.text).into_iter().enumerate() {
+        if request.cancel.is_cancelled() {
+            return Ok((written, true));
+        }
+        let clauses = espeak.text_to_phonemes(sentence)?;
+        let spoken = piper.speak(
+            clauses
+                .iter()
+                .map(|c| (c.ipa.as_str(), c.consumed.as_str())),
+            length,
+            gain,
+        )?;
+        unknown.extend(spoken.unknown);
+        let start = written;
+        let end = start + spoken.pcm.len() as u64;
+        let mut cues: Vec<VisemeCue> = Vec::with_capacity(spoken.cues.len() + 1);
+        for (at, viseme) in spoken
+            .cues
+            .into_iter()
+            .chain(std::iter::once((end - start, Viseme::Sil)))
+        {
+            if last_viseme != Some(viseme) {
+                cues.push(VisemeCue {
+                    sample: start + at.min(end - start),
+                    viseme,
+                });
+                last_viseme = Some(viseme);
+            }
+        }
+        let mut marks: Vec<PhonemeMark> = spoken
+            .phonemes
+            .into_iter()
+            .map(|(at, phoneme)| PhonemeMark {
+                sample: start + at,
+                ipa: phoneme.to_string(),
+                espeak_ms: at * 1000 / u64::from(rate.max(1)),
+            })
+            .collect();
+        let mut pieces: Vec<&[i16]> = spoken.pcm.chunks(chunk_samples).collect();
+        if pieces.is_empty() && !cues.is_empty() {
+            pieces.push(&[]);
+        }
+        let count = pieces.len();
+        for (position, piece) in pieces.into_iter().enumerate() {
+            if request.cancel.is_cancelled() {
+                return Ok((written, true));
+            }
+            let chunk_start = written;
+            let chunk_end = chunk_start + piece.len() as u64;
+            let inside = |sample: u64| position + 1 == count || sample < chunk_end;
+            let cue_count = cues.iter().take_while(|c| inside(c.sample)).count();
+            let mark_count = marks.iter().take_while(|m| inside(m.sample)).count();
+            let chunk = SpeechChunk {
+                sentence: index,
+                sentence_start: start,
+                start_sample: chunk_start,
+                pcm: piece.to_vec(),
+                cues: cues.drain(..cue_count).collect(),
+                phonemes: marks.drain(..mark_count).collect(),
+            };
+            if !send(SpeechEvent::Chunk(chunk)) {
+                return Ok((written, true));
+            }
+            written = chunk_end;
+        }
+        let sentence_end = SpeechEvent::SentenceEnd {
+            sentence: index,
+            text: sentence.to_owned(),
+            start_sample: start,
+            end_sample: written,
+        };
+        if !send(sentence_end) {
+            return Ok((written, true));
+        }
+    }
+    if !unknown.is_empty() {
+        tracing::debug!(
+            ?unknown,
+            "phonemes the Piper voice has no id or mouth shape for"
+        );
+    }
+    Ok((written, request.cancel.is_cancelled()))
 }

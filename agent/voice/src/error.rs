@@ -49,4 +49,23 @@ pub enum VoiceError {
     /// espeak-ng reported an error while synthesising.
     #[error("espeak-ng synthesis failed: {0}")]
     Synthesis(String),
+
+    /// A model file (the Piper voice, ONNX Runtime) is missing, damaged or unknown.
+    #[error(
+        "{what} {path}: {problem} (config/models.sha256 expects {expected}); run `make model-voice` to provision it"
+    )]
+    ModelFile {
+        what: &'static str,
+        path: PathBuf,
+        problem: String,
+        expected: String,
+    },
+
+    /// The Piper voice could not be loaded or run (its configuration, ONNX Runtime, the network).
+    #[error("Piper voice: {0}")]
+    Piper(String),
+
+    /// A request asked for the Piper engine but this synthesizer was started without a Piper voice.
+    #[error("no Piper voice is loaded (start the synthesizer with a `piper` configuration)")]
+    PiperUnavailable,
 }

@@ -76,6 +76,15 @@ pub(crate) enum Parameter {
     Volume,
 }
 
+/// One clause of text as espeak-ng phonemised it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Clause {
+    /// IPA with stress marks, words separated by spaces.
+    pub ipa: String,
+    /// The text espeak-ng read for this clause, its punctuation and the whitespace after it included.
+    pub consumed: String,
+}
+
 /// The sink the callback forwards to, plus the events converted for it and a panic caught on the C side.
 struct CallbackSlot<'a> {
     sink: &'a mut dyn FnMut(&[i16], &[RawEvent]) -> Flow,
@@ -198,6 +207,61 @@ impl Espeak {
         // SAFETY: a plain setter on the initialised engine, which `&mut self` proves we own.
         let status = unsafe { sys::espeak_ng_SetParameter(id, value, 0) };
         check(status).map_err(VoiceError::Synthesis)
+    }
+
+    /// Turns `text` (UTF-8) into IPA phonemes with the current voice, one string per clause as espeak-ng reads
+    /// the text, each with the part of the text it consumed (from which the caller takes the clause's
+    /// punctuation). This is how Piper voices are fed: they were trained on espeak-ng's IPA.
+    pub(crate) fn text_to_phonemes(&mut self, text: &str) -> Result<Vec<Clause>, VoiceError> {
+        let c_text = CString::new(text)
+            .map_err(|_| VoiceError::InvalidText("it contains a NUL character".into()))?;
+        let start = c_text.as_ptr();
+        let end_offset = c_text.as_bytes().len();
+        let mut cursor: *const c_void = start.cast::<c_void>();
+        let mut clauses = Vec::new();
+        let mut consumed_from = 0usize;
+        // espeak-ng returns one clause per call and moves `cursor` past it, or sets it to null at the end; a
+        // bound on the calls guards against a cursor that stops moving.
+        for _ in 0..=end_offset {
+            if cursor.is_null() {
+                break;
+            }
+            // SAFETY: `cursor` points into `c_text` (a NUL-terminated UTF-8 string alive for this whole loop), as
+            // set by the previous call or at its start; espeak-ng reads from there and writes the position after
+            // the clause, or null, back through the pointer we pass. `&mut self` proves we own the engine. The
+            // returned string is espeak-ng's own static buffer, copied below before the next call.
+            let phonemes = unsafe {
+                sys::espeak_TextToPhonemes(
+                    &mut cursor,
+                    sys::espeakCHARS_UTF8 as c_int,
+                    sys::espeakPHONEMES_IPA as c_int,
+                )
+            };
+            let ipa = if phonemes.is_null() {
+                String::new()
+            } else {
+                // SAFETY: a non-null result is a NUL-terminated string in espeak-ng's buffer, valid until the
+                // next call; it is copied at once.
+                unsafe { CStr::from_ptr(phonemes) }
+                    .to_string_lossy()
+                    .into_owned()
+            };
+            let consumed_to = if cursor.is_null() {
+                end_offset
+            } else {
+                // The cursor still points into `c_text`: its distance from the start is a byte offset.
+                (cursor as usize)
+                    .saturating_sub(start as usize)
+                    .min(end_offset)
+            };
+            let consumed = text
+                .get(consumed_from..consumed_to.max(consumed_from))
+                .unwrap_or_default()
+                .to_owned();
+            consumed_from = consumed_to.max(consumed_from);
+            clauses.push(Clause { ipa, consumed });
+        }
+        Ok(clauses)
     }
 
     /// Synthesises `text` (UTF-8), calling `sink` with every PCM buffer and the events positioned inside it;

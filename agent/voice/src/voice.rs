@@ -1,9 +1,23 @@
-//! Voice, language and prosody of an utterance, validated before they reach espeak-ng.
+//! Voice, language and prosody of an utterance, validated before they reach espeak-ng or the Piper voice.
 
-/// Which espeak-ng voice speaks, and how fast and how high.
+/// Which engine speaks an utterance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    /// espeak-ng's formant synthesiser, with `voice` naming its voice or language.
+    #[default]
+    Espeak,
+    /// The Piper voice the synthesizer was started with (`voice` is then not used; `rate_wpm` and `volume` are,
+    /// `pitch` and `range` are not: the network has its own intonation).
+    Piper,
+}
+
+/// Which engine and voice speaks, and how fast and how high.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct VoiceSettings {
+    /// espeak-ng, or the Piper voice.
+    pub engine: Engine,
     /// espeak-ng voice name or language tag: `en`, `en-us`, `en-gb-x-rp`, `it`, optionally with a variant such
     /// as `en+f3`.
     pub voice: String,
@@ -20,6 +34,7 @@ pub struct VoiceSettings {
 impl Default for VoiceSettings {
     fn default() -> Self {
         VoiceSettings {
+            engine: Engine::Espeak,
             voice: "en".into(),
             rate_wpm: 175,
             pitch: 50,
@@ -37,6 +52,14 @@ impl VoiceSettings {
     pub fn for_voice(voice: impl Into<String>) -> Self {
         VoiceSettings {
             voice: voice.into(),
+            ..Self::default()
+        }
+    }
+
+    /// The Piper voice at the default prosody.
+    pub fn piper() -> Self {
+        VoiceSettings {
+            engine: Engine::Piper,
             ..Self::default()
         }
     }
