@@ -30,12 +30,12 @@ const D = 0.09;
 const EYE_R = 0.0165; // eyeball radius: stylised, large eyes like the 2D face's
 const EYE_X = 0.034;
 const EYE_Y = C[1] + 0.003;
-const EYE_OUT = 0.0046; // how far the eyeball's front stands out of the skin
+const EYE_OUT = 0.0038; // how far the eyeball's front stands out of the skin
 const LID_R = EYE_R * 1.08;
 const MOUTH_Y = C[1] - 0.059;
-const MOUTH_W = 0.0195; // half-width of the lips
-const UPPER_LIP = 0.0056;
-const LOWER_LIP = 0.0074;
+const MOUTH_W = 0.0172; // half-width of the lips
+const UPPER_LIP = 0.0047;
+const LOWER_LIP = 0.0062;
 const JAW_MAX_RAD = 0.16; // jaw = 1 opens the lips by about 18 mm
 const JAW_HINGE = /** @type {V3} */ ([0, C[1] - 0.012, C[2] - 0.025]);
 
@@ -70,7 +70,7 @@ export const MATERIALS = [
   { name: "hair", baseColor: [1, 1, 1], roughness: 0.62, doubleSided: true },
   { name: "cloth", baseColor: [1, 1, 1], roughness: 0.82 },
   { name: "brows", baseColor: linear(0x35212c), roughness: 0.7 },
-  { name: "lashes", baseColor: linear(0x1a1016), roughness: 0.6, doubleSided: true },
+  { name: "lashes", baseColor: linear(0x140c11), roughness: 0.95, doubleSided: true },
   // Lids are thin shells seen from both sides as they move (their rim turns inwards).
   { name: "lids", baseColor: [1, 1, 1], roughness: 0.62, doubleSided: true },
   { name: "catchlight", baseColor: [1, 1, 1], roughness: 1, emissive: [0.85, 0.85, 0.85] },
@@ -126,7 +126,7 @@ function relief(x, y) {
   const tipY = -0.034;
   const k = clamp((0.012 - y) / (0.012 - tipY), 0, 1);
   const under = y < tipY ? Math.exp(-(((y - tipY) / 0.0042) ** 2)) : 1;
-  const bridge = y > 0.012 ? Math.exp(-(((y - 0.012) / 0.006) ** 2)) * 0.2 : 0.2 + 0.8 * Math.pow(k, 1.25);
+  const bridge = y > 0.012 ? Math.exp(-(((y - 0.012) / 0.006) ** 2)) * 0.12 : 0.12 + 0.88 * Math.pow(k, 1.6);
   const sigma = lerp(0.0042, 0.0062, k);
   let z = 0.0108 * bridge * under * Math.exp(-((x / sigma) ** 2));
   z += 0.0032 * gauss(x, 0.0058, y - (tipY + 0.0005), 0.0052); // the ball of the tip
@@ -137,6 +137,7 @@ function relief(x, y) {
   z += 0.0007 * gauss(ax - 0.0042, 0.0017, y + 0.05, 0.006) - 0.0004 * gauss(x, 0.0022, y + 0.05, 0.006);
   z += 0.0032 * Math.exp(-(((y - 0.034) / 0.009) ** 2)) * smoothstep(0.066, 0.03, ax); // brow ridge
   z += 0.0042 * gauss(ax - 0.043, 0.015, y + 0.014, 0.014); // cheekbones
+  z += 0.0045 * gauss(ax - 0.056, 0.009, y - 0.002, 0.016); // the outer rim of the eye sockets, round the eyeballs
   z += 0.0062 * gauss(x, 0.026, y + 0.062, 0.017); // the muzzle the lips sit on
   z += 0.0065 * gauss(x, 0.015, y + 0.09, 0.012); // chin
   z -= 0.0025 * gauss(x, 0.012, y + 0.077, 0.005); // the dip under the lower lip
@@ -149,7 +150,7 @@ function skull(u, v) {
   const ny = Math.cos(v);
   const nz = Math.sin(v) * Math.cos(u);
   const lower = Math.max(0, -ny);
-  let x = A * nx * (1 - 0.17 * Math.pow(lower, 1.8));
+  let x = A * nx * (1 - 0.3 * Math.pow(lower, 1.5)); // the jaw tapers to a small chin, as on the 2D face
   const y = B * ny;
   let z = D * nz;
   if (nz > 0) z *= 0.95 - 0.1 * lower * lower;
@@ -240,7 +241,7 @@ const FIELDS = {
     if (info.rigid) return [0, 0, 0];
     const corner = gauss(p[0] - side * MOUTH_W, 0.013, p[1] - MOUTH_Y, 0.012);
     const cheek = info.lip ? 0 : gauss(p[0] - side * 0.038, 0.017, p[1] - MOUTH_Y - 0.03, 0.016);
-    return [side * 0.0036 * corner, 0.005 * corner + 0.0028 * cheek, -0.0022 * corner + 0.0026 * cheek];
+    return [side * 0.0042 * corner, 0.0062 * corner + 0.0032 * cheek, -0.0026 * corner + 0.0028 * cheek];
   },
   frown(p, info, side) {
     if (info.rigid) return [0, 0, 0];
@@ -287,8 +288,15 @@ function lipTarget(name, p, info) {
     return d;
   }
   if (name === "jawOpen") addField("jaw", 1);
-  if (name === "mouthSmileLeft") addField("smile", 1);
-  if (name === "mouthSmileRight") addField("smile", -1);
+  // A smile lifts the upper lip off the teeth a little (each side's target half of it, both together all).
+  if (name === "mouthSmileLeft") {
+    addField("smile", 1);
+    addField("part", 0.35);
+  }
+  if (name === "mouthSmileRight") {
+    addField("smile", -1);
+    addField("part", 0.35);
+  }
   if (name === "mouthFrownLeft") addField("frown", 1);
   if (name === "mouthFrownRight") addField("frown", -1);
   return d;
@@ -325,7 +333,7 @@ function eyeHug(p, eyes, sink = true) {
   const [x, y] = p;
   let q = p;
   eyes.forEach((e, k) => {
-    const hugR = EYE_R * 1.0;
+    const hugR = EYE_R * 1.02;
     const dx = x - e[0];
     const dy = y - e[1];
     const rho = Math.hypot(dx, dy);
@@ -539,7 +547,7 @@ function buildMouth(zAt, detail) {
   for (const row of [{ top: MOUTH_Y + 0.003, bottom: MOUTH_Y - 0.0024, jaw: 0, z: -0.0062 },
     { top: MOUTH_Y - 0.0022, bottom: MOUTH_Y - 0.005, jaw: 1, z: -0.0082 }]) {
     teeth.grid(cells(32, detail), 3, (s, t) => {
-      const x = (s - 0.5) * 0.025;
+      const x = (s - 0.5) * 0.022;
       const tooth = Math.abs(Math.sin((x / 0.0042) * Math.PI));
       const shade = 0.86 + 0.14 * Math.pow(tooth, 0.3);
       const y = lerp(row.top, row.bottom, t) + (row.jaw ? 0.0004 : -0.0004) * (1 - tooth) * (t === 1 ? 1 : 0);
@@ -571,8 +579,8 @@ function lidGeometry(e, side) {
   const hc = 0.86; // the corners, in radians from the front
   const corner = (h) => (side * h > 0 ? 0.06 : -0.035); // outer corner a little higher than the inner one
   const open = (h) => Math.pow(Math.max(0, 1 - (h / hc) ** 2), 0.62);
-  const upperEdge = (h) => corner(h) + (0.44 - corner(h)) * open(h);
-  const lowerEdge = (h) => corner(h) + (-0.37 - corner(h)) * Math.pow(Math.max(0, 1 - (h / hc) ** 2), 0.8);
+  const upperEdge = (h) => corner(h) + (0.54 - corner(h)) * open(h);
+  const lowerEdge = (h) => corner(h) + (-0.43 - corner(h)) * Math.pow(Math.max(0, 1 - (h / hc) ** 2), 0.8);
   const dir = (h, l, r) => /** @type {V3} */ ([
     e[0] + r * Math.sin(h) * Math.cos(l), e[1] + r * Math.sin(l), e[2] + r * Math.cos(h) * Math.cos(l),
   ]);
@@ -595,7 +603,7 @@ function buildLids(eyes, skinZ, detail) {
   const lashes = new Part("lashes", towardViewer);
   const catchlight = new Part("catchlight", towardViewer);
   const nh = cells(40, detail);
-  const hmax = 1.3;
+  const hmax = 1.02;
   eyes.forEach((e, k) => {
     const side = k === 0 ? 1 : -1;
     const g = lidGeometry(e, side);
@@ -625,8 +633,15 @@ function buildLids(eyes, skinZ, detail) {
           // Away from the edge each lid merges into the skin, just under it: the lower lid within a few
           // millimetres, the upper one above its crease. So the lids never stand out of the face as shells, and
           // the skin (of the same colour) takes over without a seam.
-          const w = upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f);
-          if (w > 0) p = /** @type {V3} */ ([p[0], p[1], lerp(p[2], skinZ(p[0], p[1]) - 0.0004, w)]);
+          // Beyond the corners both lids merge into the skin too, so their ends never show as a step.
+          const w = Math.max(upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f), smoothstep(g.hc * 1.02, hmax, Math.abs(h)));
+          if (w > 0) {
+            p = /** @type {V3} */ ([p[0], p[1], lerp(p[2], skinZ(p[0], p[1]) - 0.0003, w)]);
+            // Never into the eyeball, which would show through.
+            const d = sub(p, e);
+            const dl = len3(d);
+            if (dl < EYE_R * 1.012) p = add(e, scale(d, (EYE_R * 1.012) / dl));
+          }
           const inside = Math.abs(h) < g.hc * 1.05;
           let c = skinColour(p[0], p[1]);
           if (upper) {
@@ -739,7 +754,7 @@ function buildEyeball(detail) {
   // The white leaves the front cap open where the iris sits (else it would cover the iris's dip); the iris is a
   // shallow bowl behind where the cornea would be, so it keeps its depth as the eye turns, with a dark limbal
   // ring that reads as its edge.
-  const irisAngle = 0.5;
+  const irisAngle = 0.56;
   const sclera = new Part("sclera", (p) => p);
   sclera.grid(cells(36, detail), cells(14, detail), (s, t) => {
     const u = s * 2 * Math.PI;
@@ -778,12 +793,13 @@ function hairEnd(u) {
   const sweep = 0.5 + 0.5 * Math.tanh(u * 2.4);
   const lockPhase = (u + 0.62) / 0.42;
   const scallop = 0.03 * Math.pow(Math.sin(Math.PI * (lockPhase - Math.floor(lockPhase))), 1.5);
-  const fringe = 1.06 + 0.13 * sweep + scallop * smoothstep(0.9, 0.5, au);
+  const fringe = 1.03 + 0.12 * sweep + scallop * smoothstep(0.9, 0.5, au);
   // Down the temples to just above the ears (tucked behind them), then the bob: to the jaw at the sides, the
   // nape behind.
-  let v = lerp(fringe, 1.5, smoothstep(0.5, 1.0, au));
+  let v = lerp(Math.min(fringe, 1.16), 1.5, smoothstep(0.62, 1.05, au));
+  v = lerp(fringe, v, smoothstep(0.3, 0.62, au));
   v += 0.16 * Math.exp(-(((au - 1.3) / 0.13) ** 2)); // a short sideburn in front of the ear
-  v = lerp(v, 2.9, smoothstep(1.8, 2.1, au));
+  v = lerp(v, 3.2, smoothstep(1.8, 2.1, au));
   // The bob ends in rounded locks, a little longer at the front of each side.
   if (au > 1.8) {
     const ph = (u * 7) / Math.PI;
@@ -798,7 +814,7 @@ function buildHair(detail) {
   const nv = cells(30, detail);
   // Locks: the shell's surface rises and falls across the strands' direction, in rounded ridges with darker
   // grooves between them. The strands run from the crown down, and sweep sideways across the fringe.
-  const LOCKS = 30;
+  const LOCKS = 19;
   hair.grid(nu, nv, (s, t) => {
     const u = (s - 0.5) * 2 * Math.PI;
     const vm = hairEnd(u);
@@ -808,29 +824,31 @@ function buildHair(detail) {
     const n = sub(q, C);
     const nn = [n[0] / (A * A), n[1] / (B * B), n[2] / (D * D)];
     const l = Math.hypot(nn[0], nn[1], nn[2]);
-    const twist = -0.9 * smoothstep(1.1, 0.3, au) * smoothstep(0.2, 0.9, t) * v;
-    const phase = ((u + twist) * LOCKS) / (2 * Math.PI);
+    const twist = -1.2 * smoothstep(1.2, 0.2, au) * smoothstep(0.15, 0.9, t) * v;
+    // Locks of uneven widths: the phase runs a little faster and slower round the head.
+    const uu = u + twist + 0.06 * Math.sin(u * 5 + 1.3) + 0.03 * Math.sin(u * 11 + 0.4);
+    const phase = (uu * LOCKS) / (2 * Math.PI);
     const ridge = Math.pow(Math.sin(Math.PI * (phase - Math.floor(phase))), 0.7); // 0 in a groove, 1 on a crest
     const locks = smoothstep(0.05, 0.3, t); // the crown is smooth where the strands start
     const volume = 0.0065 + 0.009 * smoothstep(0.2, 1.4, v) * smoothstep(0.3, 1.6, au);
     // The edge thins out to lie on the skin at the hairline, but keeps a rounded thickness where the bob ends.
     const hairline = smoothstep(1.9, 1.2, au);
     const edge = 1 - 0.88 * smoothstep(0.75, 1, t) * hairline;
-    const lift = (volume + 0.0014 * ridge * locks) * edge + 0.0012;
+    const lift = (volume + 0.0022 * ridge * locks) * edge + 0.0012;
     let p = add(q, scale(nn, lift / l));
     if (v > 1.62) {
       // Below the skull's widest line the bob hangs down instead of following the skull inwards, curling in a
       // little at its ends.
       const k = v - 1.62;
       const curl = 1 + 0.05 * k - 0.06 * smoothstep(0.75, 1, t) * (1 - hairline);
-      p = [p[0] * curl, p[1] - 0.066 * k, p[2] * curl];
+      p = [p[0] * (curl + 0.06 * k), p[1] - 0.066 * k, p[2] * curl];
     }
     // Shade: darker in the grooves and underneath, lighter on the crests; a soft band of sheen across the
     // crown, as the 2D face's highlight.
     let c = mix3(HAIR_MID, HAIR_BASE, smoothstep(0.2, 0.95, t));
     c = scale(c, 0.72 + 0.28 * lerp(1, ridge, locks));
     const sheen = Math.exp(-(((v - 0.55 - 0.1 * Math.cos(u)) / 0.14) ** 2)) * smoothstep(2.4, 1.2, au) * (0.4 + 0.6 * ridge);
-    c = mix3(c, linear(0x8a6078), 0.45 * sheen);
+    c = mix3(c, linear(0x7a6070), 0.4 * sheen);
     return { p, c };
   }, true);
   return hair;
@@ -839,7 +857,7 @@ function buildHair(detail) {
 /** The neck's half-width and half-depth at height `y`: it flares at its base into the slope of the shoulders. */
 function neckRadii(y) {
   const base = smoothstep(0.08, -0.01, y);
-  return [0.03 + 0.05 * base * base, 0.033 + 0.012 * base];
+  return [0.024 + 0.054 * base * base, 0.029 + 0.015 * base];
 }
 const NECK_Z = -0.004;
 
@@ -861,7 +879,7 @@ function buildNeckAndBody(detail) {
   }, true);
 
   // The shirt: from the neckline out over the slope of the shoulders (trapezius), round the shoulder and down.
-  const CHEST = [0.158, 0.088];
+  const CHEST = [0.148, 0.085];
   const ROUND = 0.034; // the shoulders' roundness
   const section = (a, rx, rz) => {
     const sn = Math.sin(a);

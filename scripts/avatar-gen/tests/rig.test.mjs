@@ -103,6 +103,21 @@ test("a closed blink closes both lids fully; moods become morph combinations", (
   assert.ok(surprised.eyeWideLeft > 0 && surprised.browOuterUpLeft === 1 && surprised.jawOpen > 0.3);
 });
 
+test("thinking is lopsided: one brow up and one down, one mouth corner up", () => {
+  const m = rig({ gaze: rest, blink: 1, mood: expression("thinking"), visemes: { sil: 1 }, nowMs: 0 }).morphs;
+  assert.ok(m.browOuterUpLeft > m.browOuterUpRight + 0.5, `brows ${m.browOuterUpLeft} vs ${m.browOuterUpRight}`);
+  assert.ok(m.browDownRight > m.browDownLeft, `brows down ${m.browDownRight} vs ${m.browDownLeft}`);
+  assert.ok(m.mouthSmileLeft > 0.3 && m.mouthSmileRight === 0, `smile ${m.mouthSmileLeft} / ${m.mouthSmileRight}`);
+  const eyes = rig({ gaze: rest, blink: 1, mood: expression("thinking"), visemes: { sil: 1 }, nowMs: 0 }).eyes;
+  assert.ok(eyes.pitch < -0.05 && Math.abs(eyes.yaw) > 0.05, "thinking glances up and aside");
+  // Every other mood stays symmetric.
+  for (const name of ["neutral", "happy", "sad", "surprised", "angry", "listening"]) {
+    const s = rig({ gaze: rest, blink: 1, mood: expression(name), visemes: { sil: 1 }, nowMs: 0 }).morphs;
+    assert.equal(s.browOuterUpLeft, s.browOuterUpRight, name);
+    assert.equal(s.mouthSmileLeft, s.mouthSmileRight, name);
+  }
+});
+
 test("idle motion keeps the head moving a little, never far", () => {
   const yaws = [];
   for (let t = 0; t < 60000; t += 250) yaws.push(rig({ gaze: rest, blink: 1, mood: expression("neutral"), visemes: { sil: 1 }, nowMs: t }).head.yaw);

@@ -18,6 +18,12 @@ import { mouthShape } from "./visemes.js";
 const MOOD_TAU_MS = 160;
 /** As on the 2D face: between blinks and speech 30 fps is smooth, and halves the cost on GPU-less machines. */
 const CALM_FRAME_MS = 32;
+/**
+ * On software WebGL, where a frame costs the CPU ~20 ms, the calm head (only breathing and drifting, slow
+ * motions) draws at 15 fps: the page's other work (speech, the microphone, the camera) keeps its CPU time. Speech,
+ * blinks and gaze moves still draw every frame.
+ */
+const SOFTWARE_CALM_FRAME_MS = 66;
 const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
 const FRAME_LOG = 1200; // frames whose cost the debug hook keeps, as avatar.js does
 const MIN_PIXEL_RATIO = 0.45; // below this the head turns visibly blurry; slower machines get fewer frames
@@ -129,11 +135,12 @@ export class Avatar3D {
 
     // Soft light: a warm sky and a cool floor, a key from the viewer's upper left (where the 2D face's highlights
     // are), a cool fill from the right, and a teal rim from behind that separates the hair from the dark stage.
-    this.scene.add(new THREE.HemisphereLight(0xfff3ea, 0x8a7078, 1.4));
-    const key = new THREE.DirectionalLight(0xfff4ec, 2.1);
+    this.scene.add(new THREE.HemisphereLight(0xfff3ea, 0xa88890, 1.5));
+    const key = new THREE.DirectionalLight(0xfff4ec, 1.9);
     key.position.set(-0.6, 0.9, 1.2);
-    const fill = new THREE.DirectionalLight(0xcfe2ff, 0.55);
-    fill.position.set(1, 0.1, 0.7);
+    // A fill from below the camera's right keeps the jaw and the neck from going muddy.
+    const fill = new THREE.DirectionalLight(0xffe6dc, 0.75);
+    fill.position.set(0.8, -0.2, 1);
     const rim = new THREE.DirectionalLight(0x7fe6d8, 0.35);
     rim.position.set(0.4, 0.6, -1);
     this.scene.add(key, fill, rim);
@@ -168,6 +175,10 @@ export class Avatar3D {
     requestAnimationFrame(this.frame);
   }
 
+  calmFrameMs() {
+    return this.quality?.software ? SOFTWARE_CALM_FRAME_MS : CALM_FRAME_MS;
+  }
+
   setPixelRatio(ratio) {
     this.renderer.setPixelRatio(ratio);
     if (this.size.w > 0) this.renderer.setSize(this.size.w, this.size.h, false);
@@ -181,7 +192,7 @@ export class Avatar3D {
    */
   adapt(now, interval, busy) {
     if (!this.quality?.adaptive) return;
-    const wanted = busy ? 1000 / 60 : CALM_FRAME_MS;
+    const wanted = busy ? 1000 / 60 : this.calmFrameMs();
     const late = Math.min(4, interval / wanted);
     this.lateness = this.lateness === undefined ? late : this.lateness * 0.9 + late * 0.1;
     if (now - (this.lastAdapt ?? 0) < 1000) return;
@@ -223,8 +234,8 @@ export class Avatar3D {
 
   frame(now) {
     requestAnimationFrame(this.frame);
-    const busy = this.blinks.current !== null || this.mixer.pending > 0;
-    if (!busy && now - this.lastDraw < CALM_FRAME_MS) return;
+    const busy = this.blinks.current !== null || this.mixer.pending > 0 || this.gazeMoving;
+    if (!busy && now - this.lastDraw < this.calmFrameMs()) return;
     const interval = now - this.last;
     const dt = Math.min(100, Math.max(0, interval));
     this.last = now;
@@ -250,6 +261,9 @@ export class Avatar3D {
     const km = 1 - Math.exp(-dt / MOOD_TAU_MS);
     for (const k of Object.keys(this.mood)) this.mood[k] += (this.moodTarget[k] - this.mood[k]) * km;
     const g = this.gaze.update(now, dt);
+    // Eyes or head still on their way to a gaze target: draw every frame until they settle.
+    const was = this.g;
+    this.gazeMoving = !!was && Math.abs(g.eyeX - was.eyeX) + Math.abs(g.eyeY - was.eyeY) + Math.abs(g.yaw - was.yaw) + Math.abs(g.pitch - was.pitch) > 0.002;
     this.g = g;
     const blink = this.blinks.update(now);
     if (this.blinks.current && !this.wasBlinking) {

@@ -27,8 +27,12 @@ export function rig({ gaze, blink, mood, visemes, nowMs }) {
   // The mood's own jaw (surprise) shows only while the mouth is not speaking, as on the 2D face.
   m.jawOpen = Math.max(0, mood.jaw) * silent;
   const smile = mood.smile;
+  const asym = mood.asym ?? 0;
   m.mouthSmileLeft = m.mouthSmileRight = Math.max(0, smile);
   m.mouthFrownLeft = m.mouthFrownRight = Math.max(0, -smile);
+  // Thinking: the mouth pulled up on the avatar's left only, down on its right.
+  m.mouthSmileLeft = clamp01(m.mouthSmileLeft + 0.45 * asym);
+  m.mouthFrownRight = clamp01(m.mouthFrownRight + 0.35 * asym);
 
   // Brows: raise lifts the outer ends (and a little of the inner), inner > 0 lifts the inner ends (sad,
   // worried), inner < 0 and a negative raise pull them down and together (angry, focused).
@@ -37,6 +41,11 @@ export function rig({ gaze, blink, mood, visemes, nowMs }) {
   m.browOuterUpLeft = m.browOuterUpRight = clamp01(raise);
   m.browInnerUp = clamp01(Math.max(0, inner) + Math.max(0, raise) * 0.5);
   m.browDownLeft = m.browDownRight = clamp01(Math.max(0, -inner) * 0.8 + Math.max(0, -raise));
+  // Asymmetry (thinking): the avatar's left brow arches up, its right one draws down.
+  m.browOuterUpLeft = clamp01(m.browOuterUpLeft + 0.65 * asym);
+  m.browOuterUpRight = clamp01(m.browOuterUpRight - 0.5 * asym);
+  m.browDownRight = clamp01(m.browDownRight + 0.5 * asym);
+  m.browDownLeft = clamp01(m.browDownLeft - 0.4 * asym);
 
   // Lids: the blink closes them; looking down lowers the upper lids a little; squint narrows, a negative
   // squint (surprise) widens.
@@ -57,7 +66,8 @@ export function rig({ gaze, blink, mood, visemes, nowMs }) {
 
   return {
     morphs: m,
-    eyes: { yaw: gaze.eyeX * EYE_YAW_RAD, pitch: gaze.eyeY * EYE_PITCH_RAD },
+    // Thinking also glances up and aside, as people do while they search for a word.
+    eyes: { yaw: gaze.eyeX * EYE_YAW_RAD + 0.14 * asym, pitch: gaze.eyeY * EYE_PITCH_RAD - 0.12 * asym },
     head: {
       yaw: gaze.yaw * HEAD_YAW_RAD + drift.yaw,
       pitch: gaze.pitch * 0.6 * HEAD_PITCH_RAD + drift.pitch + breath * 0.006,
