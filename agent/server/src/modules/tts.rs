@@ -1,5 +1,6 @@
 //! The TTS module: speaks for the agent. It takes requests on the `Agent.say` service (and `{"say": ...}` on
-//! `Agent.ctrl`), synthesises them with espeak-ng (`agent-voice`) sentence by sentence, streams the PCM on
+//! `Agent.ctrl`), synthesises them (`agent-voice`: the Piper voice for English, espeak-ng for other languages and
+//! for requests naming an espeak-ng voice) sentence by sentence, streams the PCM on
 //! `Agent.speech` and the matching visemes, caption and stop commands on `Agent.avatar`, and stops talking when
 //! the user starts to (barge-in). It also owns the behaviour controllers (blink, gaze, listening), which share
 //! its `Agent.avatar` publisher. See docs/voice.md.
@@ -13,7 +14,7 @@ pub mod wire;
 use std::sync::Arc;
 
 use agent_brain::Language;
-use agent_voice::{Synthesizer, SynthesizerConfig, VoiceSettings};
+use agent_voice::{Engine, Synthesizer, SynthesizerConfig, VoiceSettings};
 use anyhow::Context;
 use bytes::Bytes;
 use flow::tick::Tick;
@@ -41,7 +42,8 @@ impl Module for TtsModule {
     }
 
     fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
-        TtsParams::from_json(params).map(drop)
+        // A missing or damaged voice stops the server here, at start, rather than leaving it mute.
+        TtsParams::from_json(params)?.check_files(self.language)
     }
 
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
@@ -67,12 +69,13 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         chunk_ms: params.chunk_ms,
         queue_capacity: 16,
         chunk_queue: 64,
+        piper: params.piper_for(language),
     };
-    // Loading espeak-ng's data takes a few milliseconds of blocking file reads.
+    // Loading espeak-ng's data takes a few milliseconds of blocking file reads, the Piper voice about a second.
     let synth = tokio::task::spawn_blocking(move || Synthesizer::start(engine_config))
         .await
-        .context("starting espeak-ng")?
-        .context("[modules.tts] starting espeak-ng")?;
+        .context("starting the speech engine")?
+        .context("[modules.tts] starting the speech engine")?;
     let client = ctx.client.clone();
     let speech = client
         .publisher(
@@ -119,7 +122,7 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         barge_in: params.barge_in,
         counters,
     };
-    info!(voice = %tts.voice.voice, rate = tts.voice.rate_wpm, "tts: speaking on {} and {}", channels::SPEECH.name, channels::AVATAR.name);
+    info!(engine = ?tts.voice.engine, voice = %tts.voice.voice, rate = tts.voice.rate_wpm, "tts: speaking on {} and {}", channels::SPEECH.name, channels::AVATAR.name);
 
     let mut ticks = ctx.ticks();
     loop {
@@ -212,9 +215,14 @@ impl Tts {
         }
     }
 
-    /// The configured voice with a request's changes.
+    /// The configured voice with a request's changes; a request that names a voice names an espeak-ng one.
     fn voice_for(&self, choice: VoiceChoice) -> VoiceSettings {
         VoiceSettings {
+            engine: if choice.voice.is_some() {
+                Engine::Espeak
+            } else {
+                self.voice.engine
+            },
             voice: choice.voice.unwrap_or_else(|| self.voice.voice.clone()),
             rate_wpm: choice.rate_wpm.unwrap_or(self.voice.rate_wpm),
             pitch: choice.pitch.unwrap_or(self.voice.pitch),
@@ -226,6 +234,14 @@ impl Tts {
         let mut status = self.counters.to_json();
         if let Some(object) = status.as_object_mut() {
             object.insert("voice".into(), self.voice.voice.clone().into());
+            object.insert(
+                "engine".into(),
+                match self.voice.engine {
+                    Engine::Piper => "piper",
+                    Engine::Espeak => "espeak",
+                }
+                .into(),
+            );
             object.insert(
                 "speaking".into(),
                 self.speaker.is_audible(Instant::now()).into(),

@@ -1,10 +1,11 @@
-//! The TTS module's parameters (`[modules.tts]` and `[modules.tts.behaviour]`), checked at start.
+//! The TTS module's parameters (`[modules.tts]`, `[modules.tts.piper]` and `[modules.tts.behaviour]`), checked
+//! at start.
 
 use std::path::PathBuf;
 use std::time::Duration;
 
 use agent_brain::Language;
-use agent_voice::VoiceSettings;
+use agent_voice::{Engine, PiperConfig, VoiceSettings};
 use serde::Deserialize;
 
 use super::behaviour::BehaviourParams;
@@ -16,6 +17,13 @@ pub struct TtsParams {
     /// Read by the server to switch the module off; accepted and ignored here.
     #[serde(default, rename = "enabled")]
     _enabled: serde::de::IgnoredAny,
+    /// The engine that speaks English: `piper` (the neural voice, `[modules.tts.piper]`) or `espeak`. Other
+    /// languages, and requests that name an espeak-ng voice, always speak with espeak-ng.
+    #[serde(default = "default_engine")]
+    pub engine: Engine,
+    /// The Piper voice and how it speaks.
+    #[serde(default)]
+    pub piper: PiperParams,
     /// espeak-ng voice or language (`en`, `en-us`, `it`, `en+f3`); by default that of `agent.language`.
     #[serde(default)]
     pub voice: Option<String>,
@@ -49,6 +57,49 @@ pub struct TtsParams {
     pub behaviour: BehaviourParams,
 }
 
+/// `[modules.tts.piper]`: every key may be left out; the paths default to the files `make model-voice`
+/// provisions in the repository's `models/`.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PiperParams {
+    /// The voice network with its durations output (`models/piper/en_US-joe-medium.durations.onnx`).
+    pub voice: Option<PathBuf>,
+    /// The voice's `.onnx.json` (`models/piper/en_US-joe-medium.onnx.json`).
+    pub voice_json: Option<PathBuf>,
+    /// The voice's sha256, for a voice that `config/models.sha256` does not list.
+    pub voice_sha256: Option<String>,
+    /// ONNX Runtime's shared library (`models/onnxruntime/libonnxruntime.so.1.32.0`).
+    pub runtime: Option<PathBuf>,
+    /// Variation of the sound, 0-2 (the voice's default 0.667).
+    pub noise_scale: Option<f32>,
+    /// Variation of the phoneme lengths, 0-2 (the voice's default 0.8).
+    pub noise_w: Option<f32>,
+    /// Slower (> 1) or faster (< 1), 0.25-4, before `rate_wpm` (175 = 1.0) scales it.
+    pub length_scale: Option<f32>,
+    /// ONNX Runtime threads for one sentence, 1-16 (default 2).
+    pub threads: Option<usize>,
+}
+
+impl PiperParams {
+    /// The engine's configuration, defaults filled in.
+    pub fn config(&self) -> PiperConfig {
+        let defaults = PiperConfig::default();
+        PiperConfig {
+            voice: self.voice.clone().unwrap_or(defaults.voice),
+            voice_json: self.voice_json.clone().unwrap_or(defaults.voice_json),
+            runtime: self.runtime.clone().unwrap_or(defaults.runtime),
+            voice_sha256: self.voice_sha256.clone(),
+            noise_scale: self.noise_scale,
+            noise_w: self.noise_w,
+            length_scale: self.length_scale,
+            threads: self.threads.unwrap_or(defaults.threads),
+        }
+    }
+}
+
+fn default_engine() -> Engine {
+    Engine::Piper
+}
 fn default_rate() -> u32 {
     175
 }
@@ -93,13 +144,40 @@ impl TtsParams {
             .behaviour
             .validate()
             .map_err(|(key, reason)| anyhow::anyhow!("[modules.tts.behaviour] {key}: {reason}"))?;
+        params
+            .piper
+            .config()
+            .validate()
+            .map_err(|e| anyhow::anyhow!("[modules.tts.piper] {e}"))?;
         Ok(params)
     }
 
-    /// The default voice of every utterance that does not choose its own: the configured one, or espeak-ng's
-    /// voice for the agent's language.
+    /// The Piper voice to load for an agent speaking `language`: only English has one, and only with
+    /// `engine = "piper"`.
+    pub fn piper_for(&self, language: Language) -> Option<PiperConfig> {
+        (self.engine == Engine::Piper && language == Language::En).then(|| self.piper.config())
+    }
+
+    /// Checks, at start, that the Piper voice this agent would load is there and whole (the checksums of
+    /// `config/models.sha256`); the error names the file, both checksums and `make model-voice`.
+    pub fn check_files(&self, language: Language) -> anyhow::Result<()> {
+        if let Some(piper) = self.piper_for(language) {
+            piper
+                .verify()
+                .map_err(|e| anyhow::anyhow!("[modules.tts.piper] {e}"))?;
+        }
+        Ok(())
+    }
+
+    /// The default voice of every utterance that does not choose its own: the Piper voice for English with
+    /// `engine = "piper"`, otherwise the configured espeak-ng voice, or espeak-ng's voice for the agent's language.
     pub fn voice_settings(&self, language: Language) -> VoiceSettings {
         VoiceSettings {
+            engine: if self.piper_for(language).is_some() {
+                Engine::Piper
+            } else {
+                Engine::Espeak
+            },
             voice: self
                 .voice
                 .clone()
@@ -123,12 +201,30 @@ mod tests {
     #[test]
     fn defaults_and_named_errors() {
         let params = TtsParams::from_json(&serde_json::json!({})).expect("defaults are valid");
+        // English speaks with the Piper voice by default, Italian with espeak-ng's Italian voice.
+        assert_eq!(params.voice_settings(Language::En), VoiceSettings::piper());
+        assert_eq!(params.voice_settings(Language::It).voice, "it");
+        assert_eq!(params.voice_settings(Language::It).engine, Engine::Espeak);
+        assert!(params.piper_for(Language::It).is_none());
+        let espeak =
+            TtsParams::from_json(&serde_json::json!({ "engine": "espeak" })).expect("valid");
         assert_eq!(
-            params.voice_settings(Language::En),
+            espeak.voice_settings(Language::En),
             VoiceSettings::default()
         );
-        // Without a voice of its own, the module speaks the agent's language.
-        assert_eq!(params.voice_settings(Language::It).voice, "it");
+        let error = TtsParams::from_json(&serde_json::json!({ "engine": "festival" }))
+            .expect_err("unknown engine");
+        assert!(error.to_string().contains("engine"), "{error}");
+        let error = TtsParams::from_json(&serde_json::json!({ "piper": { "noise_scale": 7.5 } }))
+            .expect_err("out of range");
+        assert!(
+            error.to_string().contains("[modules.tts.piper]")
+                && error.to_string().contains("noise_scale"),
+            "{error}"
+        );
+        let error = TtsParams::from_json(&serde_json::json!({ "piper": { "noise": 0.5 } }))
+            .expect_err("typo");
+        assert!(error.to_string().contains("piper.noise"), "{error}");
         let chosen = TtsParams::from_json(&serde_json::json!({ "voice": "en+f3" })).expect("valid");
         assert_eq!(chosen.voice_settings(Language::It).voice, "en+f3");
         let error = TtsParams::from_json(&serde_json::json!({ "rate_wpm": 9000 }))
