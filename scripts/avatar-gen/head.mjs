@@ -27,11 +27,11 @@ const A = 0.08;
 const B = 0.093;
 const D = 0.09;
 
-const EYE_R = 0.0165; // eyeball radius: stylised, large eyes like the 2D face's
-const EYE_X = 0.034;
+const EYE_R = 0.0176; // eyeball radius: stylised, large eyes like the 2D face's
+const EYE_X = 0.0355;
 const EYE_Y = C[1] + 0.003;
 const EYE_OUT = 0.0038; // how far the eyeball's front stands out of the skin
-const LID_R = EYE_R * 1.08;
+const LID_R = EYE_R * 1.045; // the upper lid's edge, where the lashes grow
 const MOUTH_Y = C[1] - 0.059;
 const MOUTH_W = 0.0172; // half-width of the lips
 const UPPER_LIP = 0.0047;
@@ -48,8 +48,8 @@ const LIP_UP = linear(0xc4647a);
 const LIP_LOW = linear(0xd7798a);
 const LIP_IN = linear(0x9c4257);
 const LIP_LINE = linear(0x7c2f41);
-const HAIR_BASE = linear(0x3a2634);
-const HAIR_MID = linear(0x5a3b4e);
+const HAIR_BASE = linear(0x33242f); // a little cooler than the 2D face's, which the warm key light warms up
+const HAIR_MID = linear(0x5c4458);
 const IRIS_IN = linear(0x49b3b0);
 const IRIS_OUT = linear(0x1d5e68);
 const IRIS_RING = linear(0x0f3238);
@@ -150,7 +150,7 @@ function skull(u, v) {
   const ny = Math.cos(v);
   const nz = Math.sin(v) * Math.cos(u);
   const lower = Math.max(0, -ny);
-  let x = A * nx * (1 - 0.3 * Math.pow(lower, 1.5)); // the jaw tapers to a small chin, as on the 2D face
+  let x = A * nx * (1 - 0.26 * Math.pow(lower, 1.5)); // the jaw tapers to a small chin, as on the 2D face
   const y = B * ny;
   let z = D * nz;
   if (nz > 0) z *= 0.95 - 0.1 * lower * lower;
@@ -342,8 +342,12 @@ function eyeHug(p, eyes, sink = true) {
     const l = Math.asin(clamp(dy / hugR, -1, 1));
     const h = Math.asin(clamp(dx / (hugR * Math.cos(l)), -1, 1));
     const m = 0.1;
-    const inside = rho < hugR && Math.abs(h) < g.hc + m && l < g.upperEdge(h) + m && l > g.lowerEdge(h) - m;
-    if (inside && sink) q = [x, y, e[2] - 0.002];
+    // Not beyond the corners: there the lids end, and the skin itself must cover the eyeball's side.
+    const inside = rho < hugR && Math.abs(h) < g.hc + 0.02 && l < g.upperEdge(h) + m && l > g.lowerEdge(h) - m;
+    // Sunk just inside the eyeball (behind the iris's bowl too), not deep behind it: the coarse triangles from
+    // the hole's edge up to the skin then stay close to the eye, under the lids, even on the lite model.
+    const sunkR = EYE_R * 0.9;
+    if (inside && sink) q = [x, y, e[2] + Math.sqrt(Math.max(0, sunkR * sunkR - rho * rho))];
     else {
       const hug = rho < hugR ? e[2] + Math.sqrt(hugR * hugR - rho * rho) : -Infinity;
       q = [x, y, smax(q[2], hug, 0.005)];
@@ -579,8 +583,8 @@ function lidGeometry(e, side) {
   const hc = 0.86; // the corners, in radians from the front
   const corner = (h) => (side * h > 0 ? 0.06 : -0.035); // outer corner a little higher than the inner one
   const open = (h) => Math.pow(Math.max(0, 1 - (h / hc) ** 2), 0.62);
-  const upperEdge = (h) => corner(h) + (0.54 - corner(h)) * open(h);
-  const lowerEdge = (h) => corner(h) + (-0.43 - corner(h)) * Math.pow(Math.max(0, 1 - (h / hc) ** 2), 0.8);
+  const upperEdge = (h) => corner(h) + (0.52 - corner(h)) * open(h);
+  const lowerEdge = (h) => corner(h) + (-0.41 - corner(h)) * Math.pow(Math.max(0, 1 - (h / hc) ** 2), 0.8);
   const dir = (h, l, r) => /** @type {V3} */ ([
     e[0] + r * Math.sin(h) * Math.cos(l), e[1] + r * Math.sin(l), e[2] + r * Math.cos(h) * Math.cos(l),
   ]);
@@ -616,7 +620,11 @@ function buildLids(eyes, skinZ, detail) {
       for (let j = 0; j < rows.length; j++) {
         const row = [];
         for (let i = 0; i <= nh; i++) {
-          const h = (i / nh - 0.5) * 2 * hmax;
+          // Towards the nose the lids stop just past the corner: the skin falls away there, and a longer lid
+          // would stand out of it, seen from the side.
+          const hi = (i / nh - 0.5) * 2 * hmax;
+          const hEnd = side * hi < 0 ? g.hc * 1.06 : hmax;
+          const h = clamp(hi, -hEnd, hEnd);
           const edge = upper ? g.upperEdge(h) : g.lowerEdge(h);
           const far = upper ? LID_TOP : -LID_TOP;
           const f = Math.max(0, rows[j]);
@@ -627,14 +635,14 @@ function buildLids(eyes, skinZ, detail) {
           const f0 = rows[j];
           let r;
           if (f0 < 0) r = EYE_R * 1.01;
-          else if (upper) r = EYE_R * (1.06 + 0.03 * Math.sin(Math.PI * Math.min(1, f / 0.5)));
+          else if (upper) r = LID_R * (1 + 0.033 * Math.sin(Math.PI * Math.min(1, f / 0.5)));
           else r = EYE_R * 1.035;
           let p = g.dir(h, l, r);
           // Away from the edge each lid merges into the skin, just under it: the lower lid within a few
           // millimetres, the upper one above its crease. So the lids never stand out of the face as shells, and
           // the skin (of the same colour) takes over without a seam.
           // Beyond the corners both lids merge into the skin too, so their ends never show as a step.
-          const w = Math.max(upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f), smoothstep(g.hc * 1.02, hmax, Math.abs(h)));
+          const w = Math.max(upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f), smoothstep(g.hc * 1.02, side * h < 0 ? g.hc * 1.06 : hmax, Math.abs(h)));
           if (w > 0) {
             p = /** @type {V3} */ ([p[0], p[1], lerp(p[2], skinZ(p[0], p[1]) - 0.0003, w)]);
             // Never into the eyeball, which would show through.
@@ -647,7 +655,8 @@ function buildLids(eyes, skinZ, detail) {
           if (upper) {
             // A soft shade in the crease and along the lid's edge, a thin dark lash line on the rim itself.
             c = mix3(c, SKIN_SHADE, 0.5 * gauss(f - 0.42, 0.1, 0, 1) + 0.35 * smoothstep(0.12, 0, f));
-            if (f0 <= 0 && inside) c = linear(0x2a1a22);
+            if (f0 < 0 && inside) c = linear(0x2a1a22);
+            else if (f0 === 0 && inside) c = mix3(c, linear(0x2a1a22), 0.6);
           } else {
             c = mix3(c, mix3(SKIN_SHADE, BLUSH, 0.25), 0.4 * smoothstep(0.2, 0, f));
             if (f0 < 0) c = linear(0xc98580);
@@ -830,7 +839,7 @@ function buildHair(detail) {
     const phase = (uu * LOCKS) / (2 * Math.PI);
     const ridge = Math.pow(Math.sin(Math.PI * (phase - Math.floor(phase))), 0.7); // 0 in a groove, 1 on a crest
     const locks = smoothstep(0.05, 0.3, t); // the crown is smooth where the strands start
-    const volume = 0.0065 + 0.009 * smoothstep(0.2, 1.4, v) * smoothstep(0.3, 1.6, au);
+    const volume = 0.008 + 0.013 * smoothstep(0.2, 1.4, v) * smoothstep(0.3, 1.6, au);
     // The edge thins out to lie on the skin at the hairline, but keeps a rounded thickness where the bob ends.
     const hairline = smoothstep(1.9, 1.2, au);
     const edge = 1 - 0.88 * smoothstep(0.75, 1, t) * hairline;
@@ -900,7 +909,9 @@ function buildNeckAndBody(detail) {
     let rx;
     let rz;
     let y;
-    const yS = yN - 0.05 * (1 - 0.5 * Math.abs(Math.cos(a))); // where the slope meets the shoulder's roundness
+    // Where the slope meets the shoulder's roundness: level all round (the neckline's scoop is only the opening),
+    // a little lower at the shoulders' tips.
+    const yS = 0.006 - 0.012 * Math.abs(Math.sin(a));
     if (r <= TOP) {
       const w = r / TOP;
       rx = lerp(nx + 0.001, CHEST[0] - ROUND, Math.pow(w, 0.9));

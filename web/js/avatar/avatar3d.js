@@ -135,7 +135,7 @@ export class Avatar3D {
 
     // Soft light: a warm sky and a cool floor, a key from the viewer's upper left (where the 2D face's highlights
     // are), a cool fill from the right, and a teal rim from behind that separates the hair from the dark stage.
-    this.scene.add(new THREE.HemisphereLight(0xfff3ea, 0xa88890, 1.5));
+    this.scene.add(new THREE.HemisphereLight(0xfbf4f0, 0xa08c98, 1.5));
     const key = new THREE.DirectionalLight(0xfff4ec, 1.9);
     key.position.set(-0.6, 0.9, 1.2);
     // A fill from below the camera's right keeps the jaw and the neck from going muddy.
@@ -375,7 +375,7 @@ function softSkin(material) {
 	{
 		float ndl = dot( geometryNormal, directLight.direction );
 		float scatter = saturate( ( ndl + ${SKIN_WRAP.toFixed(2)} ) / ${(1 + SKIN_WRAP).toFixed(2)} ) - dotNL;
-		reflectedLight.directDiffuse += scatter * vec3( 0.62, 0.3, 0.2 ) * directLight.color * BRDF_Lambert( material.diffuseColor );
+		reflectedLight.directDiffuse += scatter * vec3( 0.55, 0.32, 0.24 ) * directLight.color * BRDF_Lambert( material.diffuseColor );
 	}`;
   material.onBeforeCompile = (shader) => {
     shader.fragmentShader = shader.fragmentShader.replace(`#include <${chunk}>`, source.replace(plain, wrapped));
