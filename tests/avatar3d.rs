@@ -1,8 +1,9 @@
-//! End-to-end tests of the avatar's two renderers, the 2D canvas face (`?avatar=2d`) and the 3D head
-//! (`?avatar=3d`, three.js on SwiftShader's software WebGL): the same commands move both alike; the 3D head's
+//! End-to-end tests of the avatar's two renderers, the 3D head (the page's default, three.js on SwiftShader's
+//! software WebGL) and the 2D canvas face (`?avatar=2d`): the same commands move both alike; the 3D head's
 //! mouth follows the viseme schedule on the audio clock, its eyes turn towards the gaze target, it blinks at the
 //! specified intervals and phases; without WebGL the page falls back to the 2D face. Screenshots of both
-//! renderers (rest, mid-viseme "aa", "O", "FF", blinking, looking left and right) go to `artifacts/`.
+//! renderers (rest, smile, thinking, listening, surprise, visemes "aa" "O" "FF" "PP" "SS", blinking, looking left
+//! and right; the 3D head also from three-quarters) and a side-by-side sheet of them go to `artifacts/`.
 //!
 //! Needs `chromium`, `ffmpeg`, `node` and a built `robot-agent`, like tests/browser.rs.
 
@@ -48,12 +49,17 @@ fn repo_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The page of `agent` with renderer `renderer` ("2d", "3d", or "3d-full": the 3D head with the settings it uses
-/// on a GPU, for screenshots), in kiosk mode as tests/browser.rs opens it.
+/// The page of `agent` with renderer `renderer` ("2d", "3d", "3d-full": the 3D head with the settings it uses on a
+/// GPU, for screenshots, "3d-full-3q": the same seen from three-quarters, or "default": no `avatar` parameter), in
+/// kiosk mode as tests/browser.rs opens it.
 fn page(agent: &Agent, renderer: &str) -> String {
     match renderer {
         "2d" => agent.page_url("autostart=1&aec=0&avatar=2d"),
         "3d-full" => agent.page_url("autostart=1&aec=0&avatar=3d&avatarquality=full"),
+        "3d-full-3q" => {
+            agent.page_url("autostart=1&aec=0&avatar=3d&avatarquality=full&avatarview=0.62")
+        }
+        "default" => agent.page_url("autostart=1&aec=0"),
         _ => agent.page_url("autostart=1&aec=0&avatar=3d"),
     }
 }
@@ -498,7 +504,8 @@ async fn the_3d_head_blinks_every_450_ms_to_4_s_in_close_hold_open_phases() -> a
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> {
     let _one = ONE_BROWSER.lock().await;
-    let s = Stage::open("3d", &["--disable-3d-apis"]).await?;
+    // The page's default renderer is the 3D head: without WebGL it must show the 2D face instead.
+    let s = Stage::open("default", &["--disable-3d-apis"]).await?;
     assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("2d"));
     assert_eq!(
         s.eval("!!document.createElement('canvas').getContext('webgl2')")
@@ -511,6 +518,24 @@ async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> 
     s.command(json!({"cmd": "gaze", "x": 0.9, "y": 0.5}))
         .await?;
     s.wait("agentDebug.eyeOffset.x < -0.6", 5).await?;
+    s.quit().await;
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_without_an_avatar_parameter_shows_the_3d_head_and_avatar_2d_keeps_the_2d_face()
+-> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("default", WEBGL).await?;
+    assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("3d"));
+    // On software WebGL the default head is the lite model, drawn and moving.
+    let (model, software, triangles) = drawn(&s).await?;
+    assert_eq!(model, "assets/avatar-lite.glb");
+    assert_eq!(software, Some(true));
+    assert!(triangles > 0, "the default 3D head drew no triangles");
+    s.quit().await;
+    let s = Stage::open("2d", WEBGL).await?;
+    assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("2d"));
     s.quit().await;
     Ok(())
 }
@@ -549,12 +574,29 @@ async fn software_webgl_draws_the_lite_model_and_gpu_settings_the_full_one() -> 
     Ok(())
 }
 
-/// Screenshots of `renderer` at rest, mid-viseme, blinking and looking either way, as `artifacts/avatar-<r>-*.png`.
+/// The poses both renderers are shot in, in the side-by-side sheet's order: `artifacts/avatar-<r>-<pose>.png`.
+const POSES: &[&str] = &[
+    "rest",
+    "smile",
+    "thinking",
+    "listening",
+    "surprise",
+    "viseme-aa",
+    "viseme-O",
+    "viseme-FF",
+    "viseme-PP",
+    "viseme-SS",
+    "blink",
+    "look-left",
+    "look-right",
+];
+
+/// Screenshots of `renderer` in every pose of `POSES` (the 3D head also from three-quarters), as
+/// `artifacts/avatar-<r>-*.png`.
 ///
 /// The 3D head is shot with the settings it has on a GPU (`avatarquality=full`); on SwiftShader it would lower its
 /// resolution to keep its frame rate, which says nothing about how the model looks.
 async fn screenshots(renderer: &str) -> anyhow::Result<()> {
-    let _one = ONE_BROWSER.lock().await;
     let s = Stage::open(
         if renderer == "3d" {
             "3d-full"
@@ -572,14 +614,31 @@ async fn screenshots(renderer: &str) -> anyhow::Result<()> {
     tokio::time::sleep(Duration::from_millis(800)).await;
     s.shot(&name("rest")).await?;
 
-    s.speak(
-        3,
-        json!([{"t_ms": 0, "v": "sil"}, {"t_ms": 200, "v": "aa"}, {"t_ms": 4200, "v": "O"},
-               {"t_ms": 8200, "v": "FF"}, {"t_ms": 12200, "v": "sil"}]),
-        12.6,
-    )
-    .await?;
-    for v in ["aa", "O", "FF"] {
+    // Expressions: each mood blends in within half a second.
+    for (what, mood) in [
+        ("smile", "happy"),
+        ("thinking", "thinking"),
+        ("listening", "listening"),
+        ("surprise", "surprised"),
+    ] {
+        s.command(json!({"cmd": "mood", "mood": mood})).await?;
+        s.wait(&format!("agentDebug.mood === '{mood}'"), 5).await?;
+        tokio::time::sleep(Duration::from_millis(900)).await;
+        s.shot(&name(what)).await?;
+    }
+    s.command(json!({"cmd": "mood", "mood": "neutral"})).await?;
+    s.wait("agentDebug.mood === 'neutral'", 5).await?;
+    tokio::time::sleep(Duration::from_millis(900)).await;
+
+    let visemes = ["aa", "O", "FF", "PP", "SS"];
+    let mut cues = vec![json!({"t_ms": 0, "v": "sil"})];
+    for (i, v) in visemes.iter().enumerate() {
+        cues.push(json!({"t_ms": 200 + 4000 * i, "v": v}));
+    }
+    cues.push(json!({"t_ms": 200 + 4000 * visemes.len(), "v": "sil"}));
+    s.speak(3, Value::Array(cues), 0.6 + 4.0 * visemes.len() as f64)
+        .await?;
+    for v in visemes {
         s.wait(&format!("agentDebug.viseme === '{v}'"), 15).await?;
         // Past the blend; a screenshot can take a second or two on SwiftShader, the cue lasts 4 s.
         tokio::time::sleep(Duration::from_millis(300)).await;
@@ -629,18 +688,118 @@ async fn screenshots(renderer: &str) -> anyhow::Result<()> {
         tokio::time::sleep(Duration::from_millis(1400)).await;
         s.shot(&name(what)).await?;
     }
+
+    if renderer == "3d" {
+        // The same head seen from three-quarters (the camera turned 35 degrees round it), in a tab of its own.
+        let url = page(&s._agent, "3d-full-3q");
+        let tab = s.browser.open(&url).await?;
+        s.browser
+            .wait_for(
+                &tab,
+                "window.agentDebug && agentDebug.avatarRenderer === '3d' && agentDebug.avatarFrameMs.length > 40",
+                Duration::from_secs(60),
+            )
+            .await?;
+        let png = s.browser.screenshot_of(&tab, ".stage").await?;
+        ensure!(
+            png.len() > 5_000,
+            "the three-quarter screenshot is only {} bytes",
+            png.len()
+        );
+        let path = agent_tests::artifacts_dir().join(format!("{}.png", name("three-quarter")));
+        std::fs::write(&path, &png).with_context(|| format!("writing {}", path.display()))?;
+        println!("screenshot: {}", path.display());
+        s.browser.close(&tab).await?;
+    }
     s.quit().await;
     Ok(())
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn screenshots_of_the_2d_face_are_saved_as_artifacts() -> anyhow::Result<()> {
-    screenshots("2d").await
+/// `artifacts/avatar-side-by-side.png`: every pose of `POSES` with the 2D face above the 3D head, five poses to a
+/// row in `POSES`' order, put together by ffmpeg from the two renderers' screenshots.
+fn side_by_side_sheet() -> anyhow::Result<PathBuf> {
+    const W: usize = 400;
+    const H: usize = 274; // the stage's aspect (972 x 663)
+    const COLUMNS: usize = 5;
+    let dir = agent_tests::artifacts_dir();
+    let mut args: Vec<String> = vec!["-y".into(), "-loglevel".into(), "error".into()];
+    for pose in POSES {
+        for renderer in ["2d", "3d"] {
+            args.push("-i".into());
+            args.push(
+                dir.join(format!("avatar-{renderer}-{pose}.png"))
+                    .display()
+                    .to_string(),
+            );
+        }
+    }
+    // Each picture labelled with its pose and renderer where the usual font is installed (Debian's fonts-dejavu,
+    // which chromium brings); without it the sheet has the same layout, unlabelled.
+    let font = Path::new("/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf");
+    let label = |text: String| {
+        if font.is_file() {
+            format!(
+                ",drawtext=fontfile={}:text='{text}':x=8:y=6:fontsize=15:fontcolor=white@0.85",
+                font.display()
+            )
+        } else {
+            String::new()
+        }
+    };
+    let mut filter = String::new();
+    let mut layout = Vec::new();
+    for (k, pose) in POSES.iter().enumerate() {
+        filter.push_str(&format!(
+            "[{}:v]scale={W}:{H}{}[a{k}];[{}:v]scale={W}:{H}{}[b{k}];[a{k}][b{k}]vstack[p{k}];",
+            2 * k,
+            label(format!("{pose}  2D")),
+            2 * k + 1,
+            label(format!("{pose}  3D")),
+        ));
+        layout.push(format!("{}_{}", (k % COLUMNS) * W, (k / COLUMNS) * 2 * H));
+    }
+    for k in 0..POSES.len() {
+        filter.push_str(&format!("[p{k}]"));
+    }
+    filter.push_str(&format!(
+        "xstack=inputs={}:layout={}:fill=0x0d1117",
+        POSES.len(),
+        layout.join("|")
+    ));
+    let out = dir.join("avatar-side-by-side.png");
+    args.extend([
+        "-filter_complex".into(),
+        filter,
+        "-frames:v".into(),
+        "1".into(),
+        out.display().to_string(),
+    ]);
+    let status = std::process::Command::new("ffmpeg")
+        .args(&args)
+        .status()
+        .context("running ffmpeg")?;
+    ensure!(
+        status.success(),
+        "ffmpeg could not make the sheet: {status}"
+    );
+    Ok(out)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn screenshots_of_the_3d_head_are_saved_as_artifacts() -> anyhow::Result<()> {
-    screenshots("3d").await
+async fn screenshots_of_both_renderers_and_a_side_by_side_sheet_are_saved_as_artifacts()
+-> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    screenshots("2d").await?;
+    screenshots("3d").await?;
+    let sheet = side_by_side_sheet()?;
+    let size = std::fs::metadata(&sheet)?.len();
+    ensure!(
+        size > 100_000,
+        "the sheet {} is only {size} bytes",
+        sheet.display()
+    );
+    println!("side by side: {}", sheet.display());
+    Ok(())
 }
 
 #[test]

@@ -40,16 +40,20 @@ const link = new Link({ autostart });
 // speech player below sets it; the avatar may draw before that).
 let heardTime = (/** @type {number} */ nowS) => nowS;
 const heardClock = () => heardTime(audioClock());
-// `?avatar=2d` or `?avatar=3d` picks the renderer; the 3D head falls back to the 2D face where it cannot run.
+// The 3D head by default, `?avatar=2d` for the 2D face; the 3D head falls back to the 2D face where it cannot run.
 const { avatar, renderer: avatarRenderer } = await createAvatar(
   $("avatar"),
   heardClock,
   params.get("avatar") ?? DEFAULT_RENDERER,
   {
     syncFrames: params.get("avatarsync") === "1",
-    // `avatarquality=full`: GPU settings (the full model, PBR materials, antialiasing, full resolution) even on
-    // software WebGL.
-    quality: params.get("avatarquality") === "full" ? { software: false, adaptive: false } : {},
+    quality: {
+      // `avatarquality=full`: GPU settings (the full model, PBR materials, antialiasing, full resolution) even on
+      // software WebGL.
+      ...(params.get("avatarquality") === "full" ? { software: false, adaptive: false } : {}),
+      // `avatarview=RADIANS`: the camera turned around the head (the tests' three-quarter view).
+      view: { yaw: Number(params.get("avatarview") ?? 0) || 0 },
+    },
   },
 );
 const overlay = new Overlay($("overlay"));

@@ -1,4 +1,4 @@
-//! Picks the avatar's renderer: the 3D head (three.js, WebGL 2) or the 2D canvas face, with `?avatar=2d|3d`.
+//! Picks the avatar's renderer: the 3D head (three.js, WebGL 2; the default) or the 2D canvas face, with `?avatar=2d|3d`.
 //
 // The 3D module and three.js are imported only when the 3D head is wanted, so the 2D page loads nothing more
 // than before. Without WebGL 2, or when the model or three.js fails to load, the page says so on the console
@@ -8,12 +8,11 @@
 import { Avatar } from "./avatar.js";
 
 /**
- * The renderer a page gets without `?avatar=`. The 2D face stays the default: side by side (tests/avatar3d.rs's
- * screenshots) the generated 3D head does not yet look as good (puffy lower lids, a harder, less finished face),
- * and on software WebGL, even with its lite model, a frame costs ~20-27 ms of CPU where the 2D face's costs ~4 ms
- * (bench_avatar, docs/bench-avatar.md).
+ * The renderer a page gets without `?avatar=`: the 3D head, the lite model on software WebGL (bench_avatar keeps
+ * it above 30 fps there, docs/bench-avatar.md). `?avatar=2d` keeps the 2D face, and a browser without WebGL 2
+ * falls back to it (below).
  */
-export const DEFAULT_RENDERER = "2d";
+export const DEFAULT_RENDERER = "3d";
 
 /** Whether this browser can give the 3D head a WebGL 2 context (three.js needs WebGL 2). */
 export function webgl2Available() {
