@@ -411,3 +411,185 @@ async fn blinks_gaze_at_a_face_and_thinking() -> anyhow::Result<()> {
     assert_eq!(mood["mood"], "thinking");
     Ok(())
 }
+
+/// The reference sentences of the Piper intelligibility test: plain words, no numbers (whisper writes digits).
+const TEN_SENTENCES: [&str; 10] = [
+    "Hello! How can I help you?",
+    "I am the robot agent. I can see, listen and talk.",
+    "Sorry, I did not understand. You can ask me the time, or what I see.",
+    "I can see two people in front of me.",
+    "Maria and John are coming to dinner on Friday.",
+    "Where did you leave the keys?",
+    "Would you like a cup of tea or coffee?",
+    "Please remember to water the plants while I am away next week.",
+    "The robot turned its head and looked at the visitor with interest.",
+    "After the rain stopped, the children went outside to play football.",
+];
+
+/// The highest word error rate the test accepts: voice-bench measured 0 to 2 % for the Piper voice over forty
+/// sentences with the base model (docs/bench-voice.md); a few words of slack cover the voice's random variation.
+const PIPER_WER_BAR: f64 = 0.06;
+
+/// A robot-agent speaking English with its default engine, the Piper voice, says ten sentences; a real
+/// `whisper-sat transcribe` with the base model hears the PCM that went out on `Agent.speech`.
+#[tokio::test]
+async fn whisper_hears_ten_piper_sentences_right() -> anyhow::Result<()> {
+    let rig = Rig::start().await?;
+    rig.agent
+        .output
+        .wait_for("engine=Piper", 1, PATIENCE)
+        .await
+        .context("the default English engine is the Piper voice")?;
+    let model =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/ggml-base.bin");
+    anyhow::ensure!(
+        model.is_file(),
+        "{} is missing: `make model-base`",
+        model.display()
+    );
+    let scratch = tempfile::tempdir()?;
+    let (mut errors, mut words) = (0.0, 0.0);
+    let mut heard = Vec::new();
+    for (index, text) in TEN_SENTENCES.iter().enumerate() {
+        let utterance = rig.speak(text).await?;
+        let pcm = collect_pcm(&rig.speech, utterance, QUIET).await?;
+        let wav = scratch.path().join(format!("piper-{index}.wav"));
+        agent_tests::spoken::write_wav(&wav, &pcm)?;
+        let mut transcribe = agent_tests::command("whisper-sat")?;
+        transcribe
+            .arg("transcribe")
+            .arg(&wav)
+            .arg("--model")
+            .arg(&model)
+            .args(["--language", "en", "--no-core-share"]);
+        let out = agent_tests::run(transcribe, b"", PATIENCE).await?.ok()?;
+        let written = out.lines().last().unwrap_or_default().to_owned();
+        let mut wer = agent_tests::command("whisper-sat")?;
+        wer.arg("wer").arg(text).arg(&written);
+        let scored = agent_tests::run(wer, b"", PATIENCE).await?.ok()?;
+        let fields: Vec<f64> = scored
+            .split_whitespace()
+            .filter_map(|f| f.parse().ok())
+            .collect();
+        anyhow::ensure!(fields.len() == 3, "unexpected wer output {scored:?}");
+        errors += fields[1];
+        words += fields[2];
+        heard.push(format!("{text:?} -> {written:?}"));
+    }
+    let wer = errors / words;
+    println!(
+        "{}\nWER {:.1}% ({errors}/{words})",
+        heard.join("\n"),
+        wer * 100.0
+    );
+    assert!(
+        wer <= PIPER_WER_BAR,
+        "whisper misheard {errors} of {words} words of the Piper voice:\n{}",
+        heard.join("\n")
+    );
+    Ok(())
+}
+
+/// The PCM of `utterance` until none has come for `quiet`.
+async fn collect_pcm(
+    speech: &Subscription,
+    utterance: u64,
+    quiet: Duration,
+) -> anyhow::Result<Vec<i16>> {
+    let mut pcm: Vec<i16> = Vec::new();
+    loop {
+        let wait = if pcm.is_empty() { PATIENCE } else { quiet };
+        let Ok(data) = tokio::time::timeout(wait, speech.recv()).await else {
+            if pcm.is_empty() {
+                bail!("no speech for utterance {utterance}");
+            }
+            return Ok(pcm);
+        };
+        let data = data.context("Agent.speech closed")?;
+        let (id, offset, _) = speech_frame(&data.payload)?;
+        if id != utterance {
+            continue;
+        }
+        anyhow::ensure!(offset == pcm.len() as u64, "a gap in utterance {utterance}");
+        pcm.extend(
+            data.payload[8..]
+                .chunks_exact(2)
+                .map(|b| i16::from_le_bytes([b[0], b[1]])),
+        );
+    }
+}
+
+#[tokio::test]
+async fn an_italian_agent_speaks_with_espeak_ngs_italian_voice() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let config = "[agent]\nlanguage = \"it\"\n[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n";
+    let agent = Agent::start_configured(&dir, config, "tts: speaking on").await?;
+    // The Piper voice is English: an Italian agent starts espeak-ng's Italian voice and no Piper voice.
+    agent
+        .output
+        .wait_for("engine=Espeak voice=it", 1, PATIENCE)
+        .await?;
+    let client = agent.client("italian-voice-test").await?;
+    let avatar = client.subscribe(ch::AVATAR.name).await?;
+    let speech = client.subscribe(ch::SPEECH.name).await?;
+    let answer = client
+        .call(
+            ch::SAY.name,
+            json!({ "text": "Ciao! Come posso aiutarti?" })
+                .to_string()
+                .into_bytes(),
+            PATIENCE,
+        )
+        .await?;
+    let answer: Value = serde_json::from_slice(&answer)?;
+    let utterance = answer["utterance"].as_u64().context("utterance")?;
+    assert!(collect_speech(&speech, utterance, QUIET).await? > 11025);
+    let mut visemes = Vec::new();
+    while let Some(data) = avatar.try_recv() {
+        let command: Value = serde_json::from_slice(&data.payload)?;
+        if command["cmd"] == "visemes" {
+            for item in command["items"].as_array().context("items")? {
+                visemes.push(item["v"].as_str().context("v")?.to_owned());
+            }
+        }
+    }
+    // espeak-ng's Italian says "Ciao" with tʃ (CH) and "aiutarti" with a trilled r (RR); English rules (and the
+    // English Piper voice) say neither.
+    assert!(
+        visemes.iter().any(|v| v == "CH") && visemes.iter().any(|v| v == "RR"),
+        "not espeak-ng's Italian voice: {visemes:?}"
+    );
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_missing_voice_file_stops_the_agent_at_start_naming_path_checksum_and_target()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let missing = dir
+        .path()
+        .join("models/piper/en_US-joe-medium.durations.onnx");
+    let config = format!(
+        "[modules.tts.piper]\nvoice = {:?}\n",
+        missing.display().to_string()
+    );
+    let error = Agent::with_config(&dir, &config)
+        .await
+        .expect_err("the agent must not start without its voice")
+        .to_string();
+    let listed = std::fs::read_to_string(
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config/models.sha256"),
+    )?
+    .lines()
+    .find(|l| l.ends_with("  models/piper/en_US-joe-medium.durations.onnx"))
+    .and_then(|l| l.split_whitespace().next().map(str::to_owned))
+    .context("config/models.sha256 lists the voice")?;
+    for needed in [
+        missing.display().to_string(),
+        listed,
+        "make model-voice".to_owned(),
+    ] {
+        assert!(error.contains(&needed), "{needed:?} not in:\n{error}");
+    }
+    Ok(())
+}
