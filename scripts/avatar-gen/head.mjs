@@ -642,7 +642,8 @@ function buildLids(eyes, skinZ, detail) {
           // millimetres, the upper one above its crease. So the lids never stand out of the face as shells, and
           // the skin (of the same colour) takes over without a seam.
           // Beyond the corners both lids merge into the skin too, so their ends never show as a step.
-          const w = Math.max(upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f), smoothstep(g.hc * 1.02, side * h < 0 ? g.hc * 1.06 : hmax, Math.abs(h)));
+          const beyond = smoothstep(g.hc * 1.02, side * h < 0 ? g.hc * 1.06 : hmax, Math.abs(h));
+          const w = Math.max(upper ? smoothstep(0.4, 0.8, f) : smoothstep(0.12, 0.5, f), beyond);
           if (w > 0) {
             p = /** @type {V3} */ ([p[0], p[1], lerp(p[2], skinZ(p[0], p[1]) - 0.0003, w)]);
             // Never into the eyeball, which would show through.
@@ -661,7 +662,7 @@ function buildLids(eyes, skinZ, detail) {
             c = mix3(c, mix3(SKIN_SHADE, BLUSH, 0.25), 0.4 * smoothstep(0.2, 0, f));
             if (f0 < 0) c = linear(0xc98580);
           }
-          row.push(lids.vertex(p, c, { eye: k, upper, h, f: rows[j] }));
+          row.push(lids.vertex(p, c, { eye: k, upper, h, f: rows[j], merged: w }));
         }
         ids.push(row);
       }
@@ -717,7 +718,9 @@ function lidDisplacement(p, info, eyes, target, eyeIndex) {
   const l0 = lerp(edge0, far, f) + (info.lift ?? 0);
   const l1 = lerp(edge1, far, f) + (info.lift ?? 0);
   const r = len3(sub(p, e));
-  return sub(g.dir(h, l1, r), g.dir(h, l0, r));
+  // The parts of the lids merged into the skin (beyond the corners, under the brow and the cheek) stay put, or
+  // they would fold out of it or uncover the skin's opening; the lid stretches between them and its edge.
+  return scale(sub(g.dir(h, l1, r), g.dir(h, l0, r)), 1 - (info.merged ?? 0));
 }
 
 const len3 = (v) => Math.hypot(v[0], v[1], v[2]);
