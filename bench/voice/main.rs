@@ -1,6 +1,15 @@
-//! Benchmark of the speech engine (`make bench`): time to first chunk and real-time factor of the in-process
+//! Benchmark of the speech engines (`make bench`): time to first chunk and real-time factor of the in-process
 //! espeak-ng engine, side by side with the `espeak-ng` command-line tool speaking the same sentences in the same
-//! run, and how well the viseme cues line up with espeak-ng's events and with the audio itself.
+//! run, and how well the viseme cues line up with espeak-ng's events and with the audio itself; then the Piper
+//! voice against PyPI's `piper-tts` on the same voice file and against espeak-ng (first audio, real-time factor),
+//! its visemes against the audio, what our whisper path (base model) hears of forty sentences from each engine,
+//! and the peak memory of a robot-agent speaking with each.
+
+mod baseline;
+mod compare;
+mod intelligibility;
+mod rss;
+mod sentences;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -8,8 +17,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use agent_voice::{
-    Recording, SAMPLE_RATE, SpeechEvent, Synthesizer, SynthesizerConfig, Viseme, VoiceSettings,
-    samples_to_ms,
+    PiperConfig, Recording, SAMPLE_RATE, Synthesizer, SynthesizerConfig, Viseme, VisemeCue,
+    VoiceSettings, samples_to_ms,
 };
 use anyhow::{Context, bail};
 use clap::Parser;
@@ -24,6 +33,19 @@ struct Options {
     /// The espeak-ng command-line tool used as the baseline.
     #[arg(long, default_value = "espeak-ng")]
     cli: PathBuf,
+    /// Measured runs per sentence of the Piper comparison (after one warm-up run).
+    #[arg(long, default_value_t = 5)]
+    piper_runs: usize,
+    /// The Python with PyPI's piper-tts 1.8.0, the Piper baseline (`make bench` makes models/piper-venv).
+    #[arg(
+        long,
+        env = "PIPER_PYTHON",
+        default_value = "models/piper-venv/bin/python"
+    )]
+    piper_python: PathBuf,
+    /// The Whisper model that judges intelligibility (`make model-release MODEL=base`).
+    #[arg(long, default_value = "models/ggml-base.bin")]
+    whisper_model: PathBuf,
 }
 
 /// The sentences spoken, with their espeak-ng voice: short and long, English and Italian.
@@ -48,13 +70,19 @@ const SENTENCES: [(&str, &str); 5] = [
     ),
 ];
 
-/// Targets from the issue.
+/// Targets from the issues.
 const FIRST_CHUNK_TARGET_MS: f64 = 30.0;
 const VISEME_ERROR_TARGET_MS: f64 = 20.0;
+const PIPER_VISEME_TARGET_MS: f64 = 40.0;
 
 fn main() -> anyhow::Result<()> {
     let options = Options::parse();
-    let engine = Synthesizer::start(SynthesizerConfig::default()).context("starting espeak-ng")?;
+    let piper = PiperConfig::default();
+    let engine = Synthesizer::start(SynthesizerConfig {
+        piper: Some(piper.clone()),
+        ..SynthesizerConfig::default()
+    })
+    .context("starting the speech engine with the Piper voice (`make model-voice`)")?;
     if engine.sample_rate() != SAMPLE_RATE {
         bail!(
             "espeak-ng produces {} Hz, expected {SAMPLE_RATE}",
@@ -83,7 +111,8 @@ fn main() -> anyhow::Result<()> {
         let mut cli_wav = Vec::new();
         let mut audio_s = 0.0;
         for run in 0..options.runs + 2 {
-            let (ours_first_ms, ours_whole_ms, samples) = time_engine(&engine, text, &settings)?;
+            let (ours_first_ms, ours_whole_ms, samples) =
+                compare::time_engine(&engine, text, &settings)?;
             let cli_first_ms = time_cli_first_output(&options.cli, voice, text)?;
             let (cli_whole_ms, cli_samples) = time_cli_wav(&options.cli, voice, text, &scratch)?;
             if run < 2 {
@@ -164,32 +193,127 @@ fn main() -> anyhow::Result<()> {
         acoustic_p95 / VISEME_ERROR_TARGET_MS,
         verdict(acoustic_p95 <= VISEME_ERROR_TARGET_MS)
     );
-    Ok(())
+    piper_section(&options, &engine, &piper)
 }
 
-/// Speaks `text` in process: milliseconds to the first PCM chunk and to the end, and the samples produced.
-fn time_engine(
+/// The Piper voice: against piper-tts and espeak-ng, its visemes, intelligibility and memory.
+fn piper_section(
+    options: &Options,
     engine: &Synthesizer,
-    text: &str,
-    voice: &VoiceSettings,
-) -> anyhow::Result<(f64, f64, usize)> {
-    let start = Instant::now();
-    let mut utterance = engine.speak(text, voice)?;
-    let mut first = None;
-    let mut samples = 0;
-    while let Some(event) = utterance.blocking_next() {
-        match event {
-            SpeechEvent::Chunk(chunk) if !chunk.pcm.is_empty() => {
-                first.get_or_insert_with(|| ms(start.elapsed()));
-                samples += chunk.pcm.len();
-            }
-            SpeechEvent::Finished { .. } => break,
-            SpeechEvent::Failed { message } => bail!("synthesis failed: {message}"),
-            _ => {}
+    piper: &PiperConfig,
+) -> anyhow::Result<()> {
+    println!();
+    println!(
+        "Piper voice {} vs piper-tts 1.8.0 ({}) on the same file and vs espeak-ng (en), {} runs after 1 warm-up",
+        piper.voice.display(),
+        options.piper_python.display(),
+        options.piper_runs
+    );
+    let mut baseline =
+        baseline::PiperTts::start(&options.piper_python, &piper.voice, &piper.voice_json)?;
+    let english: Vec<&str> = SENTENCES
+        .iter()
+        .filter(|(voice, _)| *voice == "en")
+        .map(|(_, text)| *text)
+        .chain([
+            sentences::INTELLIGIBILITY[4],
+            sentences::INTELLIGIBILITY[36],
+        ])
+        .collect();
+    let times = compare::compare(engine, &mut baseline, &english, options.piper_runs)?;
+    let piper_tts_rss = baseline.finish()?;
+
+    // Visemes against the audio: the English reply spoken five times (the voice draws noise, so every run differs).
+    let mut timing = VisemeTiming::default();
+    for _ in 0..5 {
+        let recording = engine
+            .speak(&english.join(" "), &VoiceSettings::piper())?
+            .collect_blocking()?;
+        check_against_energy(&recording, &mut timing, |cue| {
+            matches!(cue.viseme, Viseme::PP | Viseme::DD | Viseme::Kk)
+        });
+    }
+    let onsets: Vec<f64> = timing.onset_errors.iter().map(|e| e.abs()).collect();
+    let offsets: Vec<f64> = timing.offset_errors.iter().map(|e| e.abs()).collect();
+    let both: Vec<f64> = onsets.iter().chain(&offsets).copied().collect();
+    println!(
+        "piper visemes: {} onsets (signed median {:+.1} ms) and {} offsets (signed median {:+.1} ms) checked against \
+         the audio energy",
+        onsets.len(),
+        median(&timing.onset_errors),
+        offsets.len(),
+        median(&timing.offset_errors)
+    );
+
+    // Intelligibility: forty sentences from each engine through our whisper path, base model.
+    let mut transcriber = intelligibility::transcriber(&options.whisper_model)?;
+    let piper_heard = intelligibility::score(engine, &VoiceSettings::piper(), &mut transcriber)?;
+    let espeak_heard =
+        intelligibility::score(engine, &VoiceSettings::for_voice("en"), &mut transcriber)?;
+    for (name, heard) in [("piper", &piper_heard), ("espeak-ng", &espeak_heard)] {
+        println!(
+            "{name}: {} of {} words wrong; misheard sentences:",
+            heard.errors, heard.words
+        );
+        for (said, written) in &heard.misheard {
+            println!("  {said:?} -> {written:?}");
         }
     }
-    let first = first.context("no audio produced")?;
-    Ok((first, ms(start.elapsed()), samples))
+
+    // Memory of a real robot-agent with each engine.
+    let runtime = tokio::runtime::Runtime::new()?;
+    let replies = &english[..3];
+    let piper_rss = runtime.block_on(rss::agent_peak_rss_mb("piper", replies))?;
+    let espeak_rss = runtime.block_on(rss::agent_peak_rss_mb("espeak", replies))?;
+
+    let piper_first = median(&times.piper.first_ms);
+    let py_first = median(&times.piper_tts.first_ms);
+    let espeak_first = median(&times.espeak.first_ms);
+    let (piper_rtf, py_rtf, espeak_rtf) =
+        (times.piper.rtf(), times.piper_tts.rtf(), times.espeak.rtf());
+    println!();
+    println!(
+        "SUMMARY piper first audio: {piper_first:.1} ms median, p95 {:.1} ms (baseline piper-tts {py_first:.1} ms, \
+         ratio {:.3}; target <= 1.0: {}; espeak-ng {espeak_first:.2} ms)",
+        percentile(&times.piper.first_ms, 95.0),
+        piper_first / py_first,
+        verdict(piper_first <= py_first)
+    );
+    println!(
+        "SUMMARY piper real-time factor: {piper_rtf:.4} (baseline piper-tts {py_rtf:.4}, ratio {:.3}; target <= 1.0: \
+         {}; espeak-ng {espeak_rtf:.4})",
+        piper_rtf / py_rtf,
+        verdict(piper_rtf <= py_rtf)
+    );
+    println!(
+        "SUMMARY tts intelligibility (whisper base, {} sentences): WER piper {:.1}% ({}/{} words), espeak-ng {:.1}% \
+         ({}/{} words), ratio {:.3}; target piper <= espeak-ng: {}",
+        sentences::INTELLIGIBILITY.len(),
+        piper_heard.wer() * 100.0,
+        piper_heard.errors,
+        piper_heard.words,
+        espeak_heard.wer() * 100.0,
+        espeak_heard.errors,
+        espeak_heard.words,
+        piper_heard.wer() / espeak_heard.wer().max(f64::MIN_POSITIVE),
+        verdict(piper_heard.wer() <= espeak_heard.wer())
+    );
+    println!(
+        "SUMMARY piper viseme timing vs audio onsets/offsets: median {:.1} ms, p95 {:.1} ms (onsets p95 {:.1} ms, \
+         offsets p95 {:.1} ms; target {PIPER_VISEME_TARGET_MS} ms, ratio {:.3}: {})",
+        median(&both),
+        percentile(&both, 95.0),
+        percentile(&onsets, 95.0),
+        percentile(&offsets, 95.0),
+        percentile(&both, 95.0) / PIPER_VISEME_TARGET_MS,
+        verdict(percentile(&both, 95.0) <= PIPER_VISEME_TARGET_MS)
+    );
+    println!(
+        "SUMMARY tts peak rss of robot-agent: piper {piper_rss:.0} MB, espeak-ng {espeak_rss:.0} MB (ratio {:.2}; \
+         piper-tts's Python process {piper_tts_rss:.0} MB)",
+        piper_rss / espeak_rss
+    );
+    Ok(())
 }
 
 /// Runs `espeak-ng --stdout` and returns the milliseconds until its first audio bytes (past the 44-byte WAV
@@ -272,7 +396,18 @@ fn viseme_timing(engine: &Synthesizer) -> anyhow::Result<VisemeTiming> {
             .speak(&reply.join(" "), &VoiceSettings::for_voice(voice))?
             .collect_blocking()?;
         check_against_events(&recording, &mut timing);
-        check_against_energy(&recording, &mut timing);
+        // Stops and affricates: their lips close during a silent closure before any sound.
+        check_against_energy(&recording, &mut timing, |cue| {
+            recording
+                .phonemes
+                .iter()
+                .find(|m| m.sample == cue.sample)
+                .is_some_and(|m| {
+                    m.ipa
+                        .trim_start_matches(['ˈ', 'ˌ'])
+                        .starts_with(['p', 'b', 't', 'd', 'k', 'g', 'ɡ'])
+                })
+        });
     }
     Ok(timing)
 }
@@ -297,10 +432,14 @@ fn check_against_events(recording: &Recording, timing: &mut VisemeTiming) {
     }
 }
 
-/// Compares rest/speech transitions of the cues with the energy envelope (5 ms windows). Stops and
-/// affricates are skipped at onsets: their lips close during a silent closure before any sound, so the
-/// viseme rightly leads the audio there.
-fn check_against_energy(recording: &Recording, timing: &mut VisemeTiming) {
+/// Compares rest/speech transitions of the cues with the energy envelope (5 ms windows). Onsets that `is_stop`
+/// says are stops are skipped: their lips close during a silent closure before any sound, so the viseme rightly
+/// leads the audio there.
+fn check_against_energy(
+    recording: &Recording,
+    timing: &mut VisemeTiming,
+    is_stop: impl Fn(&VisemeCue) -> bool,
+) {
     const WINDOW: usize = (SAMPLE_RATE as usize) / 200;
     let envelope: Vec<f64> = recording
         .pcm
@@ -321,16 +460,7 @@ fn check_against_energy(recording: &Recording, timing: &mut VisemeTiming) {
         let from = at.saturating_sub(search);
         let to = (at + search).min(envelope.len());
         if before.viseme == Viseme::Sil && cue.viseme != Viseme::Sil {
-            let ipa = recording
-                .phonemes
-                .iter()
-                .find(|m| m.sample == cue.sample)
-                .map(|m| m.ipa.as_str());
-            let stop = ipa.is_some_and(|p| {
-                p.trim_start_matches(['ˈ', 'ˌ'])
-                    .starts_with(['p', 'b', 't', 'd', 'k', 'g', 'ɡ'])
-            });
-            if stop {
+            if is_stop(&cue) {
                 continue;
             }
             if let Some(onset) = (from..to).find(|&i| is_loud(i) && (i == 0 || !is_loud(i - 1))) {
@@ -372,7 +502,7 @@ fn verdict(met: bool) -> &'static str {
     if met { "met" } else { "NOT met" }
 }
 
-fn shorten(text: &str, chars: usize) -> String {
+pub(crate) fn shorten(text: &str, chars: usize) -> String {
     let mut short: String = text.chars().take(chars).collect();
     if text.chars().count() > chars {
         short.push('…');
