@@ -222,7 +222,8 @@ impl Admission {
     pub fn admit(self: &Arc<Self>, origin: Origin) -> Stranger {
         let mut table = self.lock();
         let from_origin = table.per_origin.get(&origin).copied().unwrap_or(0);
-        let victim = if from_origin >= self.per_address {
+        // Every local process shares the loopback address and the socket: the cap per address is for the network.
+        let victim = if origin.door == Door::Remote && from_origin >= self.per_address {
             table
                 .oldest_of(origin)
                 .map(|id| (id, Eviction::AddressFull))
@@ -238,7 +239,7 @@ impl Admission {
         {
             self.evictions.fetch_add(1, Ordering::Relaxed);
             entry.evict.fire(why);
-            self.notices.note(&entry.origin, || {
+            self.notices.note(&entry.origin, "eviction", || {
                 format!("{why} (from {})", entry.origin.label())
             });
         }
@@ -351,7 +352,7 @@ impl Drop for Stranger {
 #[derive(Debug)]
 pub struct Notices {
     interval: Duration,
-    seen: Mutex<HashMap<Origin, (Instant, u64)>>,
+    seen: Mutex<HashMap<(Origin, &'static str), (Instant, u64)>>,
 }
 
 /// Addresses remembered at most; beyond, the memory starts over (a flood from many addresses logs a few more).
@@ -365,14 +366,14 @@ impl Notices {
         }
     }
 
-    /// Logs `message()` at WARN unless `origin` was logged within the interval.
-    pub fn note(&self, origin: &Origin, message: impl FnOnce() -> String) {
+    /// Logs `message()` at WARN unless a message of this `kind` about `origin` was logged within the interval.
+    pub fn note(&self, origin: &Origin, kind: &'static str, message: impl FnOnce() -> String) {
         let now = Instant::now();
         let mut seen = self.seen.lock().unwrap_or_else(PoisonError::into_inner);
         if seen.len() >= NOTICES_KEPT {
             seen.clear();
         }
-        match seen.get_mut(origin) {
+        match seen.get_mut(&(*origin, kind)) {
             Some((last, quiet)) if now.duration_since(*last) < self.interval => {
                 *quiet += 1;
             }
@@ -387,7 +388,7 @@ impl Notices {
                 );
             }
             None => {
-                seen.insert(*origin, (now, 0));
+                seen.insert((*origin, kind), (now, 0));
                 drop(seen);
                 tracing::warn!("{}", message());
             }

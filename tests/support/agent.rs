@@ -37,6 +37,16 @@ impl DataDir {
         })
     }
 
+    /// A data directory inside `parent` (a small disk the test mounted).
+    pub fn inside(parent: &Path) -> anyhow::Result<DataDir> {
+        Ok(DataDir {
+            dir: tempfile::Builder::new()
+                .prefix("agent-test-")
+                .tempdir_in(parent)
+                .context("creating a data directory")?,
+        })
+    }
+
     pub fn path(&self) -> &Path {
         self.dir.path()
     }
@@ -78,6 +88,8 @@ pub struct AgentOptions {
     /// Run in this network namespace (`ip netns exec`; see `netns::NetnsPair`). Its TCP addresses are then
     /// reachable only from inside it: talk to it over its Unix socket ([`Agent::unix_client`]).
     pub netns: Option<String>,
+    /// Start under this open-file limit, soft and hard (`prlimit`), so that the server cannot raise it.
+    pub fd_limit: Option<u64>,
 }
 
 /// Everything a process printed, line by line, with a wake-up for waiters.
@@ -217,7 +229,16 @@ impl Agent {
                 cmd.args(["netns", "exec", ns]).arg(binary(program)?);
                 cmd
             }
-            None => Command::new(binary(program)?),
+            None => match opts.fd_limit {
+                Some(limit) => {
+                    let mut cmd = Command::new("prlimit");
+                    cmd.arg(format!("--nofile={limit}:{limit}"))
+                        .arg("--")
+                        .arg(binary(program)?);
+                    cmd
+                }
+                None => Command::new(binary(program)?),
+            },
         };
         // From the repository root, as `make run` starts it: the default configuration's relative paths (the rule
         // program) resolve there.
@@ -273,8 +294,9 @@ impl Agent {
         };
         ready?;
         let lines = output.lines();
-        let http = after(&lines, &format!("{program} ready: open http://"))
-            .and_then(|s| s.split('/').next())
+        let http = after(&lines, &format!("{program} ready: open "))
+            .and_then(|s| s.split_once("://"))
+            .and_then(|(_, s)| s.split('/').next())
             .context("no HTTP address printed")?
             .parse()?;
         let flow_tcp = after(&lines, "flow hub: tcp://")

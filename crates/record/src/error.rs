@@ -24,6 +24,16 @@ pub enum RecordError {
     Form(String),
     #[error("the recording's writer stopped: {0}")]
     Writer(String),
+    /// Writing failed mid-recording (a full disk): the file was cut back to its last whole chunk and ended there,
+    /// so it opens with the `kept` messages written before.
+    #[error(
+        "writing {path} failed ({reason}); the file ends cleanly after the {kept} messages written before"
+    )]
+    Interrupted {
+        path: String,
+        reason: String,
+        kept: u64,
+    },
     #[error("{0} is not an MCAP recording (or is cut before its first record)")]
     NotMcap(String),
 }

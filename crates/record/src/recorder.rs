@@ -73,6 +73,8 @@ impl RecordReport {
 pub struct Recorder {
     stop: Option<oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<Result<RecordReport, RecordError>>,
+    /// Closed when the recording has ended by itself (a failed write): see [`Recorder::ended`].
+    ended: tokio::sync::watch::Receiver<()>,
 }
 
 type Messages = Pin<Box<dyn Stream<Item = (String, Data)> + Send>>;
@@ -90,7 +92,10 @@ impl Recorder {
         let events = client.events();
         let existing = client.channels().await?;
         let (stop, stopped) = oneshot::channel();
+        let (ending, ended) = tokio::sync::watch::channel(());
         let task = tokio::spawn(async move {
+            // Dropped when this task ends, which wakes `Recorder::ended`.
+            let _ending = ending;
             let mut run = Run {
                 client,
                 opts,
@@ -119,7 +124,14 @@ impl Recorder {
         Ok(Recorder {
             stop: Some(stop),
             task,
+            ended,
         })
+    }
+
+    /// Resolves once the recording has ended without being stopped: a write failed (the disk is full). Then
+    /// [`Recorder::stop`] returns the error at once.
+    pub async fn ended(&mut self) {
+        while self.ended.changed().await.is_ok() {}
     }
 
     /// Stops recording, finishes the file and says what it holds.

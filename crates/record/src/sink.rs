@@ -3,7 +3,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 
@@ -72,6 +72,13 @@ pub struct SinkReport {
     pub annotations: u64,
 }
 
+impl SinkReport {
+    /// Messages written, every channel together.
+    pub fn messages(&self) -> u64 {
+        self.channels.values().map(|c| c.messages).sum()
+    }
+}
+
 struct Topic {
     info: ChannelInfo,
     form: Form,
@@ -87,6 +94,11 @@ pub struct Sink {
     topics: HashMap<String, Topic>,
     annotations: Option<u16>,
     report: SinkReport,
+    /// A second handle on the file (same offset), to cut it back and end it when a write fails.
+    file: File,
+    path: PathBuf,
+    /// Where the last whole chunk ends, and how many messages the file holds up to there.
+    good: (u64, u64),
 }
 
 impl std::fmt::Debug for Sink {
@@ -96,6 +108,51 @@ impl std::fmt::Debug for Sink {
             .finish()
     }
 }
+
+/// Ends the file at `good` (offset, messages) with a data-end record, a footer without summary and the closing
+/// magic, and returns the error that says so.
+///
+/// ```text
+/// DataEnd: 0x0F | len u64 = 4  | data_section_crc u32 = 0 (not computed)
+/// Footer:  0x02 | len u64 = 20 | summary_start u64 = 0 | summary_offset_start u64 = 0 | summary_crc u32 = 0
+/// Magic:   0x89 'M' 'C' 'A' 'P' '0' '\r' '\n'
+/// ```
+fn end_file(path: &Path, (offset, kept): (u64, u64), cause: &RecordError) -> RecordError {
+    let mut end = Vec::with_capacity(50);
+    end.push(0x0F);
+    end.extend_from_slice(&4u64.to_le_bytes());
+    end.extend_from_slice(&0u32.to_le_bytes());
+    end.push(0x02);
+    end.extend_from_slice(&20u64.to_le_bytes());
+    end.extend_from_slice(&[0u8; 20]);
+    end.extend_from_slice(&MCAP_MAGIC);
+    let ended = (|| -> std::io::Result<()> {
+        let mut f = std::fs::OpenOptions::new().write(true).open(path)?;
+        f.set_len(offset)?;
+        f.seek(SeekFrom::Start(offset))?;
+        f.write_all(&end)?;
+        f.sync_all()
+    })();
+    // The OS's own words ("No space left on device") are at the end of the cause's chain.
+    let mut why = cause.to_string();
+    let mut source = std::error::Error::source(cause);
+    while let Some(s) = source {
+        why = format!("{why}: {s}");
+        source = s.source();
+    }
+    let reason = match ended {
+        Ok(()) => why,
+        Err(e) => format!("{why}; ending the file failed too: {e}"),
+    };
+    RecordError::Interrupted {
+        path: path.display().to_string(),
+        reason,
+        kept,
+    }
+}
+
+/// The MCAP magic that opens and closes a file.
+const MCAP_MAGIC: [u8; 8] = [0x89, b'M', b'C', b'A', b'P', b'0', b'\r', b'\n'];
 
 /// Creates the file and starts the writer thread.
 /// The writer thread's input and its result.
@@ -119,7 +176,8 @@ impl Sink {
     /// Creates (or replaces) the file.
     pub fn create(path: &Path, opts: &SinkOptions) -> Result<Sink, RecordError> {
         let file = File::create(path).map_err(|e| RecordError::file(path, e))?;
-        let writer = mcap::WriteOptions::new()
+        let spare = file.try_clone().map_err(|e| RecordError::file(path, e))?;
+        let mut writer = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(opts.chunk_bytes))
             // Compression runs on the writing thread alone: zstd's worker threads would compete with the hub
@@ -127,28 +185,65 @@ impl Sink {
             .compression_threads(0)
             .profile("")
             .create(BufWriter::new(file))?;
-        Ok(Sink {
+        // The magic and header on disk: the file is a valid (empty) recording from here.
+        writer.flush()?;
+        let mut sink = Sink {
             writer,
             topics: HashMap::new(),
             annotations: None,
             report: SinkReport::default(),
-        })
+            file: spare,
+            path: path.to_path_buf(),
+            good: (0, 0),
+        };
+        sink.mark_good()?;
+        Ok(sink)
+    }
+
+    /// Notes where the file's last whole chunk ends (the shared offset, after a flush).
+    fn mark_good(&mut self) -> Result<(), RecordError> {
+        let at = (&self.file)
+            .stream_position()
+            .map_err(|e| RecordError::file(&self.path, e))?;
+        self.good = (at, self.report.messages());
+        Ok(())
     }
 
     fn run(mut self, mut rx: mpsc::Receiver<Item>) -> Result<SinkReport, RecordError> {
         while let Some(item) = rx.blocking_recv() {
-            match item {
-                Item::Channel(info) => self.channel(info),
-                Item::Message { name, data, log_ns } => self.message(&name, &data, log_ns)?,
-                Item::Flush => self.flush()?,
+            let written = match item {
+                Item::Channel(info) => {
+                    self.channel(info);
+                    Ok(())
+                }
+                Item::Message { name, data, log_ns } => self.message(&name, &data, log_ns),
+                Item::Flush => self.flush(),
+            };
+            if let Err(e) = written {
+                return Err(self.end_at_last_chunk(&e));
             }
         }
-        self.finish()
+        let (path, good) = (self.path.clone(), self.good);
+        match self.finish() {
+            Ok(report) => Ok(report),
+            // The summary did not fit: the file still ends after its last whole chunk.
+            Err(e) => Err(end_file(&path, good, &e)),
+        }
+    }
+
+    /// After a failed write: cuts the file back to its last whole chunk and ends it there (without a summary,
+    /// which readers do without), freeing the space the broken chunk took.
+    fn end_at_last_chunk(self, e: &RecordError) -> RecordError {
+        let (path, good) = (self.path.clone(), self.good);
+        // The MCAP writer tries to finish the file as it goes; whatever it manages is cut off below.
+        drop(self);
+        end_file(&path, good, e)
     }
 
     /// Closes the current chunk and writes it out: a crash after this loses nothing before it.
     pub fn flush(&mut self) -> Result<(), RecordError> {
-        Ok(self.writer.flush()?)
+        self.writer.flush()?;
+        self.mark_good()
     }
 
     /// Writes the summary and footer (what makes the file indexed, and quick to open) and says what it holds.

@@ -76,7 +76,7 @@ pub async fn run(listener: TcpListener, tls: Option<Tls>, router: Router, shared
                     let cap = shared.config.http.max_connections;
                     if open.fetch_add(1, Ordering::AcqRel) >= cap {
                         open.fetch_sub(1, Ordering::AcqRel);
-                        shared.admission.notices().note(&origin, || {
+                        shared.admission.notices().note(&origin, "http-cap", || {
                             format!("http connection from {remote} closed at accept: {cap} are open (http.max_connections)")
                         });
                         continue;

@@ -47,8 +47,10 @@ enum End {
     Closed(String),
     /// The client broke the protocol or a limit.
     Spurious(String),
-    /// A stranger evicted or out of time: logged once per address per interval, as a flood makes many.
+    /// A stranger out of time: logged once per address per interval, as a flood makes many.
     Stranger(String),
+    /// A stranger evicted to make room (the table logs evictions, once per address per interval).
+    Evicted(String),
 }
 
 /// How the writer task ended.
@@ -102,7 +104,7 @@ pub async fn serve_connection<T: Transport>(
         let awaiting_login = !session.is_logged_in();
         let read = tokio::select! {
             frame = reader.read_frame() => frame,
-            why = stranger.evicted(), if awaiting_login => break End::Stranger(why.to_string()),
+            why = stranger.evicted(), if awaiting_login => break End::Evicted(why.to_string()),
             _ = tokio::time::sleep_until(last_frame + frame_timeout), if !awaiting_login => {
                 if reader.partial() > 0 {
                     break End::Spurious(format!(
@@ -137,6 +139,10 @@ pub async fn serve_connection<T: Transport>(
         let mut next = match read {
             Ok(Some(raw)) => Some(raw),
             Ok(None) => break End::Closed("closed by the peer".into()),
+            // A transport's protocol violation (text on the WebSocket link) is the client's fault.
+            Err(ConnError::Io(e)) if e.kind() == std::io::ErrorKind::InvalidData => {
+                break End::Spurious(e.to_string());
+            }
             Err(e @ ConnError::Io(_)) => break End::Closed(e.to_string()),
             Err(e) => break End::Spurious(e.to_string()),
         };
@@ -173,8 +179,12 @@ pub async fn serve_connection<T: Transport>(
     let origin = stranger.origin();
     drop(stranger);
     let reason = match end {
+        End::Evicted(reason) => {
+            debug!(%peer, conn, "connection closed: {reason}");
+            reason
+        }
         End::Stranger(reason) => {
-            shared.admission.notices().note(&origin, || {
+            shared.admission.notices().note(&origin, "login", || {
                 format!("killing spurious client {peer}: {reason}")
             });
             reason

@@ -69,6 +69,14 @@ struct Running {
     started_ms: u64,
 }
 
+/// Resolves when the running recording ended by itself; never while none runs.
+async fn ended(running: &mut Option<Running>) {
+    match running {
+        Some(run) => run.recorder.ended().await,
+        None => std::future::pending().await,
+    }
+}
+
 /// What the module does and tells.
 struct Desk {
     client: flow::Client,
@@ -130,7 +138,18 @@ impl Desk {
         let (messages, error) = match run.recorder.stop().await {
             // Everything the file holds: the channels' messages and the detections' annotations beside them.
             Ok(report) => (report.messages() + report.annotations, None),
-            Err(e) => (0, Some(format!("the recording {} failed: {e}", run.file))),
+            Err(flow_record::RecordError::Interrupted { path, reason, kept }) => {
+                let error = format!(
+                    "recording into {path} failed ({reason}); the file keeps the {kept} messages written before"
+                );
+                tracing::warn!(file = run.file, "{error}");
+                (kept, Some(error))
+            }
+            Err(e) => {
+                let error = format!("the recording {} failed: {e}", run.file);
+                tracing::warn!(file = run.file, "{error}");
+                (0, Some(error))
+            }
         };
         tracing::info!(file = run.file, messages, "recording stopped");
         self.state = RecordingState {
@@ -200,6 +219,8 @@ impl Module for RecorderModule {
                         }
                     }
                     _ = beat.tick(), if recording => {}
+                    // A write failed (a full disk): say so now, not at the next stop.
+                    _ = ended(&mut desk.running), if recording => desk.stop().await,
                 }
                 let text = serde_json::to_vec(&desk.state).unwrap_or_default();
                 // The state is small and comes again; a full send queue only delays it.

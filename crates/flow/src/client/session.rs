@@ -335,9 +335,15 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
 
 fn on_reply(inner: &Arc<Inner>, req: u32, result: Result<Reply, crate::protocol::ErrorReply>) {
     let Some(pending) = lock(&inner.state).pending.remove(&req) else {
-        if let Err(e) = result {
-            // A fire-and-forget command failed; nobody waits for it, so say it here.
-            warn!("hub refused a command: {e}");
+        match result {
+            // A fire-and-forget command on a channel that is gone (an unsubscribe while its owner shuts down) has
+            // nothing left to do.
+            Err(e) if e.code == crate::protocol::ErrorCode::NotFound => {
+                debug!("hub: {e} (a fire-and-forget command on a channel that is gone)");
+            }
+            // Any other failure of a fire-and-forget command: nobody waits for it, so say it here.
+            Err(e) => warn!("hub refused a command: {e}"),
+            Ok(_) => {}
         }
         return;
     };
