@@ -820,49 +820,94 @@ function hairEnd(u) {
   return v;
 }
 
+/**
+ * A point of the hair's shell at azimuth `u`, at fraction `t` of the way from the crown to the hair's end there,
+ * with its colour: the shell rises and falls across the strands' direction in rounded locks with darker grooves.
+ * `extra` lifts the point further off the head (for the lock cards lying on the shell).
+ */
+function hairPoint(u, t, extra = 0) {
+  const LOCKS = 19;
+  const vm = hairEnd(u);
+  const v = t * vm;
+  const au = Math.abs(u);
+  const q = skull(u, Math.min(v, 1.62));
+  const n = sub(q, C);
+  const nn = [n[0] / (A * A), n[1] / (B * B), n[2] / (D * D)];
+  const l = Math.hypot(nn[0], nn[1], nn[2]);
+  // The strands run from the crown down, and sweep sideways across the fringe.
+  const twist = -1.2 * smoothstep(1.2, 0.2, au) * smoothstep(0.15, 0.9, t) * v;
+  // Locks of uneven widths: the phase runs a little faster and slower round the head.
+  const uu = u + twist + 0.06 * Math.sin(u * 5 + 1.3) + 0.03 * Math.sin(u * 11 + 0.4);
+  const phase = (uu * LOCKS) / (2 * Math.PI);
+  const ridge = Math.pow(Math.sin(Math.PI * (phase - Math.floor(phase))), 0.7); // 0 in a groove, 1 on a crest
+  const locks = smoothstep(0.05, 0.3, t); // the crown is smooth where the strands start
+  const volume = 0.008 + 0.013 * smoothstep(0.2, 1.4, v) * smoothstep(0.3, 1.6, au);
+  // The edge thins out to lie on the skin at the hairline, but keeps a rounded thickness where the bob ends.
+  const hairline = smoothstep(1.9, 1.2, au);
+  const edge = 1 - 0.88 * smoothstep(0.75, 1, t) * hairline;
+  const lift = (volume + 0.0022 * ridge * locks) * edge + 0.0012 + extra;
+  let p = add(q, scale(nn, lift / l));
+  if (v > 1.62) {
+    // Below the skull's widest line the bob hangs down instead of following the skull inwards, curling in a
+    // little at its ends.
+    const k = v - 1.62;
+    const curl = 1 + 0.05 * k - 0.06 * smoothstep(0.75, 1, t) * (1 - hairline);
+    p = [p[0] * (curl + 0.06 * k), p[1] - 0.066 * k, p[2] * curl];
+  }
+  // Shade: darker in the grooves and underneath, lighter on the crests; a soft band of sheen across the
+  // crown, as the 2D face's highlight.
+  let c = mix3(HAIR_MID, HAIR_BASE, smoothstep(0.2, 0.95, t));
+  c = scale(c, 0.72 + 0.28 * lerp(1, ridge, locks));
+  const sheen = Math.exp(-(((v - 0.55 - 0.1 * Math.cos(u)) / 0.14) ** 2)) * smoothstep(2.4, 1.2, au) * (0.4 + 0.6 * ridge);
+  c = mix3(c, linear(0x7a6070), 0.4 * sheen);
+  return { p: /** @type {V3} */ (p), c };
+}
+
+/**
+ * Lock cards: ribbons lying just off the shell, each along a path from its root to a pointed (fringe) or rounded
+ * (bob) tip a little past the shell's edge, so that the hair reads as locks laid over each other and the fringe's
+ * edge is made of their tips. `path(t)` gives [u, t] on the shell; `width(t)` the half-width in radians of u.
+ */
+function lockCard(part, path, width, lift, steps) {
+  const rows = [];
+  for (let j = 0; j <= steps; j++) {
+    const k = j / steps;
+    const [u, t] = path(k);
+    const w = width(k);
+    const off = lift * (0.6 + 0.4 * Math.sin(Math.PI * k));
+    const row = [-1, 0, 1].map((side) => {
+      const hp = hairPoint(u + side * w, t, off * (1 - 0.35 * Math.abs(side)));
+      // The card's middle catches a little more light than its sides, its tip is darker.
+      const c = scale(hp.c, (1.08 - 0.12 * Math.abs(side)) * (1 - 0.25 * smoothstep(0.7, 1, k)));
+      return part.vertex(hp.p, c, {});
+    });
+    rows.push(row);
+  }
+  for (let j = 0; j < steps; j++) {
+    part.quad(rows[j][0], rows[j][1], rows[j + 1][1], rows[j + 1][0]);
+    part.quad(rows[j][1], rows[j][2], rows[j + 1][2], rows[j + 1][1]);
+  }
+}
+
 function buildHair(detail) {
   const hair = new Part("hair", outward(C));
-  const nu = cells(128, detail);
-  const nv = cells(30, detail);
-  // Locks: the shell's surface rises and falls across the strands' direction, in rounded ridges with darker
-  // grooves between them. The strands run from the crown down, and sweep sideways across the fringe.
-  const LOCKS = 19;
-  hair.grid(nu, nv, (s, t) => {
-    const u = (s - 0.5) * 2 * Math.PI;
-    const vm = hairEnd(u);
-    const v = t * vm;
-    const au = Math.abs(u);
-    const q = skull(u, Math.min(v, 1.62));
-    const n = sub(q, C);
-    const nn = [n[0] / (A * A), n[1] / (B * B), n[2] / (D * D)];
-    const l = Math.hypot(nn[0], nn[1], nn[2]);
-    const twist = -1.2 * smoothstep(1.2, 0.2, au) * smoothstep(0.15, 0.9, t) * v;
-    // Locks of uneven widths: the phase runs a little faster and slower round the head.
-    const uu = u + twist + 0.06 * Math.sin(u * 5 + 1.3) + 0.03 * Math.sin(u * 11 + 0.4);
-    const phase = (uu * LOCKS) / (2 * Math.PI);
-    const ridge = Math.pow(Math.sin(Math.PI * (phase - Math.floor(phase))), 0.7); // 0 in a groove, 1 on a crest
-    const locks = smoothstep(0.05, 0.3, t); // the crown is smooth where the strands start
-    const volume = 0.008 + 0.013 * smoothstep(0.2, 1.4, v) * smoothstep(0.3, 1.6, au);
-    // The edge thins out to lie on the skin at the hairline, but keeps a rounded thickness where the bob ends.
-    const hairline = smoothstep(1.9, 1.2, au);
-    const edge = 1 - 0.88 * smoothstep(0.75, 1, t) * hairline;
-    const lift = (volume + 0.0022 * ridge * locks) * edge + 0.0012;
-    let p = add(q, scale(nn, lift / l));
-    if (v > 1.62) {
-      // Below the skull's widest line the bob hangs down instead of following the skull inwards, curling in a
-      // little at its ends.
-      const k = v - 1.62;
-      const curl = 1 + 0.05 * k - 0.06 * smoothstep(0.75, 1, t) * (1 - hairline);
-      p = [p[0] * (curl + 0.06 * k), p[1] - 0.066 * k, p[2] * curl];
+  hair.grid(cells(128, detail), cells(30, detail), (s, t) => hairPoint((s - 0.5) * 2 * Math.PI, t), true);
+  const steps = cells(14, detail);
+  // The fringe: locks from the parting on the avatar's right sweeping across the forehead to its left, their
+  // pointed tips just past the shell's edge.
+  const fringe = [[-0.58, 0.4, 1.0], [-0.3, 0.42, 1.035], [0.0, 0.44, 1.02], [0.3, 0.42, 1.045], [0.6, 0.36, 1.025]];
+  fringe.forEach(([tipU, w0, reach], i) => {
+    const rootU = -0.95 + 0.2 * i;
+    lockCard(hair, (k) => [lerp(rootU, tipU, smoothstep(0, 1, k)), lerp(0.08, reach, k)],
+      (k) => w0 * 0.5 * (1 - Math.pow(k, 2.6)) + 0.012, 0.0018, steps);
+  });
+  // Side locks over the bob, ending in rounded tips.
+  for (const side of [-1, 1]) {
+    for (const [u0, w0] of [[1.95, 0.2], [2.3, 0.22], [2.65, 0.2]]) {
+      lockCard(hair, (k) => [side * (u0 - 0.08 * k), lerp(0.3, 1.015, k)],
+        (k) => w0 * 0.5 * (1 - 0.6 * Math.pow(k, 4)), 0.0014, steps);
     }
-    // Shade: darker in the grooves and underneath, lighter on the crests; a soft band of sheen across the
-    // crown, as the 2D face's highlight.
-    let c = mix3(HAIR_MID, HAIR_BASE, smoothstep(0.2, 0.95, t));
-    c = scale(c, 0.72 + 0.28 * lerp(1, ridge, locks));
-    const sheen = Math.exp(-(((v - 0.55 - 0.1 * Math.cos(u)) / 0.14) ** 2)) * smoothstep(2.4, 1.2, au) * (0.4 + 0.6 * ridge);
-    c = mix3(c, linear(0x7a6070), 0.4 * sheen);
-    return { p, c };
-  }, true);
+  }
   return hair;
 }
 
