@@ -377,11 +377,46 @@ function softSkin(material) {
 		float scatter = saturate( ( ndl + ${SKIN_WRAP.toFixed(2)} ) / ${(1 + SKIN_WRAP).toFixed(2)} ) - dotNL;
 		reflectedLight.directDiffuse += scatter * vec3( 0.55, 0.32, 0.24 ) * directLight.color * BRDF_Lambert( material.diffuseColor );
 	}`;
+  // On a GPU, fine normal detail as well: a faint bump of value noise a few millimetres across, fixed to the
+  // model (so it does not swim as the head moves), which breaks up the smooth plastic look of the shading. Software
+  // WebGL leaves it out: it costs per pixel, and at the resolution it draws there it would not show.
+  const detail = material.isMeshStandardMaterial;
   material.onBeforeCompile = (shader) => {
     shader.fragmentShader = shader.fragmentShader.replace(`#include <${chunk}>`, source.replace(plain, wrapped));
+    if (!detail) return;
+    shader.vertexShader = shader.vertexShader
+      .replace("#include <common>", "#include <common>\nvarying vec3 vSkinPos;")
+      .replace("#include <project_vertex>", "#include <project_vertex>\n\tvSkinPos = transformed;");
+    shader.fragmentShader = shader.fragmentShader
+      .replace("#include <common>", `#include <common>\n${SKIN_NOISE}`)
+      .replace("#include <normal_fragment_maps>", `#include <normal_fragment_maps>
+	{
+		// Bump mapping from screen-space derivatives (as three.js's bump map does), with noise for the height.
+		float h = skinNoise( vSkinPos * 380.0 ) * 0.00012 + skinNoise( vSkinPos * 1100.0 ) * 0.00003;
+		vec3 sx = dFdx( - vViewPosition );
+		vec3 sy = dFdy( - vViewPosition );
+		vec3 r1 = cross( sy, normal );
+		vec3 r2 = cross( normal, sx );
+		float det = dot( sx, r1 );
+		vec3 grad = sign( det ) * ( dFdx( h ) * r1 + dFdy( h ) * r2 );
+		normal = normalize( abs( det ) * normal - grad );
+	}`);
   };
-  material.customProgramCacheKey = () => `soft-skin-${chunk}`;
+  material.customProgramCacheKey = () => `soft-skin-${chunk}-${detail}`;
 }
+
+/** Smooth value noise in 3D (for the skin's normal detail). */
+const SKIN_NOISE = `varying vec3 vSkinPos;
+float skinHash( vec3 p ) { return fract( sin( dot( p, vec3( 127.1, 311.7, 74.7 ) ) ) * 43758.5453 ); }
+float skinNoise( vec3 p ) {
+	vec3 i = floor( p );
+	vec3 f = fract( p );
+	f = f * f * ( 3.0 - 2.0 * f );
+	return mix(
+		mix( mix( skinHash( i ), skinHash( i + vec3( 1, 0, 0 ) ), f.x ), mix( skinHash( i + vec3( 0, 1, 0 ) ), skinHash( i + vec3( 1, 1, 0 ) ), f.x ), f.y ),
+		mix( mix( skinHash( i + vec3( 0, 0, 1 ) ), skinHash( i + vec3( 1, 0, 1 ) ), f.x ), mix( skinHash( i + vec3( 0, 1, 1 ) ), skinHash( i + vec3( 1, 1, 1 ) ), f.x ), f.y ),
+		f.z );
+}`;
 const SKIN_WRAP = 0.55;
 
 /** Whether WebGL here is a software rasteriser (no GPU): SwiftShader, llvmpipe, softpipe. */
