@@ -12,7 +12,7 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: run test bench fuzz deps model model-base model-face model-voice model-release build build-debug python clean
+.PHONY: soak run test bench fuzz deps model model-base model-face model-voice model-release build build-debug python clean
 
 # The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
 # and a satellite hearing Italian with the multilingual base model).
@@ -67,6 +67,16 @@ bench: deps model-release model-face model-voice build
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_record --write docs/bench-record.md | tee $(BENCH_LOGS)/bench_record.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/federation-bench --write docs/bench-federation.md | tee $(BENCH_LOGS)/federation-bench.log
 	$(TARGET_DIR)/release/bench-summary --logs $(BENCH_LOGS) --doc docs/benchmarks.md
+
+## The soak (not part of the tests): the whole agent with a browser, two satellites and the recorder for MINUTES
+## (default 30), sampled every minute; writes docs/soak.md, its CSV and docs/soak.png.
+MINUTES ?= 30
+soak: .SHELLFLAGS := -o pipefail -c
+soak: deps model-release model-face build
+	test -x bench/soak/.venv/bin/python || (python3 -m venv bench/soak/.venv && bench/soak/.venv/bin/pip install -q 'matplotlib==3.11.2')
+	mkdir -p $(BENCH_LOGS)
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/soak --minutes $(MINUTES) --write docs/soak.md | tee $(BENCH_LOGS)/soak.log
+	bench/soak/.venv/bin/python bench/soak/plot.py docs/soak.csv docs/soak.png
 
 ## Coverage-guided fuzzing of the protocol decoder and the federation's sample stamp (not in CI).
 fuzz:

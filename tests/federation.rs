@@ -513,6 +513,12 @@ async fn a_peer_without_the_credentials_sees_nothing() -> anyhow::Result<()> {
         on_anonymous.channel("Robot.pose").await.is_err(),
         "a peer without credentials imported hub A's channel"
     );
+    // The refusing hub says so, once per interval rather than once per retry.
+    a.output
+        .wait_for("refused a federation peer", 1, PATIENCE)
+        .await?;
+    let said = a.output.matching("refused a federation peer").len();
+    assert!(said <= 3, "{said} refusal lines within a few seconds");
     Ok(())
 }
 

@@ -2,7 +2,6 @@
 //! application's modules and routes, and a clean shutdown on Ctrl-C or SIGTERM. Configuration errors exit with
 //! status 2 and name the file, the key and the reason.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -103,12 +102,7 @@ async fn run(
     }
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
-    // Logs go to stderr; stdout carries only what the operator reads (the address to open).
-    tracing_subscriber::fmt()
-        .with_env_filter(quiet_frames(filter))
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+    crate::log::init(filter);
 
     let app = build(&config)?;
     if args.record.is_some()
@@ -147,15 +141,6 @@ async fn run(
     wait_for_signal().await?;
     server.shutdown().await;
     Ok(())
-}
-
-/// Caps the WebSocket libraries at debug level whatever the filter asks: at trace they print every frame's bytes,
-/// the login frame with its token included.
-fn quiet_frames(filter: EnvFilter) -> EnvFilter {
-    ["tungstenite=debug", "tokio_tungstenite=debug"]
-        .into_iter()
-        .filter_map(|d| d.parse().ok())
-        .fold(filter, EnvFilter::add_directive)
 }
 
 async fn wait_for_signal() -> anyhow::Result<()> {

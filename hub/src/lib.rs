@@ -9,6 +9,7 @@ pub mod config;
 pub mod federation;
 pub mod http;
 pub mod hub;
+pub mod log;
 pub mod metrics;
 pub mod module;
 pub mod net;
