@@ -126,11 +126,7 @@ async fn a_page_opened_over_https_from_another_address_gets_the_microphone_and_c
         "printed {printed}, openssl says {actual}"
     );
     ensure!(
-        agent
-            .output
-            .matching("ready: open https://")
-            .first()
-            .is_some(),
+        !agent.output.matching("ready: open https://").is_empty(),
         "the printed address is https"
     );
     let names = sh(&format!(

@@ -404,7 +404,7 @@ impl<'a> Report<'a> {
         }
         m.push_str("```\n\n![RSS, descriptors and voice-to-voice over the soak](soak.png)\n\n");
         m.push_str("| ");
-        m.push_str(&header(self.pids).replace(" | ", " | "));
+        m.push_str(&header(self.pids));
         m.push_str(" |\n|");
         m.push_str(&"---|".repeat(2 + self.pids.len() + 1));
         m.push('\n');

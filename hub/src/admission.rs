@@ -352,8 +352,11 @@ impl Drop for Stranger {
 #[derive(Debug)]
 pub struct Notices {
     interval: Duration,
-    seen: Mutex<HashMap<(Origin, &'static str), (Instant, u64)>>,
+    seen: Mutex<HashMap<NoticeKey, (Instant, u64)>>,
 }
+
+/// What a notice is about: an address and the kind of message (evictions and missed deadlines apart).
+type NoticeKey = (Origin, &'static str);
 
 /// Addresses remembered at most; beyond, the memory starts over (a flood from many addresses logs a few more).
 const NOTICES_KEPT: usize = 4096;
