@@ -62,9 +62,7 @@ async fn a_page_opened_over_https_from_another_address_gets_the_microphone_and_c
     let Some(outside) = outside_address() else {
         bail!("this machine has no non-loopback IPv4 address to open the page by");
     };
-    let media_dir = tempfile::Builder::new()
-        .prefix("https-media-")
-        .tempdir()?;
+    let media_dir = tempfile::Builder::new().prefix("https-media-").tempdir()?;
     let media = agent_tests::browser_media::prepare(media_dir.path())?.0;
     let all = "0.0.0.0:0".parse::<SocketAddr>()?;
 
