@@ -392,7 +392,7 @@ function softSkin(material) {
       .replace("#include <normal_fragment_maps>", `#include <normal_fragment_maps>
 	{
 		// Bump mapping from screen-space derivatives (as three.js's bump map does), with noise for the height.
-		float h = skinNoise( vSkinPos * 380.0 ) * 0.00012 + skinNoise( vSkinPos * 1100.0 ) * 0.00003;
+		float h = skinNoise( vSkinPos * 380.0 ) * 0.00005 + skinNoise( vSkinPos * 1100.0 ) * 0.000015;
 		vec3 sx = dFdx( - vViewPosition );
 		vec3 sy = dFdy( - vViewPosition );
 		vec3 r1 = cross( sy, normal );
