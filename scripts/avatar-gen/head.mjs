@@ -563,14 +563,16 @@ function buildMouth(zAt, detail) {
   }
 
   // Tongue: a flattened ellipsoid on the floor of the mouth.
-  const tc = /** @type {V3} */ ([0, MOUTH_Y - 0.0052, zM - 0.019]);
+  // High enough, and lowered by the jaw by less than the lower lip is, that an open mouth shows it over the lower
+  // lip; its tip stays behind the lower teeth.
+  const tc = /** @type {V3} */ ([0, MOUTH_Y - 0.0036, zM - 0.0185]);
   const tongue = new Part("tongue", outward(tc));
   tongue.grid(cells(28, detail), cells(12, detail), (s, t) => {
     const u = s * 2 * Math.PI;
     const v = t * Math.PI;
     const n = [Math.sin(v) * Math.sin(u), Math.cos(v), Math.sin(v) * Math.cos(u)];
-    const p = /** @type {V3} */ ([tc[0] + 0.011 * n[0], tc[1] + 0.0032 * n[1], tc[2] + 0.01 * n[2]]);
-    return { p, c: WHITE, info: { tongue: true, jaw: 1, rigid: true, front: smoothstep(-0.5, 1, n[2]) } };
+    const p = /** @type {V3} */ ([tc[0] + 0.0105 * n[0], tc[1] + 0.0036 * n[1], tc[2] + 0.0095 * n[2]]);
+    return { p, c: WHITE, info: { tongue: true, jaw: 0.86, rigid: true, front: smoothstep(-0.5, 1, n[2]) } };
   }, true);
   return { lips, cavity, teeth, tongue };
 }
