@@ -80,8 +80,21 @@ struct Seen {
     /// The last final transcript and the last rule change, waiting for their turn's latency.
     heard: String,
     answer: String,
-    finals: usize,
+    /// When each final transcript and each spoken answer (a rule's `say`) came.
+    finals: Vec<Duration>,
+    says: Vec<Duration>,
     turns: Vec<Turn>,
+}
+
+/// How long after a question its answer may start and still count as its answer.
+const ANSWER_WITHIN: Duration = Duration::from_secs(15);
+
+/// Questions (final transcripts) followed by a spoken answer within [`ANSWER_WITHIN`].
+fn answered(finals: &[Duration], says: &[Duration]) -> usize {
+    finals
+        .iter()
+        .filter(|q| says.iter().any(|a| *a >= **q && *a <= **q + ANSWER_WITHIN))
+        .count()
 }
 
 fn lock(seen: &Mutex<Seen>) -> std::sync::MutexGuard<'_, Seen> {
@@ -172,7 +185,13 @@ async fn main() -> anyhow::Result<()> {
     }
     browser.quit().await;
     let seen = lock(&seen);
-    let report = Report::new(&pids, &rows, &seen.turns, seen.finals);
+    let report = Report::new(
+        &pids,
+        &rows,
+        &seen.turns,
+        seen.finals.len(),
+        answered(&seen.finals, &seen.says),
+    );
     for l in report.summary() {
         println!("{l}");
     }
@@ -205,7 +224,7 @@ async fn spawn_watchers(
             {
                 let mut seen = lock(&s);
                 seen.heard = t.text.trim().to_string();
-                seen.finals += 1;
+                seen.finals.push(started.elapsed());
             }
         }
     });
@@ -215,7 +234,9 @@ async fn spawn_watchers(
             if let Ok(r) = serde_json::from_slice::<RuleChange>(&d.payload)
                 && r.action.contains("say")
             {
-                lock(&s).answer = format!("{} ({})", r.action, r.rule);
+                let mut seen = lock(&s);
+                seen.answer = format!("{} ({})", r.action, r.rule);
+                seen.says.push(started.elapsed());
             }
         }
     });
@@ -285,15 +306,23 @@ struct Report<'a> {
     rows: &'a [Row],
     turns: &'a [Turn],
     finals: usize,
+    answered: usize,
 }
 
 impl<'a> Report<'a> {
-    fn new(pids: &'a [(String, u32)], rows: &'a [Row], turns: &'a [Turn], finals: usize) -> Self {
+    fn new(
+        pids: &'a [(String, u32)],
+        rows: &'a [Row],
+        turns: &'a [Turn],
+        finals: usize,
+        answered: usize,
+    ) -> Self {
         Report {
             pids,
             rows,
             turns,
             finals,
+            answered,
         }
     }
 
@@ -350,8 +379,10 @@ impl<'a> Report<'a> {
         let unanswered = self.turns.iter().filter(|t| t.answer.is_empty()).count();
         let dropped = self.rows.last().map_or(0, |r| r.dropped);
         out.push(format!(
-            "SUMMARY soak turns: {} final transcripts, {} answered with a measured reply, {unanswered} of those without a rule's say seen, hub drops {dropped}",
+            "SUMMARY soak turns: {} questions heard (final transcripts), {} answered aloud within {} s (target: all), {} with a voice-to-voice figure, {unanswered} of those without a rule's say seen, hub drops {dropped}",
             self.finals,
+            self.answered,
+            ANSWER_WITHIN.as_secs(),
             self.turns.len()
         ));
         out
