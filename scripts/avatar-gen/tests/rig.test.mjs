@@ -101,6 +101,9 @@ test("a closed blink closes both lids fully; moods become morph combinations", (
   assert.ok(angry.browDownLeft > 0.7);
   const surprised = rig({ gaze: rest, blink: 1, mood: expression("surprised"), visemes: { sil: 1 }, nowMs: 0 }).morphs;
   assert.ok(surprised.eyeWideLeft > 0 && surprised.browOuterUpLeft === 1 && surprised.jawOpen > 0.3);
+  assert.ok(surprised.viseme_O > 0.2, "a surprised mouth opens round");
+  const speaking = rig({ gaze: rest, blink: 1, mood: expression("surprised"), visemes: { aa: 1 }, nowMs: 0 }).morphs;
+  assert.ok(!speaking.viseme_O && !speaking.jawOpen, "while speaking the visemes alone shape the mouth");
 });
 
 test("thinking is lopsided: one brow up and one down, one mouth corner up", () => {

@@ -26,6 +26,8 @@ export function rig({ gaze, blink, mood, visemes, nowMs }) {
 
   // The mood's own jaw (surprise) shows only while the mouth is not speaking, as on the 2D face.
   m.jawOpen = Math.max(0, mood.jaw) * silent;
+  // A surprised mouth opens round, not just down: part of the "O" shape with the mood's jaw.
+  if (mood.jaw > 0.2) m.viseme_O = (m.viseme_O ?? 0) + silent * Math.min(1, mood.jaw) * 0.7;
   const smile = mood.smile;
   const asym = mood.asym ?? 0;
   m.mouthSmileLeft = m.mouthSmileRight = Math.max(0, smile);
