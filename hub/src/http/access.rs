@@ -252,7 +252,7 @@ pub async fn gate(State(access): State<Arc<Access>>, mut req: Request, next: Nex
                 now,
             );
             if res.status() == StatusCode::SEE_OTHER
-                && let Some(conn) = req.extensions().get::<super::serve::HttpConn>()
+                && let Some(conn) = req.extensions().get::<super::connection::HttpConn>()
             {
                 conn.known();
             }
@@ -261,7 +261,7 @@ pub async fn gate(State(access): State<Arc<Access>>, mut req: Request, next: Nex
     }
     match access.credential(req.headers(), now) {
         Some(credential) => {
-            if let Some(conn) = req.extensions().get::<super::serve::HttpConn>() {
+            if let Some(conn) = req.extensions().get::<super::connection::HttpConn>() {
                 conn.known();
             }
             req.extensions_mut().insert(credential);

@@ -2,6 +2,7 @@
 //! every route by [`access::gate`].
 
 pub mod access;
+pub mod connection;
 pub mod serve;
 pub mod tls;
 
@@ -143,7 +144,7 @@ async fn status(State(shared): State<Arc<Shared>>) -> Result<axum::Json<Value>, 
 async fn flow_link(
     State(shared): State<Arc<Shared>>,
     ConnectInfo(peer): ConnectInfo<PeerInfo>,
-    conn: Option<axum::Extension<serve::HttpConn>>,
+    conn: Option<axum::Extension<connection::HttpConn>>,
     headers: HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Response {

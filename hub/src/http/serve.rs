@@ -6,8 +6,8 @@
 //! takes its place over to FlowProtocol's login.
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use axum::Router;
@@ -20,6 +20,7 @@ use tokio::task::JoinSet;
 use tower::Service;
 
 use super::access::PeerInfo;
+use super::connection::HttpConn;
 use super::tls::Tls;
 use crate::admission::{Origin, Stranger};
 use crate::net::descriptors::AcceptFailures;
@@ -27,29 +28,6 @@ use crate::shared::Shared;
 
 /// How long connections get to finish their requests once the server stops.
 const STOP_GRACE: Duration = Duration::from_secs(2);
-
-/// The HTTP connection a request came on, as the request's extension: while it has shown no credential it holds
-/// a stranger's place.
-#[derive(Debug, Clone)]
-pub struct HttpConn(Arc<Mutex<Option<Stranger>>>);
-
-impl HttpConn {
-    fn new(stranger: Stranger) -> Self {
-        HttpConn(Arc::new(Mutex::new(Some(stranger))))
-    }
-
-    /// A request on it showed a credential: it no longer counts among the strangers.
-    pub fn known(&self) {
-        if let Some(mut s) = self.take_stranger() {
-            s.logged_in();
-        }
-    }
-
-    /// Hands its stranger's place over (to a `/flow` link, which keeps it until FlowProtocol's login).
-    pub fn take_stranger(&self) -> Option<Stranger> {
-        self.0.lock().unwrap_or_else(PoisonError::into_inner).take()
-    }
-}
 
 /// One of the `http.max_connections` places, given back on close.
 struct Place(Arc<AtomicUsize>);
