@@ -43,6 +43,9 @@ struct Options {
         default_value = "models/piper-venv/bin/python"
     )]
     piper_python: PathBuf,
+    /// ONNX Runtime threads of the Piper engine (default: the engine's own default).
+    #[arg(long)]
+    piper_threads: Option<usize>,
     /// The Whisper model that judges intelligibility (`make model-release MODEL=base`).
     #[arg(long, default_value = "models/ggml-base.bin")]
     whisper_model: PathBuf,
@@ -77,7 +80,11 @@ const PIPER_VISEME_TARGET_MS: f64 = 40.0;
 
 fn main() -> anyhow::Result<()> {
     let options = Options::parse();
-    let piper = PiperConfig::default();
+    let defaults = PiperConfig::default();
+    let piper = PiperConfig {
+        threads: options.piper_threads.unwrap_or(defaults.threads),
+        ..defaults
+    };
     let engine = Synthesizer::start(SynthesizerConfig {
         piper: Some(piper.clone()),
         ..SynthesizerConfig::default()
@@ -204,8 +211,10 @@ fn piper_section(
 ) -> anyhow::Result<()> {
     println!();
     println!(
-        "Piper voice {} vs piper-tts 1.8.0 ({}) on the same file and vs espeak-ng (en), {} runs after 1 warm-up",
+        "Piper voice {} ({} ONNX Runtime thread(s)) vs piper-tts 1.8.0 ({}, its defaults) on the same file and vs \
+         espeak-ng (en), {} runs after 1 warm-up",
         piper.voice.display(),
+        piper.threads,
         options.piper_python.display(),
         options.piper_runs
     );

@@ -39,7 +39,8 @@ pub struct PiperConfig {
     pub noise_w: Option<f32>,
     /// Slower (> 1) or faster (< 1) speech before the rate of each request; `None`: the voice's default (1.0).
     pub length_scale: Option<f32>,
-    /// ONNX Runtime threads inside one run.
+    /// ONNX Runtime threads inside one run. One by default: the agent shares its cores with whisper-sat, and on
+    /// two busy cores a second spinning thread made each run two to three times slower (docs/voice.md).
     pub threads: usize,
 }
 
@@ -67,7 +68,7 @@ impl Default for PiperConfig {
             noise_scale: None,
             noise_w: None,
             length_scale: None,
-            threads: 2,
+            threads: 1,
         }
     }
 }

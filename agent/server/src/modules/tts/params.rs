@@ -76,7 +76,7 @@ pub struct PiperParams {
     pub noise_w: Option<f32>,
     /// Slower (> 1) or faster (< 1), 0.25-4, before `rate_wpm` (175 = 1.0) scales it.
     pub length_scale: Option<f32>,
-    /// ONNX Runtime threads for one sentence, 1-16 (default 2).
+    /// ONNX Runtime threads for one sentence, 1-16 (default 1).
     pub threads: Option<usize>,
 }
 
