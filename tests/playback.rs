@@ -1,7 +1,8 @@
-//! The page's speech playback path in headless Chromium: speech from the real TTS module plays through the
-//! loopback peer connection that Chrome's echo canceller covers, and the clock visemes are drawn on runs behind the
-//! audio clock by the delay that path adds, so that the mouth moves with what is heard (within 40 ms over every
-//! stretch of speech matched), also when the receiver's jitter buffer is far from its usual size.
+//! The page's speech playback path in headless Chromium: speech from the real TTS module (the Piper voice, and
+//! espeak-ng) plays through the loopback peer connection that Chrome's echo canceller covers, and the clock visemes
+//! are drawn on runs behind the audio clock by the delay that path adds, so that the mouth moves with what is heard
+//! (within 40 ms over every stretch of speech matched), also when the receiver's jitter buffer is far from its
+//! usual size.
 //!
 //! Needs `chromium` and `ffmpeg` (Debian packages) and a built `robot-agent` (`cargo build -p robot-agent`).
 
@@ -85,7 +86,14 @@ async fn speak_and_wait(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn speech_plays_through_the_echo_cancelled_loopback_with_the_mouth_in_step_with_what_is_heard()
 -> anyhow::Result<()> {
-    speak_and_match("").await?;
+    speak_and_match("", "piper").await?;
+    Ok(())
+}
+
+/// The same with espeak-ng's voice, the engine of every language but English.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn espeak_ng_speech_plays_with_the_mouth_in_step_too() -> anyhow::Result<()> {
+    speak_and_match("", "espeak").await?;
     Ok(())
 }
 
@@ -94,7 +102,7 @@ async fn speech_plays_through_the_echo_cancelled_loopback_with_the_mouth_in_step
 /// stretch of speech was matched (a fixed first guess of ~90 ms would be off by well over 40 ms).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_held_jitter_buffer_delays_the_mouth_by_what_it_delays_the_sound() -> anyhow::Result<()> {
-    let state = speak_and_match("&playbackbuffer=200").await?;
+    let state = speak_and_match("&playbackbuffer=200", "piper").await?;
     ensure!(
         state.jitter_buffer_ms > 150.0,
         "the receiver did not hold its buffer: {} ms",
@@ -112,9 +120,10 @@ async fn a_held_jitter_buffer_delays_the_mouth_by_what_it_delays_the_sound() -> 
     Ok(())
 }
 
-/// Starts a robot-agent and the page (`query` added to its address), has the TTS module say three sentences, and
-/// checks every matched stretch: a plausible delay, and the mouth's shift within `SYNC_MS` of it.
-async fn speak_and_match(query: &str) -> anyhow::Result<Playback> {
+/// Starts a robot-agent speaking with `engine` and the page (`query` added to its address), has the TTS module say
+/// three sentences, and checks every matched stretch: a plausible delay, and the mouth's shift within `SYNC_MS` of
+/// it.
+async fn speak_and_match(query: &str, engine: &str) -> anyhow::Result<Playback> {
     let media_dir = tempfile::Builder::new()
         .prefix("playback-media-")
         .tempdir()?;
@@ -123,10 +132,23 @@ async fn speak_and_match(query: &str) -> anyhow::Result<Playback> {
     // The TTS module speaks; no brain answers what the fake microphone plays and no vision module runs.
     let agent = Agent::start_configured(
         &dir,
-        "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n",
+        &format!(
+            "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n[modules.tts]\nengine = \"{engine}\"\n"
+        ),
         "tts: speaking on",
     )
     .await?;
+    // The voice is the one asked for: the module names its engine when it starts.
+    let expected = if engine == "piper" {
+        "engine=Piper"
+    } else {
+        "engine=Espeak"
+    };
+    ensure!(
+        !agent.output.matching(expected).is_empty(),
+        "the TTS module did not start with {expected}: {:?}",
+        agent.output.matching("tts: speaking on")
+    );
     let say = agent.client("playback-test").await?;
     let browser = Chromium::launch(&speech_media).await?;
     let tab = browser
