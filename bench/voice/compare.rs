@@ -112,7 +112,7 @@ pub fn compare(
             total / 1000.0 / audio_s,
             py_total / 1000.0 / theirs_audio_s,
             e_total / 1000.0 / espeak_audio_s,
-            crate::shorten(text, 40)
+            shorten(text, 40)
         );
         result.piper.first_ms.extend(ours);
         result.piper.synth_s += total / 1000.0;
@@ -125,4 +125,13 @@ pub fn compare(
         result.espeak.audio_s += espeak_audio_s;
     }
     Ok(result)
+}
+
+/// The first `chars` characters of `text`, with an ellipsis when it is longer.
+pub fn shorten(text: &str, chars: usize) -> String {
+    let mut short: String = text.chars().take(chars).collect();
+    if text.chars().count() > chars {
+        short.push('…');
+    }
+    short
 }

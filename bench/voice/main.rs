@@ -143,7 +143,7 @@ fn main() -> anyhow::Result<()> {
             "{voice:<5} {audio_s:>7.2} | {first_p50:>6.2} ms {whole_p50:>6.1} ms {:>8.4} | {cli_out_p50:>8.1} ms {cli_wav_p50:>6.1} ms {:>8.4} | {}",
             whole_p50 / 1000.0 / audio_s,
             cli_wav_p50 / 1000.0 / audio_s,
-            shorten(text, 40)
+            compare::shorten(text, 40)
         );
         ours_first.extend(first);
         cli_first.extend(cli_out);
@@ -509,12 +509,4 @@ fn percentile(values: &[f64], pct: f64) -> f64 {
 
 fn verdict(met: bool) -> &'static str {
     if met { "met" } else { "NOT met" }
-}
-
-pub(crate) fn shorten(text: &str, chars: usize) -> String {
-    let mut short: String = text.chars().take(chars).collect();
-    if text.chars().count() > chars {
-        short.push('…');
-    }
-    short
 }
