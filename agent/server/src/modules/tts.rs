@@ -71,16 +71,15 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         chunk_queue: 64,
         piper: params.piper_for(language),
     };
-    // Loading espeak-ng's data takes a few milliseconds of blocking file reads, the Piper voice about a second.
-    let synth = tokio::task::spawn_blocking(move || Synthesizer::start(engine_config))
-        .await
-        .context("starting the speech engine")?
-        .context("[modules.tts] starting the speech engine")?;
+    // Loading espeak-ng's data takes a few milliseconds of blocking file reads, the Piper voice about a second: it
+    // loads while the channels are made, so that `Agent.say` exists from the start and an early request waits in
+    // the service's queue instead of finding no such channel.
+    let engine = tokio::task::spawn_blocking(move || Synthesizer::start(engine_config));
     let client = ctx.client.clone();
     let speech = client
         .publisher(
             channels::SPEECH.name,
-            &channels::headers::speech(synth.sample_rate(), params.chunk_ms),
+            &channels::headers::speech(agent_voice::SAMPLE_RATE, params.chunk_ms),
         )
         .await?;
     // The visemes, captions and behaviour commands all need this channel; another owner (a module started
@@ -95,6 +94,17 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     let ctrl = client.subscribe(channels::CTRL.name).await?;
     let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
     let detections = client.subscribe(channels::DETECTIONS.name).await?;
+    let synth = engine
+        .await
+        .context("starting the speech engine")?
+        .context("[modules.tts] starting the speech engine")?;
+    anyhow::ensure!(
+        synth.sample_rate() == agent_voice::SAMPLE_RATE,
+        "[modules.tts] the speech engine speaks at {} Hz, {} is announced at {}",
+        synth.sample_rate(),
+        channels::SPEECH.name,
+        agent_voice::SAMPLE_RATE
+    );
 
     let (behaviour, events) = behaviour::channel();
     if params.behaviour.enabled {
