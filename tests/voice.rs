@@ -31,9 +31,14 @@ struct Rig {
 
 impl Rig {
     async fn start() -> anyhow::Result<Rig> {
+        Self::start_with("").await
+    }
+
+    /// As [`Rig::start`], with `extra` configuration (e.g. the TTS engine).
+    async fn start_with(extra: &str) -> anyhow::Result<Rig> {
         let dir = DataDir::new()?;
         let config =
-            "[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n".to_owned();
+            format!("[modules.brain]\nenabled = false\n[modules.vision]\nenabled = false\n{extra}");
         let agent = Agent::start_configured(&dir, &config, "tts: speaking on").await?;
         let satellite = agent.client("voice-test").await?;
         let speech = satellite.subscribe(ch::SPEECH.name).await?;
@@ -431,16 +436,16 @@ const TEN_SENTENCES: [&str; 10] = [
 /// plain sentences came out 0 of 100 words wrong, and the bar leaves the voice's random variation a few words.
 const PIPER_WER_BAR: f64 = 0.06;
 
-/// A robot-agent speaking English with its default engine, the Piper voice, says ten sentences; a real
-/// `whisper-sat transcribe` with the base model hears the PCM that went out on `Agent.speech`.
+/// A robot-agent speaking English with the Piper voice (`[modules.tts] engine = "piper"`) says ten sentences; a
+/// real `whisper-sat transcribe` with the base model hears the PCM that went out on `Agent.speech`.
 #[tokio::test]
 async fn whisper_hears_ten_piper_sentences_right() -> anyhow::Result<()> {
-    let rig = Rig::start().await?;
+    let rig = Rig::start_with("[modules.tts]\nengine = \"piper\"\n").await?;
     rig.agent
         .output
         .wait_for("engine=Piper", 1, PATIENCE)
         .await
-        .context("the default English engine is the Piper voice")?;
+        .context("the TTS module did not start the Piper voice")?;
     let model =
         std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/ggml-base.bin");
     anyhow::ensure!(
@@ -571,7 +576,7 @@ async fn a_missing_voice_file_stops_the_agent_at_start_naming_path_checksum_and_
         .path()
         .join("models/piper/en_US-joe-medium.durations.onnx");
     let config = format!(
-        "[modules.tts.piper]\nvoice = {:?}\n",
+        "[modules.tts]\nengine = \"piper\"\n[modules.tts.piper]\nvoice = {:?}\n",
         missing.display().to_string()
     );
     let error = Agent::with_config(&dir, &config)
