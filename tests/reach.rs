@@ -32,6 +32,19 @@ fn outside_address() -> Option<IpAddr> {
         .find(|ip| ip.is_ipv4() && !ip.is_loopback())
 }
 
+/// A bare `flow-hub` (no agent modules), with `config` layered over the defaults.
+async fn bare_hub(data: &DataDir, config: Option<&str>) -> anyhow::Result<Agent> {
+    Agent::start_with(
+        data,
+        AgentOptions {
+            program: Some("flow-hub"),
+            config: config.map(str::to_string),
+            ..Default::default()
+        },
+    )
+    .await
+}
+
 /// Runs a shell pipeline and returns its trimmed output.
 fn sh(script: &str) -> anyhow::Result<String> {
     let out = std::process::Command::new("sh")
@@ -318,14 +331,7 @@ async fn the_pair_database_takes_writes_again_once_a_full_disk_has_room() -> any
         return Ok(());
     };
     let data = DataDir::inside(disk.path())?;
-    let agent = Agent::start_with(
-        &data,
-        AgentOptions {
-            program: Some("flow-hub"),
-            ..Default::default()
-        },
-    )
-    .await?;
+    let agent = bare_hub(&data, None).await?;
     ensure!(
         data.path().join("pairs.redb").exists(),
         "the pair database is on the small disk"
@@ -468,15 +474,7 @@ async fn a_recording_on_a_full_disk_says_so_and_leaves_a_readable_mcap() -> anyh
 async fn a_logged_in_client_that_stops_mid_frame_is_closed_at_the_frame_deadline()
 -> anyhow::Result<()> {
     let data = DataDir::new()?;
-    let agent = Agent::start_with(
-        &data,
-        AgentOptions {
-            program: Some("flow-hub"),
-            config: Some("[hub]\nframe_timeout_ms = 1000\n".into()),
-            ..Default::default()
-        },
-    )
-    .await?;
+    let agent = bare_hub(&data, Some("[hub]\nframe_timeout_ms = 1000\n")).await?;
     let mut conn = RawConn::login(agent.flow_tcp, agent.token(), false).await?;
     // The start of a 1 MB frame, and nothing more.
     let mut head = (1u32 << 20).to_le_bytes().to_vec();
@@ -558,14 +556,7 @@ async fn a_text_message_on_the_flow_websocket_closes_it_with_a_code_and_a_warnin
     use futures_util::{SinkExt, StreamExt};
     use tokio_tungstenite::tungstenite::Message;
     let data = DataDir::new()?;
-    let agent = Agent::start_with(
-        &data,
-        AgentOptions {
-            program: Some("flow-hub"),
-            ..Default::default()
-        },
-    )
-    .await?;
+    let agent = bare_hub(&data, None).await?;
     let url = format!("ws://{}/flow", agent.http);
     let (mut ws, _) = tokio_tungstenite::connect_async(url.as_str()).await?;
     ws.send(Message::Text("hello".into())).await?;

@@ -40,6 +40,12 @@ struct Proc {
     threads: u64,
 }
 
+impl Proc {
+    fn rss_mib(&self) -> f64 {
+        self.rss_kib as f64 / 1024.0
+    }
+}
+
 fn sample(pid: u32) -> anyhow::Result<Proc> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
     let field = |name: &str| -> u64 {
@@ -265,19 +271,6 @@ fn taken_on() -> String {
     agent_bench::summary::utc_date(secs)
 }
 
-/// `git describe --always --dirty` of the working directory, or "unknown".
-fn commit() -> String {
-    std::process::Command::new("git")
-        .args(["describe", "--always", "--dirty"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map_or_else(
-            || "unknown".into(),
-            |o| String::from_utf8_lossy(&o.stdout).trim().to_string(),
-        )
-}
-
 fn header(pids: &[(String, u32)]) -> String {
     let mut h = String::from("min");
     for (name, _) in pids {
@@ -289,13 +282,7 @@ fn header(pids: &[(String, u32)]) -> String {
 fn line(r: &Row) -> String {
     let mut l = format!("{:>3}", r.minute);
     for p in &r.procs {
-        let _ = write!(
-            l,
-            " | {:>7.1} {:>4} {:>3}",
-            p.rss_kib as f64 / 1024.0,
-            p.fds,
-            p.threads
-        );
+        let _ = write!(l, " | {:>7.1} {:>4} {:>3}", p.rss_mib(), p.fds, p.threads);
     }
     l + &format!(" | {:>5} | {:>5}", r.dropped, r.turns)
 }
@@ -397,13 +384,7 @@ impl<'a> Report<'a> {
         for r in self.rows {
             let _ = write!(s, "{}", r.minute);
             for p in &r.procs {
-                let _ = write!(
-                    s,
-                    ",{:.1},{},{}",
-                    p.rss_kib as f64 / 1024.0,
-                    p.fds,
-                    p.threads
-                );
+                let _ = write!(s, ",{:.1},{},{}", p.rss_mib(), p.fds, p.threads);
             }
             let _ = writeln!(s, ",{},{}", r.dropped, r.turns);
         }
@@ -426,7 +407,7 @@ impl<'a> Report<'a> {
             "# Soak\n\n`make soak MINUTES={minutes}`: see `bench/soak/main.rs` for what runs. Taken on {} at commit \
              {}.\n\n",
             taken_on(),
-            commit()
+            agent_bench::summary::current_commit()
         );
         m.push_str("```text\n");
         for l in self.summary() {

@@ -3,10 +3,11 @@
 //! commit, so that the figures there are those of the last run and say when it was.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::UNIX_EPOCH;
 
-use agent_bench::summary::{Taken, block_names, render, replace_block, summary_lines, utc_date};
+use agent_bench::summary::{
+    Taken, block_names, current_commit, render, replace_block, summary_lines, utc_date,
+};
 use anyhow::{Context, bail};
 use clap::Parser;
 
@@ -23,19 +24,6 @@ struct Args {
     /// The commit to stamp (default: `git describe --always --dirty` of the working directory).
     #[arg(long)]
     commit: Option<String>,
-}
-
-/// What `git describe --always --dirty` says, or "unknown" outside a work tree: a stamp is no reason to fail.
-fn current_commit() -> String {
-    Command::new("git")
-        .args(["describe", "--always", "--dirty"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .and_then(|o| String::from_utf8(o.stdout).ok())
-        .map(|s| s.trim().to_owned())
-        .filter(|s| !s.is_empty())
-        .unwrap_or_else(|| "unknown".to_owned())
 }
 
 /// The UTC day `path` was last written: when its bench ran.
