@@ -54,6 +54,10 @@ pub struct PauseTurn {
     pub speech_end_us: u64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verdict: Option<Turn>,
+    /// Set once the holder's segmenter ended the utterance at this pause: the hub time it closed it at. The
+    /// others end theirs there too, even when their voice has resumed meanwhile (the verdict reached them late).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub closed_us: Option<u64>,
 }
 
 fn is_false(b: &bool) -> bool {
@@ -184,6 +188,7 @@ mod tests {
             pause: Some(PauseTurn {
                 speech_end_us: 9,
                 verdict: None,
+                closed_us: None,
             }),
             ..ClaimHeader::new(5, 9, "s1", true)
         };
@@ -194,12 +199,24 @@ mod tests {
             pause: Some(PauseTurn {
                 speech_end_us: 9,
                 verdict: Some(Turn::Complete),
+                closed_us: None,
             }),
             ..deciding
         };
         let json = judged.to_json();
         assert!(json.contains(r#""verdict":"complete""#), "{json}");
         assert_eq!(ClaimHeader::parse(&json), Some(judged));
+        let ended = ClaimHeader {
+            pause: Some(PauseTurn {
+                speech_end_us: 9,
+                verdict: Some(Turn::Unknown),
+                closed_us: Some(12),
+            }),
+            ..ClaimHeader::new(5, 9, "s1", true)
+        };
+        let json = ended.to_json();
+        assert!(json.contains(r#""closed_us":12"#), "{json}");
+        assert_eq!(ClaimHeader::parse(&json), Some(ended));
         // A header from before verdicts were shared has none.
         assert_eq!(
             ClaimHeader::parse(r#"{"start_us":1,"end_us":2}"#).and_then(|h| h.pause),

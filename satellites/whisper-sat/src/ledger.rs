@@ -236,6 +236,7 @@ mod tests {
             speech_end_us: end,
             audio: Vec::new(),
             forced: false,
+            closed_us: end,
         }
     }
 

@@ -29,7 +29,7 @@ use webrtc_vad::{SampleRate, Vad, VadMode};
 
 /// The rate the segmenter works at (Whisper's input rate; also one WebRTC VAD supports).
 pub const RATE: u32 = 16_000;
-const FRAME: usize = 320; // 20 ms at 16 kHz
+pub(crate) const FRAME: usize = 320; // 20 ms at 16 kHz
 
 /// Tunable segmentation parameters.
 #[derive(Debug, Clone, PartialEq)]
@@ -109,6 +109,21 @@ pub struct Utterance {
     pub audio: Vec<f32>,
     /// True when the utterance was cut at the maximum length rather than ended by silence.
     pub forced: bool,
+    /// Where the segmenter stood when it closed the utterance (for a `Paused` one, when it reported the pause):
+    /// whatever comes after is the next utterance's, so another segmenter told to end the same utterance at the
+    /// same pause (`Segmenter::end_as_decided`) cuts it here too.
+    pub closed_at: u64,
+}
+
+/// What became of an end decided by another segmenter (`Segmenter::end_as_decided`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DecidedEnd {
+    /// The open utterance was ended at that pause, and what came after replayed as new speech.
+    Applied,
+    /// The stream has not reached the end's position yet: ask again later.
+    Later,
+    /// Not this segmenter's open utterance, or its frames say otherwise (voice inside the other's silence).
+    Ignored,
 }
 
 /// What the segmenter reports while it consumes audio.
@@ -160,6 +175,11 @@ enum State {
         /// The first voiced frame (without the pre-roll), and whether `Confirmed` was reported.
         onset: u64,
         confirmed: bool,
+        /// Where the frames after the opening one begin, and how each of them was classified (voiced, tonal):
+        /// what an end decided elsewhere replays (`Segmenter::end_as_decided`). At most `max_utterance_ms` of
+        /// frames: the length cap closes the utterance.
+        opened: u64,
+        classes: Vec<(bool, bool)>,
     },
 }
 
@@ -342,7 +362,7 @@ impl Segmenter {
     /// Ends the stream: an open utterance is closed as if silence followed.
     pub fn finish(&mut self, events: &mut Vec<SegmentEvent>) {
         if let State::Speech { .. } = self.state {
-            self.close(false, events);
+            self.close(false, self.position, events);
         }
         self.reset_detector();
     }
@@ -391,8 +411,113 @@ impl Segmenter {
         }
         *turn = verdict.map_or(TurnHold::Deciding, TurnHold::Judged);
         if *silent_frames >= frames(hangover_of(&self.cfg, *turn)) {
-            self.close(false, events);
+            self.close(false, self.position, events);
         }
+    }
+
+    /// Where the open utterance starts and where its frames lie: `(start, opened)`, frame boundaries being
+    /// `opened` plus whole frames (`None` when no utterance is open).
+    pub fn open_utterance(&self) -> Option<(u64, u64)> {
+        match &self.state {
+            State::Speech { start, opened, .. } => Some((*start, *opened)),
+            State::Idle => None,
+        }
+    }
+
+    /// Another segmenter on the same stream (the satellite decoding the open utterance, which alone judges the
+    /// end of its turn) ended the utterance that starts at `start` at the pause after `speech_end`, closing it at
+    /// `closed_at`. Its verdict came in time there and late here (or never), so here the voice may have resumed
+    /// since: the utterance is ended at that pause all the same, and the frames from `closed_at` on are replayed
+    /// from the utterance's own audio and classification as new speech. Both segmenters then agree on the
+    /// utterance and on the next one's start. Ignored unless the utterance is open here and its frames from
+    /// `speech_end` to `closed_at` were silent here too.
+    pub fn end_as_decided(
+        &mut self,
+        start: u64,
+        speech_end: u64,
+        closed_at: u64,
+        events: &mut Vec<SegmentEvent>,
+    ) -> DecidedEnd {
+        let State::Speech {
+            start: open,
+            speech_end: open_end,
+            opened,
+            classes,
+            ..
+        } = &self.state
+        else {
+            return DecidedEnd::Ignored;
+        };
+        let on_grid = |p: u64| p >= *opened && (p - *opened).is_multiple_of(FRAME as u64);
+        if *open != start
+            || speech_end > *open_end
+            || closed_at <= speech_end
+            || !on_grid(speech_end)
+            || !on_grid(closed_at)
+        {
+            return DecidedEnd::Ignored;
+        }
+        if self.position < closed_at {
+            return DecidedEnd::Later;
+        }
+        let first = ((speech_end - *opened) / FRAME as u64) as usize;
+        let last = ((closed_at - *opened) / FRAME as u64) as usize;
+        if classes
+            .get(first..last)
+            .is_none_or(|c| c.iter().any(|&(v, _)| v))
+        {
+            return DecidedEnd::Ignored;
+        }
+        let State::Speech {
+            audio,
+            voiced_frames,
+            tonal_frames,
+            onset,
+            opened,
+            classes,
+            ..
+        } = std::mem::replace(&mut self.state, State::Idle)
+        else {
+            return DecidedEnd::Ignored;
+        };
+        // The utterance as it stood when the other segmenter closed it: the frames after `speech_end` count for
+        // the speech that follows.
+        let after = &classes[first..];
+        let voiced = voiced_frames - after.iter().filter(|c| c.0).count() as u32;
+        let tonal = tonal_frames - after.iter().filter(|c| c.1).count() as u32;
+        let upto = ((closed_at - start) as usize).min(audio.len());
+        self.state = State::Speech {
+            start,
+            audio: audio[..upto].to_vec(),
+            speech_end,
+            voiced_frames: voiced,
+            tonal_frames: tonal,
+            silent_frames: (last - first) as u32,
+            paused: true,
+            turn: TurnHold::Hangover,
+            onset,
+            confirmed: voiced >= frames(self.cfg.min_voiced_ms)
+                && tonal >= frames(self.cfg.min_tonal_ms),
+            opened,
+            classes: Vec::new(),
+        };
+        self.close(false, closed_at, events);
+        // From `closed_at` the other segmenter was idle: so is this one, over the same frames.
+        self.recent.clear();
+        self.onset.clear();
+        self.onset_tonal.clear();
+        let now = self.position;
+        for (i, &(v, t)) in classes[last..].iter().enumerate() {
+            let at = closed_at + (i * FRAME) as u64;
+            let from = (at - start) as usize;
+            let Some(frame) = audio.get(from..from + FRAME) else {
+                break;
+            };
+            self.position = at;
+            self.step(frame, v, t, events);
+        }
+        self.position = now;
+        DecidedEnd::Applied
     }
 
     /// Whether the frame is voiced, and whether it is also tonal.
@@ -421,6 +546,11 @@ impl Segmenter {
 
     fn frame(&mut self, frame: &[f32], events: &mut Vec<SegmentEvent>) {
         let (voiced, tonal) = self.classify(frame);
+        self.step(frame, voiced, tonal, events);
+    }
+
+    /// Moves the state on by one frame (starting at `self.position`) classified as `voiced` and `tonal`.
+    fn step(&mut self, frame: &[f32], voiced: bool, tonal: bool, events: &mut Vec<SegmentEvent>) {
         let frame_end = self.position + FRAME as u64;
         match &mut self.state {
             State::Idle => {
@@ -466,6 +596,8 @@ impl Segmenter {
                         turn: TurnHold::Hangover,
                         onset: onset_at,
                         confirmed: false,
+                        opened: frame_end,
+                        classes: Vec::new(),
                     };
                     events.push(SegmentEvent::Started {
                         start,
@@ -485,8 +617,11 @@ impl Segmenter {
                 turn,
                 onset,
                 confirmed,
+                classes,
+                ..
             } => {
                 audio.extend_from_slice(frame);
+                classes.push((voiced, tonal));
                 if voiced {
                     if std::mem::take(paused) {
                         events.push(SegmentEvent::Resumed { start: *start });
@@ -512,9 +647,9 @@ impl Segmenter {
                 }
                 let too_long = audio.len() >= samples(self.cfg.max_utterance_ms);
                 if *silent_frames >= frames(hangover_of(&self.cfg, *turn)) {
-                    self.close(false, events);
+                    self.close(false, frame_end, events);
                 } else if too_long {
-                    self.close(true, events);
+                    self.close(true, frame_end, events);
                 } else if !voiced && !*paused {
                     // The first frame whose silence covers the post-roll: the audio a close would keep is complete.
                     let keep = (*speech_end - *start) as usize + samples(self.cfg.post_roll_ms);
@@ -527,6 +662,7 @@ impl Segmenter {
                             speech_end: *speech_end,
                             audio: audio[..keep].to_vec(),
                             forced: false,
+                            closed_at: frame_end,
                         }));
                     }
                 }
@@ -534,7 +670,8 @@ impl Segmenter {
         }
     }
 
-    fn close(&mut self, forced: bool, events: &mut Vec<SegmentEvent>) {
+    /// Closes the open utterance, the segmenter standing at `closed_at`.
+    fn close(&mut self, forced: bool, closed_at: u64, events: &mut Vec<SegmentEvent>) {
         let State::Speech {
             start,
             mut audio,
@@ -566,6 +703,7 @@ impl Segmenter {
                 speech_end: end,
                 audio,
                 forced: true,
+                closed_at: end,
             }));
             self.state = State::Speech {
                 start: end,
@@ -579,6 +717,8 @@ impl Segmenter {
                 onset: end,
                 // The voice never stopped: it was confirmed in the piece before the cut.
                 confirmed: true,
+                opened: end,
+                classes: Vec::new(),
             };
             events.push(SegmentEvent::Started {
                 start: end,
@@ -593,6 +733,7 @@ impl Segmenter {
             speech_end,
             audio,
             forced,
+            closed_at,
         }));
     }
 }
@@ -776,7 +917,11 @@ mod tests {
                 _ => None,
             })
             .expect("the utterance ends");
-        assert_eq!(p, e, "the paused utterance differs from the ended one");
+        assert_eq!(
+            speech(p),
+            speech(e),
+            "the paused utterance differs from the ended one"
+        );
         // Reported as soon as the silence covers the post-roll (rounded up to whole frames), well before the end.
         let post_roll_frames = u64::from(frames(cfg.post_roll_ms));
         assert_eq!(paused_at - p.speech_end, post_roll_frames * FRAME as u64);
@@ -828,7 +973,7 @@ mod tests {
         assert_eq!(pauses[0].1.start, utts[0].start);
         assert!(pauses[0].1.speech_end < utts[0].speech_end);
         assert!(pauses[0].1.audio.len() < utts[0].audio.len());
-        assert_eq!(pauses[1].1, &utts[0]);
+        assert_eq!(speech(pauses[1].1), speech(&utts[0]));
     }
 
     /// Runs `audio` 20 ms at a time; at each pause the satellite's side answers with `judge` (what `turn` gets:
@@ -879,7 +1024,7 @@ mod tests {
         assert_eq!(kinds(&ev), ["started", "confirmed", "paused", "ended"]);
         let (paused_at, p) = paused(&ev)[0];
         let (ended_at, e) = ends(&ev)[0];
-        assert_eq!(p, e);
+        assert_eq!(speech(p), speech(e));
         // Judged at once, the turn ends when the silence holds the confirmation (the pause already held the
         // post-roll), long before the hangover.
         let confirm = u64::from(frames(cfg.turn_confirm_ms).max(frames(cfg.post_roll_ms)));
@@ -985,6 +1130,156 @@ mod tests {
         assert!(utts[0].speech_end > first_pause.expect("a pause").1);
     }
 
+    /// Feeds `audio` frame by frame; after each frame `hook` sees the segmenter, the frame's events and where to
+    /// put events it causes. Returns every event.
+    fn run_hooked(
+        audio: &[f32],
+        mut hook: impl FnMut(&mut Segmenter, &[SegmentEvent], &mut Vec<SegmentEvent>),
+    ) -> Vec<SegmentEvent> {
+        let mut seg = Segmenter::new(SegmenterConfig::default()).expect("valid config");
+        let mut all = Vec::new();
+        for chunk in audio.chunks(FRAME) {
+            let mut step = Vec::new();
+            seg.push(chunk, &mut step);
+            let mut caused = Vec::new();
+            hook(&mut seg, &step, &mut caused);
+            all.extend(step);
+            all.extend(caused);
+        }
+        seg.finish(&mut all);
+        all
+    }
+
+    #[test]
+    fn an_end_decided_by_the_decoder_splits_speech_that_resumed_here_as_the_decoder_did() {
+        // 400 ms of silence: past the 300 ms hangover, short of the 600 ms a pause waits for its verdict.
+        let audio = [
+            silence(500),
+            voice(800),
+            silence(400),
+            voice(800),
+            silence(1000),
+        ]
+        .concat();
+        // The decoder held the end for its transcript, whose verdict (unknown: the hangover) came 340 ms into the
+        // silence, and ended the utterance there.
+        let mut pause = None;
+        let mut since_pause = 0;
+        let decoder = run_hooked(&audio, |seg, step, caused| {
+            for e in step {
+                if let SegmentEvent::Paused(u) = e {
+                    pause.get_or_insert((u.start, u.speech_end));
+                    seg.turn(u.start, u.speech_end, None, caused);
+                }
+            }
+            if let Some((start, speech_end)) = pause {
+                since_pause += 1;
+                if since_pause == 16 {
+                    seg.turn(start, speech_end, Some(Turn::Unknown), caused);
+                }
+            }
+        });
+        let decoded = ended(&decoder);
+        assert_eq!(decoded.len(), 2, "{:?}", kinds_of(&decoder));
+        let first = decoded[0].clone();
+        assert!(first.closed_at > first.speech_end + samples(300) as u64);
+        // Here the verdict never came in time: the voice resumed, and the decoder's end arrives mid-sentence.
+        let mut told = None;
+        let follower = run_hooked(&audio, |seg, step, caused| {
+            for e in step {
+                if let SegmentEvent::Paused(u) = e {
+                    seg.turn(u.start, u.speech_end, None, caused);
+                }
+            }
+            if told.is_none() && seg.position() >= first.closed_at + samples(300) as u64 {
+                told = Some(seg.end_as_decided(
+                    first.start,
+                    first.speech_end,
+                    first.closed_at,
+                    caused,
+                ));
+            }
+        });
+        assert_eq!(told, Some(DecidedEnd::Applied));
+        assert!(
+            kinds_of(&follower).contains(&"resumed"),
+            "{:?}",
+            kinds_of(&follower)
+        );
+        assert_eq!(ended(&follower), decoded);
+    }
+
+    #[test]
+    fn an_end_decided_elsewhere_waits_for_the_stream_and_yields_to_voice_heard_here() {
+        let audio = [silence(500), voice(800), silence(1000)].concat();
+        let mut seg = Segmenter::new(SegmenterConfig::default()).expect("valid config");
+        let mut ev = Vec::new();
+        seg.push(&audio[..samples(1400)], &mut ev);
+        let (start, opened) = seg.open_utterance().expect("speech open");
+        let speech_end = ev
+            .iter()
+            .find_map(|e| match e {
+                SegmentEvent::Paused(u) => Some(u.speech_end),
+                _ => None,
+            })
+            .expect("paused");
+        // Ahead of this stream: later. Inside the voice: not this stream's silence. Off the frames: not ours.
+        let closed_at = speech_end + 8 * FRAME as u64;
+        assert_eq!(
+            seg.end_as_decided(start, speech_end, closed_at, &mut ev),
+            DecidedEnd::Later
+        );
+        assert_eq!(
+            seg.end_as_decided(start, speech_end - 20 * FRAME as u64, speech_end, &mut ev),
+            DecidedEnd::Ignored
+        );
+        assert_eq!(
+            seg.end_as_decided(start, speech_end, closed_at + 7, &mut ev),
+            DecidedEnd::Ignored
+        );
+        assert_eq!(
+            seg.end_as_decided(start + FRAME as u64, speech_end, closed_at, &mut ev),
+            DecidedEnd::Ignored
+        );
+        assert!(opened <= speech_end);
+        // Once the stream is there, the utterance ends at that pause, closed where the other segmenter closed it.
+        seg.push(&audio[samples(1400)..samples(1500)], &mut ev);
+        let before = ended(&ev).len();
+        assert_eq!(
+            seg.end_as_decided(start, speech_end, closed_at, &mut ev),
+            DecidedEnd::Applied
+        );
+        let utts = ended(&ev);
+        assert_eq!(utts.len(), before + 1);
+        let u = utts[before];
+        assert_eq!(
+            (u.start, u.speech_end, u.closed_at),
+            (start, speech_end, closed_at)
+        );
+        assert!(seg.open_utterance().is_none());
+    }
+
+    /// The utterance without where it was closed: a pause reports the utterance before anything closes it.
+    fn speech(u: &Utterance) -> Utterance {
+        Utterance {
+            closed_at: 0,
+            ..u.clone()
+        }
+    }
+
+    fn kinds_of(ev: &[SegmentEvent]) -> Vec<&'static str> {
+        ev.iter()
+            .map(|e| match e {
+                SegmentEvent::Started { .. } => "started",
+                SegmentEvent::Confirmed { .. } => "confirmed",
+                SegmentEvent::Paused(_) => "paused",
+                SegmentEvent::Resumed { .. } => "resumed",
+                SegmentEvent::Ended(_) => "ended",
+                SegmentEvent::Dropped { .. } => "dropped",
+            })
+            .collect()
+    }
+
     #[test]
     fn a_confirmation_shorter_than_the_post_roll_is_refused() {
         let cfg = SegmenterConfig {
@@ -1075,7 +1370,10 @@ mod tests {
             "only the last piece pauses: {:?}",
             kinds(&ev)
         );
-        assert_eq!(pauses[0].1, *utts.last().expect("utterances"));
+        assert_eq!(
+            speech(pauses[0].1),
+            speech(utts.last().expect("utterances"))
+        );
         // A cut that falls in the hangover after a pause: the forced end is not the paused utterance.
         let ev = run_timed(capped, &[voice(760), silence(600)].concat());
         let p = paused(&ev);

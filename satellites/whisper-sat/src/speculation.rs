@@ -188,6 +188,7 @@ mod tests {
             speech_end_us: end_ms * 1000,
             audio: vec![0.1; (end_ms as usize - 1000) * 16 + 2400],
             forced: false,
+            closed_us: end_ms * 1000 + 300_000,
         }
     }
 

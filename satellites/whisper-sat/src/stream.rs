@@ -11,7 +11,9 @@ use std::collections::VecDeque;
 
 use crate::echo::{EchoConfig, EchoGate};
 use crate::resample::{ResampleError, StreamResampler, pcm_s16le_to_f32};
-use crate::segmenter::{RATE, SegmentEvent, Segmenter, SegmenterConfig, SegmenterError, Utterance};
+use crate::segmenter::{
+    DecidedEnd, FRAME, RATE, SegmentEvent, Segmenter, SegmenterConfig, SegmenterError, Utterance,
+};
 use crate::turn::Turn;
 
 /// The hub's audio rate (`Agent.audio`).
@@ -41,6 +43,8 @@ pub struct ClockedUtterance {
     pub audio: Vec<f32>,
     /// Cut at the maximum length while the voice went on (the speech continues in the next utterance).
     pub forced: bool,
+    /// Hub time at which the segmenter closed it (`Utterance::closed_at`).
+    pub closed_us: u64,
 }
 
 /// What the pipeline reports.
@@ -108,6 +112,9 @@ pub struct AudioStream {
     /// The last pause reported, as the satellite names it (id, end of speech on the hub clock) and as the
     /// segmenter knows it (start and end of speech in samples), for verdicts on it.
     last_pause: Option<(String, u64, u64, u64)>,
+    /// An end another satellite's segmenter gave the open utterance, waiting for the stream to reach it:
+    /// (id, end of speech, where it closed), on the hub clock.
+    decided_end: Option<(String, u64, u64)>,
 }
 
 impl AudioStream {
@@ -126,6 +133,7 @@ impl AudioStream {
             events: Vec::new(),
             echo: EchoGate::new(EchoConfig::default()),
             last_pause: None,
+            decided_end: None,
         })
     }
 
@@ -167,6 +175,9 @@ impl AudioStream {
         self.segmenter.set_echo_floor(floor);
         self.segmenter.push(&self.resampled, &mut self.events);
         self.emit(out);
+        if self.decided_end.is_some() {
+            self.apply_decided_end(out);
+        }
         Ok(())
     }
 
@@ -197,7 +208,79 @@ impl AudioStream {
         self.last_seq = None;
         self.marks.clear();
         self.last_pause = None;
+        self.decided_end = None;
         Ok(())
+    }
+
+    /// The satellite decoding utterance `id` ended it at the pause after `speech_end_us`, its segmenter closing
+    /// it at `closed_us` (hub clock): this pipeline ends it there too, at once or when the stream gets there
+    /// (`Segmenter::end_as_decided`).
+    pub fn ended_elsewhere(
+        &mut self,
+        id: &str,
+        speech_end_us: u64,
+        closed_us: u64,
+        out: &mut Vec<StreamEvent>,
+    ) {
+        self.decided_end = Some((id.to_owned(), speech_end_us, closed_us));
+        self.apply_decided_end(out);
+    }
+
+    fn apply_decided_end(&mut self, out: &mut Vec<StreamEvent>) {
+        let Some((id, speech_end_us, closed_us)) = self.decided_end.clone() else {
+            return;
+        };
+        let Some((start, opened)) = self.segmenter.open_utterance() else {
+            self.decided_end = None;
+            return;
+        };
+        if utterance_id(self.clock_of(start)) != id {
+            self.decided_end = None;
+            return;
+        }
+        if self.clock_of(self.segmenter.position()) < closed_us {
+            return;
+        }
+        let (Some(speech_end), Some(closed_at)) = (
+            self.frame_boundary_at(opened, speech_end_us),
+            self.frame_boundary_at(opened, closed_us),
+        ) else {
+            tracing::debug!(%id, speech_end_us, closed_us, "an end decided elsewhere is not on this stream's frames");
+            self.decided_end = None;
+            return;
+        };
+        match self
+            .segmenter
+            .end_as_decided(start, speech_end, closed_at, &mut self.events)
+        {
+            DecidedEnd::Later => return,
+            DecidedEnd::Applied => {
+                tracing::debug!(%id, speech_end_us, "ended where its decoder ended it")
+            }
+            DecidedEnd::Ignored => {
+                tracing::debug!(%id, speech_end_us, "an end decided elsewhere does not fit this stream")
+            }
+        }
+        self.decided_end = None;
+        self.emit(out);
+    }
+
+    /// The frame boundary (a whole number of frames from `grid`) that lies at `at_us` on the hub clock.
+    fn frame_boundary_at(&self, grid: u64, at_us: u64) -> Option<u64> {
+        let (idx, ts) = self
+            .marks
+            .iter()
+            .rev()
+            .find(|(_, ts)| *ts <= at_us)
+            .copied()?;
+        let estimate = idx + (at_us - ts) * u64::from(RATE) / 1_000_000;
+        let frame = FRAME as u64;
+        let near =
+            grid as i64 + (estimate as i64 - grid as i64).div_euclid(frame as i64) * frame as i64;
+        (-1..=2)
+            .map(|k| near + k * frame as i64)
+            .filter_map(|p| u64::try_from(p).ok())
+            .find(|&p| self.clock_of(p) == at_us)
     }
 
     /// A transcript of the pause of utterance `id` that ended speech at `speech_end_us` is being decoded (`None`)
@@ -288,6 +371,7 @@ impl AudioStream {
             speech_end_us: self.clock_of(u.speech_end),
             audio: u.audio,
             forced: u.forced,
+            closed_us: self.clock_of(u.closed_at),
         }
     }
 }
@@ -436,6 +520,110 @@ pub(crate) mod tests {
         }));
         assert_eq!(paused[0].id, u[0].id);
         assert!(paused[0].speech_end_us < u[0].speech_end_us);
-        assert_eq!(paused[1], u[0]);
+        assert_eq!(
+            paused[1],
+            &ClockedUtterance {
+                closed_us: paused[1].closed_us,
+                ..u[0].clone()
+            }
+        );
+    }
+
+    /// Feeds PCM like `feed`, letting `hook` act on the stream after each message.
+    fn feed_hooked(
+        stream: &mut AudioStream,
+        pcm: &[u8],
+        t0: u64,
+        mut hook: impl FnMut(&mut AudioStream, &[StreamEvent], &mut Vec<StreamEvent>),
+    ) -> Vec<StreamEvent> {
+        let mut out = Vec::new();
+        for (n, chunk) in pcm.chunks(882).enumerate() {
+            let msg = AudioMessage {
+                seq: 1 + n as u64,
+                ts_us: t0 + n as u64 * 20_000,
+                pcm: chunk,
+            };
+            let mut step = Vec::new();
+            stream.push(msg, &mut step).expect("push");
+            let mut caused = Vec::new();
+            hook(stream, &step, &mut caused);
+            out.extend(step);
+            out.extend(caused);
+        }
+        stream.finish(&mut out).expect("finish");
+        out
+    }
+
+    #[test]
+    fn a_pipeline_told_where_the_decoder_ended_an_utterance_finds_the_decoders_utterances() {
+        let pcm = [
+            tone_pcm(500, false),
+            tone_pcm(800, true),
+            tone_pcm(400, false),
+            tone_pcm(800, true),
+            tone_pcm(1000, false),
+        ]
+        .concat();
+        let t0 = 1_700_000_000_000_000;
+        // The decoder held its pause for the transcript and ended it on a verdict that came 340 ms in.
+        let mut pause: Option<(String, u64)> = None;
+        let mut decoder = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let decoded = feed_hooked(&mut decoder, &pcm, t0, |s, step, caused| {
+            for e in step {
+                if let StreamEvent::Paused(u) = e
+                    && pause.is_none()
+                {
+                    pause = Some((u.id.clone(), u.speech_end_us));
+                    s.turn(&u.id, u.speech_end_us, None, caused);
+                }
+            }
+            if let Some((id, end)) = &pause {
+                let now = s.clock_of(s.segmenter.position());
+                if now >= end + 340_000 && now < end + 360_000 {
+                    s.turn(id, *end, Some(Turn::Unknown), caused);
+                }
+            }
+        });
+        let theirs: Vec<&ClockedUtterance> = utterances(&decoded);
+        assert_eq!(theirs.len(), 2, "{decoded:?}");
+        // This pipeline heard of the decode but not of its verdict in time: the voice resumed here first.
+        let first = theirs[0].clone();
+        let mut told = false;
+        let mut follower = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let followed = feed_hooked(&mut follower, &pcm, t0, |s, step, caused| {
+            for e in step {
+                if let StreamEvent::Paused(u) = e
+                    && !told
+                {
+                    s.turn(&u.id, u.speech_end_us, None, caused);
+                }
+            }
+            let now = s.clock_of(s.segmenter.position());
+            if !told && now >= first.closed_us + 200_000 {
+                s.ended_elsewhere(&first.id, first.speech_end_us, first.closed_us, caused);
+                told = true;
+            }
+        });
+        assert!(
+            followed
+                .iter()
+                .any(|e| matches!(e, StreamEvent::Resumed { .. })),
+            "{followed:?}"
+        );
+        let summary = |u: &[&ClockedUtterance]| -> Vec<(String, u64, u64, usize, u64)> {
+            u.iter()
+                .map(|u| {
+                    (
+                        u.id.clone(),
+                        u.start_us,
+                        u.speech_end_us,
+                        u.audio.len(),
+                        u.closed_us,
+                    )
+                })
+                .collect()
+        };
+        assert_eq!(summary(&utterances(&followed)), summary(&theirs));
+        assert_eq!(utterances(&followed), theirs);
     }
 }

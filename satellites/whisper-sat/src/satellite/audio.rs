@@ -63,6 +63,13 @@ pub enum Feed {
         speech_end_us: u64,
         verdict: Option<Turn>,
     },
+    /// The satellite decoding utterance `id` ended it at the pause after `speech_end_us`, its segmenter closing
+    /// it at `closed_us`: end it there too (`AudioStream::ended_elsewhere`).
+    Ended {
+        id: String,
+        speech_end_us: u64,
+        closed_us: u64,
+    },
 }
 
 /// What the segmentation thread found, for the claiming side.
@@ -151,7 +158,10 @@ fn segment(
         // A verdict is not audio: the stream is still flowing (or not) as before it.
         flowing = match item {
             Feed::Audio { .. } => true,
-            Feed::Turn { .. } | Feed::Reference { .. } | Feed::ReferenceStopped { .. } => flowing,
+            Feed::Turn { .. }
+            | Feed::Ended { .. }
+            | Feed::Reference { .. }
+            | Feed::ReferenceStopped { .. } => flowing,
             Feed::Flush | Feed::Discard => false,
         };
         // Switched off: open speech still ends for the listeners, but nothing is transcribed.
@@ -173,6 +183,14 @@ fn segment(
                 verdict,
             } => {
                 stream.turn(&id, speech_end_us, verdict, &mut events);
+                Ok(())
+            }
+            Feed::Ended {
+                id,
+                speech_end_us,
+                closed_us,
+            } => {
+                stream.ended_elsewhere(&id, speech_end_us, closed_us, &mut events);
                 Ok(())
             }
             Feed::Reference {

@@ -51,6 +51,7 @@ pub(super) async fn try_claim(
         let pause = (judge_turns && !p.ended).then_some(PauseTurn {
             speech_end_us: u.speech_end_us,
             verdict: None,
+            closed_us: None,
         });
         let header = ClaimHeader {
             pause,

@@ -16,6 +16,7 @@ use super::worker::{Decode, Finished, Held, Worker};
 use crate::claim::{self, ClaimHeader, PRESENCE_PREFIX, PauseTurn};
 use crate::ledger::{Ledger, Pending, SAME_SPEECH_US, Standing};
 use crate::speculation::{Action, Hold};
+use crate::stream::ClockedUtterance;
 use crate::transcriber::{Outcome, TranscribeError, Transcriber};
 use crate::transcript::TranscriptMessage;
 use crate::turn::{self, Turn};
@@ -205,6 +206,7 @@ impl Satellite {
             held.pause = Some(PauseTurn {
                 speech_end_us: u.speech_end_us,
                 verdict,
+                closed_us: None,
             });
             self.listener.send(audio::Feed::Turn {
                 id: u.id,
@@ -240,12 +242,22 @@ impl Satellite {
         if !self.settings.judge_turns || header.done || header.satellite == self.settings.name {
             return;
         }
-        if let Some(p) = header.pause {
-            self.listener.send(audio::Feed::Turn {
+        match header.pause {
+            Some(PauseTurn {
+                speech_end_us,
+                closed_us: Some(closed_us),
+                ..
+            }) => self.listener.send(audio::Feed::Ended {
+                id: id.to_owned(),
+                speech_end_us,
+                closed_us,
+            }),
+            Some(p) => self.listener.send(audio::Feed::Turn {
                 id: id.to_owned(),
                 speech_end_us: p.speech_end_us,
                 verdict: p.verdict,
-            });
+            }),
+            None => {}
         }
     }
 
@@ -287,6 +299,10 @@ impl Satellite {
         } else {
             FAIRNESS_STEP * self.recent_jobs.len().min(4) as u32
         };
+        let ended_here = match &heard {
+            Heard::Ended(u) => self.ended_note(u),
+            _ => None,
+        };
         let action = match heard {
             Heard::Paused(u) => match self.worker.holding(&u.id) {
                 Some(hold) => hold.paused(u),
@@ -311,7 +327,35 @@ impl Satellite {
             },
             Heard::Abandoned { id } => return self.abandon(&id),
         };
-        self.act(action)
+        let mut finished = self.act(action);
+        // The others hear of the end before the transcript goes out: with the claim finished at once, from
+        // `on_finished`; else the loop writes it into the header now.
+        if let Some(note) = ended_here {
+            match (finished.as_mut(), self.worker.held.as_mut()) {
+                (Some(f), _) => f.ended = Some(note),
+                (None, Some(held)) => held.pause = Some(note),
+                (None, None) => {}
+            }
+        }
+        finished
+    }
+
+    /// What the claim header says of the held utterance `u` that our segmenter just ended: where it ended it, so
+    /// that the other segmenters end it there too. Their ends could differ only because the holder alone judges
+    /// the end of the turn, so without judging there is nothing to say.
+    fn ended_note(&mut self, u: &ClockedUtterance) -> Option<PauseTurn> {
+        if !self.settings.judge_turns || u.forced {
+            return None;
+        }
+        let held = self.worker.held.as_ref().filter(|h| h.hold.id() == u.id)?;
+        Some(PauseTurn {
+            speech_end_us: u.speech_end_us,
+            verdict: held
+                .pause
+                .filter(|p| p.speech_end_us == u.speech_end_us)
+                .and_then(|p| p.verdict),
+            closed_us: Some(u.closed_us),
+        })
     }
 
     /// Recognition was switched off during utterance `id`: forget it, and if it is ours, stop decoding and finish
@@ -329,6 +373,7 @@ impl Satellite {
             outcome: Err(TranscribeError::Aborted),
             speculative: false,
             turn: None,
+            ended: None,
         })
     }
 
@@ -450,6 +495,16 @@ impl Satellite {
         // Fairness counts the utterances a satellite finished; one abandoned unheard is no work done.
         if !matches!(f.outcome, Err(TranscribeError::Aborted)) {
             self.recent_jobs.push_back(Instant::now());
+        }
+        if let Some(note) = f.ended {
+            let u = &f.utterance;
+            let header = ClaimHeader {
+                pause: Some(note),
+                ..ClaimHeader::new(u.start_us, u.speech_end_us, &self.settings.name, true)
+            };
+            if let Err(e) = f.claim.set_header(&header.to_json()).await {
+                tracing::warn!(id = %u.id, "telling the others where the utterance ended: {e}");
+            }
         }
         finish(
             &self.client,

@@ -44,6 +44,9 @@ pub(super) struct Finished {
     pub(super) speculative: bool,
     /// The verdict on the pause the utterance ended at, if one was judged.
     pub(super) turn: Option<Turn>,
+    /// Where our segmenter ended the utterance, for the claim header before the transcript goes out
+    /// (`Satellite::ended_note`).
+    pub(super) ended: Option<PauseTurn>,
 }
 
 /// The transcriber and its work: at most one claim held and at most one decode in flight. A decode can outlive
@@ -105,6 +108,7 @@ impl Worker {
                 utterance,
                 outcome: result,
                 speculative,
+                ended: None,
             }),
         }
     }
