@@ -207,8 +207,13 @@ mod tests {
         // Finished during the hangover: kept, not submitted, since the voice might still resume.
         assert_eq!(hold.decoded("text"), None);
         assert!(!hold.is_decoding());
+        // It ends where the segmenter closed it, later than it paused: the same speech all the same.
+        let ended = ClockedUtterance {
+            closed_us: 2_450_000,
+            ..utt(2000)
+        };
         assert_eq!(
-            hold.ended(utt(2000)),
+            hold.ended(ended),
             Some(Action::Submit {
                 utterance: utt(2000),
                 result: "text",
