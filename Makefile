@@ -37,6 +37,7 @@ test: deps build-debug model model-base model-face model-voice python
 	scripts/phase.sh fmt $(CARGO) fmt --all --check
 	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
 	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
+	scripts/phase.sh no-std $(CARGO) build -p flow-lite --lib --target thumbv7em-none-eabihf
 	scripts/phase.sh node-test node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
 	scripts/phase.sh cargo-test $(CARGO) test --workspace --no-fail-fast
 	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
@@ -82,6 +83,7 @@ soak: deps model-release model-face build
 fuzz:
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run decode -- -max_total_time=60
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run stamp -- -max_total_time=30
+	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run line -- -max_total_time=30
 
 deps:
 	scripts/phase.sh deps scripts/deps.sh

@@ -18,7 +18,14 @@ packages=(
     asterisk-core-sounds-it-wav asterisk-core-sounds-it
     # More real English read speech for the ASR benchmark's word error rates: LibriVox clips with transcription.
     pocketsphinx-testdata
+    socat                                    # linked pseudo-terminals: serial lines in tests and benchmarks
 )
+
+# The embedded target flow-lite is built for in `make test`, to prove it needs no std (rustup fetches it once).
+if command -v rustup >/dev/null && ! rustup target list --installed | grep -qx thumbv7em-none-eabihf; then
+    echo "deps: adding the Rust target thumbv7em-none-eabihf"
+    rustup target add thumbv7em-none-eabihf
+fi
 
 missing=()
 for p in "${packages[@]}"; do

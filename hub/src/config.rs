@@ -66,6 +66,22 @@ pub struct HubSection {
     pub max_unauthenticated_per_address: usize,
     /// How long a logged-in client may take to finish a frame it has begun.
     pub frame_timeout_ms: u64,
+    /// `[[hub.serial]]`: serial lines (or pseudo-terminals) the hub serves a satellite on, one each.
+    #[serde(default)]
+    pub serial: Vec<SerialLine>,
+}
+
+/// One serial line the hub serves (`net/serial.rs`): opened at start, reopened whenever it fails or goes away.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SerialLine {
+    pub path: PathBuf,
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+}
+
+fn default_baud() -> u32 {
+    flow::transport::addr::DEFAULT_BAUD
 }
 
 /// `[http]`: who may use the page and the HTTP API (docs/security.md).
@@ -289,6 +305,17 @@ impl Config {
         ] {
             if v == 0 {
                 return Err((key, "must be at least 1".into()));
+            }
+        }
+        for line in &h.serial {
+            if line.path.as_os_str().is_empty() {
+                return Err(("hub.serial.path", "must name a device".into()));
+            }
+            if line.baud == 0 {
+                return Err((
+                    "hub.serial.baud",
+                    format!("{}: must be at least 1", line.path.display()),
+                ));
             }
         }
         if !(100..=600_000).contains(&h.login_timeout_ms) {

@@ -66,6 +66,11 @@ impl Metrics {
         self.lock().register(name, help, metric);
     }
 
+    /// Adds figures read at each scrape (the serial lines' counters).
+    pub fn register_collector(&self, collector: Box<dyn Collector>) {
+        self.lock().register_collector(collector);
+    }
+
     /// Everything, in the Prometheus text exposition format.
     pub fn render(&self) -> Result<String, std::fmt::Error> {
         let mut out = String::new();

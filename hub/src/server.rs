@@ -181,6 +181,12 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
             Some(path)
         }
     };
+    if !shared.config.hub.serial.is_empty() {
+        tasks.push(
+            io.handle()
+                .spawn(crate::net::serial::serve_lines(shared.clone())),
+        );
+    }
     let http_addr = &shared.config.server.http;
     let listener = TcpListener::bind(http_addr)
         .await

@@ -288,7 +288,10 @@ mod tests {
                 let got = read_all(&wire, 5, 4096);
                 // The flip may make a zero (splitting the packet in two damaged ones) but never a good packet of a.
                 assert_eq!(got.last(), Some(&Ok(b.clone())), "flip at {at}");
-                assert!(got[..got.len() - 1].iter().all(|g| g.is_err()), "flip at {at}: {got:?}");
+                assert!(
+                    got[..got.len() - 1].iter().all(|g| g.is_err()),
+                    "flip at {at}: {got:?}"
+                );
                 assert!(!got.is_empty());
             }
         }

@@ -4,6 +4,7 @@
 pub mod conn;
 pub mod descriptors;
 pub mod io_runtime;
+pub mod serial;
 pub mod tcp;
 pub mod unix;
 pub mod ws;

@@ -24,7 +24,7 @@ mod wav;
 #[derive(Debug, Parser)]
 #[command(version)]
 struct Args {
-    /// Hub address: tcp://HOST:PORT, unix:PATH or ws://HOST:PORT/flow.
+    /// Hub address: tcp://HOST:PORT, unix:PATH, ws://HOST:PORT/flow or serial:PATH?baud=N.
     #[arg(
         long,
         env = "FLOW_ADDR",

@@ -1,4 +1,4 @@
-//! Parsing of hub addresses: `tcp://HOST:PORT`, `unix:PATH`, `ws://HOST:PORT/flow`.
+//! Parsing of hub addresses: `tcp://HOST:PORT`, `unix:PATH`, `ws://HOST:PORT/flow`, `serial:PATH?baud=N`.
 
 use std::fmt;
 use std::path::PathBuf;
@@ -12,7 +12,15 @@ pub enum FlowAddr {
     Unix(PathBuf),
     /// A full `ws://` URL.
     Ws(String),
+    /// A serial line (or a pseudo-terminal) the hub serves, at `baud` (default 115200).
+    Serial {
+        path: PathBuf,
+        baud: u32,
+    },
 }
+
+/// The baud rate of a `serial:` address that names none.
+pub const DEFAULT_BAUD: u32 = 115_200;
 
 impl FromStr for FlowAddr {
     type Err = String;
@@ -29,13 +37,36 @@ impl FromStr for FlowAddr {
                 return Err(format!("{s:?}: expected unix:PATH"));
             }
             Ok(FlowAddr::Unix(PathBuf::from(path)))
+        } else if let Some(rest) = s.strip_prefix("serial:") {
+            let (path, query) = rest.split_once('?').unwrap_or((rest, ""));
+            let path = path.trim_start_matches("//");
+            if path.is_empty() {
+                return Err(format!("{s:?}: expected serial:PATH?baud=N"));
+            }
+            let mut baud = DEFAULT_BAUD;
+            for pair in query.split('&').filter(|p| !p.is_empty()) {
+                match pair.split_once('=') {
+                    Some(("baud", n)) => {
+                        baud = n
+                            .parse()
+                            .ok()
+                            .filter(|&b: &u32| b > 0)
+                            .ok_or_else(|| format!("{s:?}: baud must be a positive number"))?;
+                    }
+                    _ => return Err(format!("{s:?}: unknown option {pair:?} (only baud=N)")),
+                }
+            }
+            Ok(FlowAddr::Serial {
+                path: PathBuf::from(path),
+                baud,
+            })
         } else if s.starts_with("ws://") || s.starts_with("wss://") {
             Ok(FlowAddr::Ws(s.to_string()))
         } else if s.contains(':') && !s.contains('/') {
             Ok(FlowAddr::Tcp(s.to_string()))
         } else {
             Err(format!(
-                "{s:?}: expected tcp://HOST:PORT, unix:PATH or ws://HOST:PORT/flow"
+                "{s:?}: expected tcp://HOST:PORT, unix:PATH, ws://HOST:PORT/flow or serial:PATH?baud=N"
             ))
         }
     }
@@ -47,6 +78,7 @@ impl fmt::Display for FlowAddr {
             FlowAddr::Tcp(hp) => write!(f, "tcp://{hp}"),
             FlowAddr::Unix(p) => write!(f, "unix:{}", p.display()),
             FlowAddr::Ws(url) => f.write_str(url),
+            FlowAddr::Serial { path, baud } => write!(f, "serial:{}?baud={baud}", path.display()),
         }
     }
 }
@@ -73,6 +105,23 @@ mod tests {
             "ws://127.0.0.1:8080/flow".parse(),
             Ok(FlowAddr::Ws("ws://127.0.0.1:8080/flow".into()))
         );
+        assert_eq!(
+            "serial:/dev/ttyUSB0?baud=9600".parse(),
+            Ok(FlowAddr::Serial {
+                path: "/dev/ttyUSB0".into(),
+                baud: 9600
+            })
+        );
+        assert_eq!(
+            "serial:/dev/pts/3".parse(),
+            Ok(FlowAddr::Serial {
+                path: "/dev/pts/3".into(),
+                baud: DEFAULT_BAUD
+            })
+        );
+        assert!("serial:/dev/x?baud=0".parse::<FlowAddr>().is_err());
+        assert!("serial:/dev/x?parity=odd".parse::<FlowAddr>().is_err());
+        assert!("serial:".parse::<FlowAddr>().is_err());
         assert!("bogus".parse::<FlowAddr>().is_err());
         assert!("tcp://".parse::<FlowAddr>().is_err());
     }

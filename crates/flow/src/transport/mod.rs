@@ -1,10 +1,11 @@
-//! One transport trait, one module per transport: TCP, Unix socket, WebSocket
-//! and an in-process pipe all carry the same FlowProtocol frames.
+//! One transport trait, one module per transport: TCP, Unix socket, WebSocket,
+//! a serial line and an in-process pipe all carry the same FlowProtocol frames.
 //!
 //! A transport only moves bytes; framing lives in [`crate::connection`]. Byte
 //! streams (TCP, Unix, the in-process pipe) hand over whatever arrived; the
 //! WebSocket transport hands over each binary message's bytes in order, so one
-//! message may hold several frames or part of one.
+//! message may hold several frames or part of one; a serial line hands over the
+//! whole frames of each intact packet (`serial.rs`).
 
 use std::io;
 
@@ -12,6 +13,7 @@ use bytes::{Bytes, BytesMut};
 
 pub mod addr;
 pub mod memory;
+pub mod serial;
 pub mod stream;
 pub mod tcp;
 mod traits;
@@ -28,6 +30,7 @@ pub enum Link {
     Unix(unix::UnixTransport),
     Ws(Box<ws::WsClientTransport>),
     Memory(memory::MemoryTransport),
+    Serial(serial::SerialTransport),
 }
 
 /// Reading half of a [`Link`].
@@ -37,6 +40,7 @@ pub enum LinkReader {
     Unix(<unix::UnixTransport as Transport>::Reader),
     Ws(<ws::WsClientTransport as Transport>::Reader),
     Memory(<memory::MemoryTransport as Transport>::Reader),
+    Serial(<serial::SerialTransport as Transport>::Reader),
 }
 
 /// Writing half of a [`Link`].
@@ -46,6 +50,7 @@ pub enum LinkWriter {
     Unix(<unix::UnixTransport as Transport>::Writer),
     Ws(<ws::WsClientTransport as Transport>::Writer),
     Memory(<memory::MemoryTransport as Transport>::Writer),
+    Serial(<serial::SerialTransport as Transport>::Writer),
 }
 
 impl Link {
@@ -55,6 +60,9 @@ impl Link {
             FlowAddr::Tcp(hostport) => Link::Tcp(tcp::TcpTransport::connect(hostport).await?),
             FlowAddr::Unix(path) => Link::Unix(unix::UnixTransport::connect(path).await?),
             FlowAddr::Ws(url) => Link::Ws(Box::new(ws::WsClientTransport::connect(url).await?)),
+            FlowAddr::Serial { path, baud } => {
+                Link::Serial(serial::SerialTransport::open(path, *baud)?)
+            }
         })
     }
 }
@@ -69,6 +77,7 @@ impl Transport for Link {
             Link::Unix(t) => t.peer(),
             Link::Ws(t) => t.peer(),
             Link::Memory(t) => t.peer(),
+            Link::Serial(t) => t.peer(),
         }
     }
 
@@ -90,6 +99,10 @@ impl Transport for Link {
                 let (r, w) = t.split();
                 (LinkReader::Memory(r), LinkWriter::Memory(w))
             }
+            Link::Serial(t) => {
+                let (r, w) = t.split();
+                (LinkReader::Serial(r), LinkWriter::Serial(w))
+            }
         }
     }
 }
@@ -101,6 +114,7 @@ impl TransportRead for LinkReader {
             LinkReader::Unix(r) => r.read_into(buf).await,
             LinkReader::Ws(r) => r.read_into(buf).await,
             LinkReader::Memory(r) => r.read_into(buf).await,
+            LinkReader::Serial(r) => r.read_into(buf).await,
         }
     }
 
@@ -119,6 +133,7 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Unix(w) => w.write_all(data).await,
             LinkWriter::Ws(w) => w.write_all(data).await,
             LinkWriter::Memory(w) => w.write_all(data).await,
+            LinkWriter::Serial(w) => w.write_all(data).await,
         }
     }
 
@@ -128,6 +143,7 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Unix(w) => w.write_all_chunks(chunks).await,
             LinkWriter::Ws(w) => w.write_all_chunks(chunks).await,
             LinkWriter::Memory(w) => w.write_all_chunks(chunks).await,
+            LinkWriter::Serial(w) => w.write_all_chunks(chunks).await,
         }
     }
 
@@ -137,6 +153,7 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Unix(w) => w.shutdown().await,
             LinkWriter::Ws(w) => w.shutdown().await,
             LinkWriter::Memory(w) => w.shutdown().await,
+            LinkWriter::Serial(w) => w.shutdown().await,
         }
     }
 }

@@ -1,0 +1,314 @@
+//! Serial lines through a real `flow-hub`: the hub serves a pseudo-terminal (`[[hub.serial]]`), a satellite on the
+//! other end of it (Debian's `socat` links two pseudo-terminals) publishes, and a TCP subscriber gets every message
+//! intact; a relay that flips and drops bytes costs only damaged packets, which the hub counts, and the session
+//! survives; a line that goes away and comes back is opened again and the satellite logs in again.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+use agent_tests::metrics::{parse, scrape, value};
+use agent_tests::{Agent, DataDir, PATIENCE};
+use anyhow::{Context, bail, ensure};
+use flow::{Client, ConnectOptions, FlowAddr, Subscription};
+use flow_lite::crc::crc32;
+
+/// Two linked pseudo-terminals, `a` and `b`, made by `socat`; killed when dropped.
+struct PtyPair {
+    child: Child,
+    a: PathBuf,
+    b: PathBuf,
+}
+
+impl PtyPair {
+    async fn open(a: &Path, b: &Path) -> anyhow::Result<PtyPair> {
+        let child = Command::new("socat")
+            .arg(format!("pty,raw,echo=0,link={}", a.display()))
+            .arg(format!("pty,raw,echo=0,link={}", b.display()))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .context("starting socat (make deps installs it)")?;
+        let deadline = tokio::time::Instant::now() + PATIENCE;
+        while !(a.exists() && b.exists()) {
+            ensure!(
+                tokio::time::Instant::now() < deadline,
+                "socat made no pseudo-terminals"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Ok(PtyPair {
+            child,
+            a: a.to_path_buf(),
+            b: b.to_path_buf(),
+        })
+    }
+
+    /// Kills socat: both terminals go away.
+    fn close(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.a);
+        let _ = std::fs::remove_file(&self.b);
+    }
+}
+
+impl Drop for PtyPair {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+/// A hub serving the line at `path`.
+async fn hub_on_line(dir: &DataDir, path: &Path) -> anyhow::Result<Agent> {
+    Agent::hub_with_config(
+        dir,
+        &format!(
+            "[[hub.serial]]\npath = \"{}\"\nbaud = 115200\n",
+            path.display()
+        ),
+    )
+    .await
+}
+
+/// A satellite on the line at `path`.
+async fn satellite_on(hub: &Agent, path: &Path, reconnect: bool) -> anyhow::Result<Client> {
+    let addr: FlowAddr = format!("serial:{}?baud=115200", path.display())
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!(e))?;
+    let mut opts = ConnectOptions::new("board", hub.token());
+    opts.reconnect = reconnect;
+    Ok(Client::connect(&addr, opts).await?)
+}
+
+/// A payload that proves itself: `[seq u32][crc32 of the rest u32][bytes]`.
+fn payload(seq: u32, len: usize) -> Vec<u8> {
+    let body: Vec<u8> = (0..len)
+        .map(|i| (i as u32).wrapping_mul(31).wrapping_add(seq) as u8)
+        .collect();
+    let mut p = seq.to_le_bytes().to_vec();
+    p.extend(crc32(&body).to_le_bytes());
+    p.extend(body);
+    p
+}
+
+/// The sequence number of an intact payload; an error for a damaged one.
+fn check(p: &[u8]) -> anyhow::Result<u32> {
+    ensure!(p.len() >= 8, "payload of {} bytes", p.len());
+    let seq = u32::from_le_bytes(p[0..4].try_into()?);
+    let crc = u32::from_le_bytes(p[4..8].try_into()?);
+    ensure!(crc32(&p[8..]) == crc, "payload {seq} is damaged");
+    Ok(seq)
+}
+
+/// Waits for the first message on `sub`.
+async fn first(sub: &Subscription) -> anyhow::Result<Vec<u8>> {
+    let data = tokio::time::timeout(PATIENCE, sub.recv())
+        .await
+        .context("no message")?
+        .context("subscription ended")?;
+    Ok(data.payload.to_vec())
+}
+
+/// The hub's damaged-packet count for the line at `path`.
+async fn damaged(hub: &Agent, path: &Path) -> anyhow::Result<f64> {
+    let samples = parse(&scrape(hub).await?).await?;
+    value(
+        &samples,
+        "flow_serial_damaged_packets_total",
+        &[("line", &path.display().to_string())],
+    )
+    .context("no flow_serial_damaged_packets_total for the line")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_satellite_on_a_serial_line_publishes_to_a_tcp_subscriber_intact() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let pty = PtyPair::open(&dir.path().join("hub-line"), &dir.path().join("board-line")).await?;
+    let hub = hub_on_line(&dir, &pty.a).await?;
+    let board = satellite_on(&hub, &pty.b, false).await?;
+    let publisher = board
+        .publisher("Board.samples", r#"{"mime":"application/octet-stream"}"#)
+        .await?;
+    let watcher = hub.client("watcher").await?;
+    let sub = watcher.subscribe("Board.samples").await?;
+    // Small readings and frames longer than one packet's worth of COBS blocks.
+    let sizes = [8usize, 100, 1000, 5000, 20_000];
+    for seq in 0..50u32 {
+        publisher
+            .publish(payload(seq, sizes[seq as usize % sizes.len()]))
+            .await?;
+    }
+    for expected in 0..50u32 {
+        let p = first(&sub).await?;
+        assert_eq!(check(&p)?, expected);
+        assert_eq!(p.len(), 8 + sizes[expected as usize % sizes.len()]);
+    }
+    assert_eq!(damaged(&hub, &pty.a).await?, 0.0);
+    Ok(())
+}
+
+/// Copies bytes from `from` to `to`, flipping one byte in `flip_every` and dropping one in `drop_every` while
+/// `lossy` is set; counts what it spoilt.
+fn relay(
+    mut from: std::fs::File,
+    mut to: std::fs::File,
+    lossy: Arc<AtomicBool>,
+    spoilt: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+) {
+    let (flip_every, drop_every) = (10_000u64, 25_000u64);
+    let mut n = 0u64;
+    let mut buf = [0u8; 4096];
+    while !stop.load(Ordering::Relaxed) {
+        let Ok(got) = from.read(&mut buf) else {
+            return;
+        };
+        if got == 0 {
+            return;
+        }
+        let mut out = Vec::with_capacity(got);
+        for &b in &buf[..got] {
+            n += 1;
+            if lossy.load(Ordering::Relaxed) {
+                if n.is_multiple_of(drop_every) {
+                    spoilt.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                }
+                if n.is_multiple_of(flip_every) {
+                    spoilt.fetch_add(1, Ordering::Relaxed);
+                    out.push(b ^ 0x20);
+                    continue;
+                }
+            }
+            out.push(b);
+        }
+        if to.write_all(&out).is_err() {
+            return;
+        }
+    }
+}
+
+fn open_rw(path: &Path) -> anyhow::Result<std::fs::File> {
+    std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_line_that_flips_and_drops_bytes_loses_only_damaged_packets_and_the_session_survives()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    // hub <-> [hub-line | relay-a] <-> relay <-> [relay-b | board-line] <-> board
+    let hub_side = PtyPair::open(&dir.path().join("hub-line"), &dir.path().join("relay-a")).await?;
+    let board_side =
+        PtyPair::open(&dir.path().join("relay-b"), &dir.path().join("board-line")).await?;
+    let (lossy, spoilt, stop) = (
+        Arc::new(AtomicBool::new(false)),
+        Arc::new(AtomicU64::new(0)),
+        Arc::new(AtomicBool::new(false)),
+    );
+    let (a, b) = (open_rw(&hub_side.b)?, open_rw(&board_side.a)?);
+    for (from, to) in [(b.try_clone()?, a.try_clone()?), (a, b)] {
+        let (lossy, spoilt, stop) = (lossy.clone(), spoilt.clone(), stop.clone());
+        std::thread::spawn(move || relay(from, to, lossy, spoilt, stop));
+    }
+    let hub = hub_on_line(&dir, &hub_side.a).await?;
+    let board = satellite_on(&hub, &board_side.b, false).await?;
+    let publisher = board
+        .publisher("Board.samples", r#"{"mime":"application/octet-stream"}"#)
+        .await?;
+    let watcher = hub.client("watcher").await?;
+    let sub = watcher.subscribe("Board.samples").await?;
+    // The line goes bad once the session is up: about one packet in ten is spoilt.
+    lossy.store(true, Ordering::Relaxed);
+    const SENT: u32 = 400;
+    for seq in 0..SENT {
+        publisher.publish(payload(seq, 1024)).await?;
+    }
+    // The line heals; a last message proves the session outlived the damage.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    lossy.store(false, Ordering::Relaxed);
+    publisher.publish(payload(SENT, 16)).await?;
+    let mut seen = Vec::new();
+    loop {
+        let p = first(&sub).await?;
+        // Never a damaged payload: a packet either arrives whole or not at all.
+        let seq = check(&p)?;
+        if seq == SENT {
+            break;
+        }
+        seen.push(seq);
+    }
+    let spoilt = spoilt.load(Ordering::Relaxed);
+    let dropped = damaged(&hub, &hub_side.a).await?;
+    println!(
+        "spoilt {spoilt} bytes; {} of {SENT} delivered; {dropped} packets counted damaged",
+        seen.len()
+    );
+    ensure!(spoilt > 0, "the relay spoilt nothing");
+    ensure!(dropped >= 1.0, "no damaged packet counted");
+    ensure!(
+        seen.windows(2).all(|w| w[0] < w[1]),
+        "out of order or repeated: {seen:?}"
+    );
+    // Each spoilt byte costs at most the two packets it touches (a lost delimiter joins two).
+    ensure!(
+        seen.len() as u64 + 2 * spoilt >= u64::from(SENT),
+        "{} delivered of {SENT} with {spoilt} bytes spoilt",
+        seen.len()
+    );
+    stop.store(true, Ordering::Relaxed);
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_line_that_goes_away_and_comes_back_is_opened_again_and_the_satellite_logs_in_again()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let (a, b) = (dir.path().join("hub-line"), dir.path().join("board-line"));
+    let mut pty = PtyPair::open(&a, &b).await?;
+    let hub = hub_on_line(&dir, &a).await?;
+    let board = satellite_on(&hub, &b, true).await?;
+    let publisher = board
+        .publisher("Board.samples", r#"{"mime":"application/octet-stream"}"#)
+        .await?;
+    let watcher = hub.client("watcher").await?;
+    let sub = watcher.subscribe("Board.samples").await?;
+    publisher.publish(payload(1, 64)).await?;
+    assert_eq!(check(&first(&sub).await?)?, 1);
+    // Unplugged: both ends go away.
+    pty.close();
+    hub.output
+        .wait_for("cannot open serial line", 1, PATIENCE)
+        .await
+        .context("the hub did not notice the line went away")?;
+    // Plugged in again: the hub opens the line, the satellite logs in again and restores its channel, and the
+    // subscriber (whose subscription outlives the channel) hears it again.
+    let _pty = PtyPair::open(&a, &b).await?;
+    hub.output
+        .wait_for("serial line is back", 1, PATIENCE)
+        .await
+        .context("the hub did not open the line again")?;
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    let mut seq = 2;
+    loop {
+        // Publishing while the satellite reconnects may fail or be lost: keep at it until one arrives.
+        let _ = publisher.publish(payload(seq, 64)).await;
+        match tokio::time::timeout(Duration::from_millis(500), sub.recv()).await {
+            Ok(Some(data)) => {
+                check(&data.payload)?;
+                break;
+            }
+            Ok(None) => bail!("subscription ended"),
+            Err(_) if tokio::time::Instant::now() < deadline => seq += 1,
+            Err(_) => bail!("nothing arrived after the line came back"),
+        }
+    }
+    Ok(())
+}
