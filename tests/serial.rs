@@ -1,6 +1,6 @@
 //! Serial lines through a real `flow-hub`: the hub serves a pseudo-terminal (`[[hub.serial]]`), a satellite on the
 //! other end of it (Debian's `socat` links two pseudo-terminals) publishes, and a TCP subscriber gets every message
-//! intact; a relay that flips and drops bytes costs only damaged packets, which the hub counts, and the session
+//! intact, from the SDK and from the `flow-lite` sensor sketch a board would run; a relay that flips and drops bytes costs only damaged packets, which the hub counts, and the session
 //! survives; a line that goes away and comes back is opened again and the satellite logs in again.
 
 use std::io::{Read, Write};
@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use agent_tests::metrics::{parse, scrape, value};
-use agent_tests::{Agent, DataDir, PATIENCE};
+use agent_tests::{Agent, DataDir, PATIENCE, binary};
 use anyhow::{Context, bail, ensure};
 use flow::{Client, ConnectOptions, FlowAddr, Subscription};
 use flow_lite::crc::crc32;
@@ -310,5 +310,41 @@ async fn a_line_that_goes_away_and_comes_back_is_opened_again_and_the_satellite_
             Err(_) => bail!("nothing arrived after the line came back"),
         }
     }
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_flow_lite_sensor_sketch_publishes_through_a_serial_line_to_a_tcp_subscriber()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let pty = PtyPair::open(&dir.path().join("hub-line"), &dir.path().join("board-line")).await?;
+    let hub = hub_on_line(&dir, &pty.a).await?;
+    let watcher = hub.client("watcher").await?;
+    // Subscribed before the board comes up: the channel does not exist yet, and the subscription waits for it.
+    let sub = watcher.subscribe("Sensor.temperature").await?;
+    // The sketch as a board runs it: flow-lite alone, fixed buffers, the line's packets.
+    let sensor = tokio::process::Command::new(binary("examples/sensor")?)
+        .arg(&pty.b)
+        .arg(hub.token())
+        .args(["--count", "20"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .kill_on_drop(true)
+        .spawn()
+        .context("starting the flow-lite sensor example")?;
+    for n in 0..20u64 {
+        let reading: serde_json::Value = serde_json::from_slice(&first(&sub).await?)?;
+        assert_eq!(reading["n"], n, "{reading}");
+        assert!(reading["celsius"].as_f64().is_some(), "{reading}");
+    }
+    let out = tokio::time::timeout(PATIENCE, sensor.wait_with_output())
+        .await
+        .context("the sensor did not finish")??;
+    ensure!(
+        out.status.success(),
+        "sensor: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(damaged(&hub, &pty.a).await?, 0.0);
     Ok(())
 }
