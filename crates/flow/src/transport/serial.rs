@@ -110,7 +110,7 @@ impl<S: AsyncRead + AsyncWrite + Send + 'static> Transport for LineTransport<S> 
         (
             LineReader {
                 inner: r,
-                raw: vec![0; 4096],
+                raw: vec![0; 16 * 1024],
                 raw_len: 0,
                 raw_at: 0,
                 deframer: Deframer::new(vec![0; PACKET_BUFFER].into_boxed_slice()),
@@ -190,8 +190,9 @@ impl<W: AsyncWrite + Unpin + Send + 'static> TransportWrite for LineWriter<W> {
                 .map_err(|e| io::Error::other(format!("serial framing: {e:?}")))?;
             self.out.truncate(at + n);
         }
-        self.inner.write_all(&self.out).await?;
-        self.inner.flush().await
+        // No flush: the stream has no buffer of its own, and a serial port's flush waits for the line to drain
+        // (tcdrain), which would hold the writer for every packet.
+        self.inner.write_all(&self.out).await
     }
 
     async fn shutdown(&mut self) -> io::Result<()> {
