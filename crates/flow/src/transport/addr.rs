@@ -1,4 +1,5 @@
-//! Parsing of hub addresses: `tcp://HOST:PORT`, `unix:PATH`, `ws://HOST:PORT/flow`, `serial:PATH?baud=N`.
+//! Parsing of hub addresses: `tcp://HOST:PORT`, `unix:PATH`, `ws://HOST:PORT/flow`, `serial:PATH?baud=N`,
+//! `udp://HOST:PORT`.
 
 use std::fmt;
 use std::path::PathBuf;
@@ -17,6 +18,8 @@ pub enum FlowAddr {
         path: PathBuf,
         baud: u32,
     },
+    /// `host:port` of the hub's UDP edge.
+    Udp(String),
 }
 
 /// The baud rate of a `serial:` address that names none.
@@ -31,6 +34,14 @@ impl FromStr for FlowAddr {
                 return Err(format!("{s:?}: expected tcp://HOST:PORT"));
             }
             Ok(FlowAddr::Tcp(rest.trim_end_matches('/').to_string()))
+        } else if let Some(rest) = s.strip_prefix("udp://") {
+            let rest = rest.trim_end_matches('/');
+            match rest.rsplit_once(':') {
+                Some((host, port)) if !host.is_empty() && port.parse::<u16>().is_ok() => {
+                    Ok(FlowAddr::Udp(rest.to_string()))
+                }
+                _ => Err(format!("{s:?}: expected udp://HOST:PORT")),
+            }
         } else if let Some(rest) = s.strip_prefix("unix:") {
             let path = rest.trim_start_matches("//");
             if path.is_empty() {
@@ -66,7 +77,7 @@ impl FromStr for FlowAddr {
             Ok(FlowAddr::Tcp(s.to_string()))
         } else {
             Err(format!(
-                "{s:?}: expected tcp://HOST:PORT, unix:PATH, ws://HOST:PORT/flow or serial:PATH?baud=N"
+                "{s:?}: expected tcp://HOST:PORT, unix:PATH, ws://HOST:PORT/flow, serial:PATH?baud=N or udp://HOST:PORT"
             ))
         }
     }
@@ -79,6 +90,7 @@ impl fmt::Display for FlowAddr {
             FlowAddr::Unix(p) => write!(f, "unix:{}", p.display()),
             FlowAddr::Ws(url) => f.write_str(url),
             FlowAddr::Serial { path, baud } => write!(f, "serial:{}?baud={baud}", path.display()),
+            FlowAddr::Udp(hp) => write!(f, "udp://{hp}"),
         }
     }
 }
@@ -122,6 +134,22 @@ mod tests {
         assert!("serial:/dev/x?baud=0".parse::<FlowAddr>().is_err());
         assert!("serial:/dev/x?parity=odd".parse::<FlowAddr>().is_err());
         assert!("serial:".parse::<FlowAddr>().is_err());
+        assert_eq!(
+            "udp://127.0.0.1:9000".parse(),
+            Ok(FlowAddr::Udp("127.0.0.1:9000".into()))
+        );
+        assert_eq!(
+            "udp://[::1]:9000".parse(),
+            Ok(FlowAddr::Udp("[::1]:9000".into()))
+        );
+        assert_eq!(
+            FlowAddr::Udp("robot.local:9001".into()).to_string(),
+            "udp://robot.local:9001"
+        );
+        assert!("udp://".parse::<FlowAddr>().is_err());
+        assert!("udp://host".parse::<FlowAddr>().is_err());
+        assert!("udp://host:port".parse::<FlowAddr>().is_err());
+        assert!("udp://:9000".parse::<FlowAddr>().is_err());
         assert!("bogus".parse::<FlowAddr>().is_err());
         assert!("tcp://".parse::<FlowAddr>().is_err());
     }

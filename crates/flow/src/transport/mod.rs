@@ -1,11 +1,12 @@
 //! One transport trait, one module per transport: TCP, Unix socket, WebSocket,
-//! a serial line and an in-process pipe all carry the same FlowProtocol frames.
+//! a serial line, UDP and an in-process pipe all carry the same FlowProtocol frames.
 //!
 //! A transport only moves bytes; framing lives in [`crate::connection`]. Byte
 //! streams (TCP, Unix, the in-process pipe) hand over whatever arrived; the
 //! WebSocket transport hands over each binary message's bytes in order, so one
 //! message may hold several frames or part of one; a serial line hands over the
-//! whole frames of each intact packet (`serial.rs`).
+//! whole frames of each intact packet (`serial.rs`), and UDP the whole frames its session delivers
+//! (`udp/`).
 
 use std::io;
 
@@ -17,6 +18,7 @@ pub mod serial;
 pub mod stream;
 pub mod tcp;
 mod traits;
+pub mod udp;
 pub mod unix;
 pub mod ws;
 
@@ -31,6 +33,7 @@ pub enum Link {
     Ws(Box<ws::WsClientTransport>),
     Memory(memory::MemoryTransport),
     Serial(serial::SerialTransport),
+    Udp(Box<udp::UdpTransport>),
 }
 
 /// Reading half of a [`Link`].
@@ -41,6 +44,7 @@ pub enum LinkReader {
     Ws(<ws::WsClientTransport as Transport>::Reader),
     Memory(<memory::MemoryTransport as Transport>::Reader),
     Serial(<serial::SerialTransport as Transport>::Reader),
+    Udp(<udp::UdpTransport as Transport>::Reader),
 }
 
 /// Writing half of a [`Link`].
@@ -51,6 +55,7 @@ pub enum LinkWriter {
     Ws(<ws::WsClientTransport as Transport>::Writer),
     Memory(<memory::MemoryTransport as Transport>::Writer),
     Serial(<serial::SerialTransport as Transport>::Writer),
+    Udp(<udp::UdpTransport as Transport>::Writer),
 }
 
 impl Link {
@@ -63,6 +68,7 @@ impl Link {
             FlowAddr::Serial { path, baud } => {
                 Link::Serial(serial::SerialTransport::open(path, *baud)?)
             }
+            FlowAddr::Udp(hostport) => Link::Udp(Box::new(udp::UdpTransport::connect(hostport).await?)),
         })
     }
 }
@@ -78,6 +84,7 @@ impl Transport for Link {
             Link::Ws(t) => t.peer(),
             Link::Memory(t) => t.peer(),
             Link::Serial(t) => t.peer(),
+            Link::Udp(t) => t.peer(),
         }
     }
 
@@ -103,6 +110,10 @@ impl Transport for Link {
                 let (r, w) = t.split();
                 (LinkReader::Serial(r), LinkWriter::Serial(w))
             }
+            Link::Udp(t) => {
+                let (r, w) = (*t).split();
+                (LinkReader::Udp(r), LinkWriter::Udp(w))
+            }
         }
     }
 }
@@ -115,6 +126,7 @@ impl TransportRead for LinkReader {
             LinkReader::Ws(r) => r.read_into(buf).await,
             LinkReader::Memory(r) => r.read_into(buf).await,
             LinkReader::Serial(r) => r.read_into(buf).await,
+            LinkReader::Udp(r) => r.read_into(buf).await,
         }
     }
 
@@ -134,6 +146,7 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Ws(w) => w.write_all(data).await,
             LinkWriter::Memory(w) => w.write_all(data).await,
             LinkWriter::Serial(w) => w.write_all(data).await,
+            LinkWriter::Udp(w) => w.write_all(data).await,
         }
     }
 
@@ -144,6 +157,7 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Ws(w) => w.write_all_chunks(chunks).await,
             LinkWriter::Memory(w) => w.write_all_chunks(chunks).await,
             LinkWriter::Serial(w) => w.write_all_chunks(chunks).await,
+            LinkWriter::Udp(w) => w.write_all_chunks(chunks).await,
         }
     }
 
@@ -154,6 +168,7 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Ws(w) => w.shutdown().await,
             LinkWriter::Memory(w) => w.shutdown().await,
             LinkWriter::Serial(w) => w.shutdown().await,
+            LinkWriter::Udp(w) => w.shutdown().await,
         }
     }
 }
