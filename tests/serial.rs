@@ -154,17 +154,36 @@ async fn a_satellite_on_a_serial_line_publishes_to_a_tcp_subscriber_intact() -> 
 /// Copies bytes from `from` to `to`, flipping one byte in `flip_every` and dropping one in `drop_every` while
 /// `lossy` is set; counts what it spoilt.
 fn relay(
+    from: std::fs::File,
+    to: std::fs::File,
+    lossy: Arc<AtomicBool>,
+    spoilt: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+) {
+    relay_at(from, to, lossy, spoilt, stop, None);
+}
+
+/// `relay`, at most `bytes_per_s` when given (a slow line: 11 520 bytes/s is 115 200 baud).
+fn relay_at(
     mut from: std::fs::File,
     mut to: std::fs::File,
     lossy: Arc<AtomicBool>,
     spoilt: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
+    bytes_per_s: Option<u64>,
 ) {
     let (flip_every, drop_every) = (10_000u64, 25_000u64);
     let mut n = 0u64;
     let mut buf = [0u8; 4096];
+    let started = std::time::Instant::now();
+    let mut sent = 0u64;
     while !stop.load(Ordering::Relaxed) {
-        let Ok(got) = from.read(&mut buf) else {
+        let room = if bytes_per_s.is_some() {
+            256
+        } else {
+            buf.len()
+        };
+        let Ok(got) = from.read(&mut buf[..room]) else {
             return;
         };
         if got == 0 {
@@ -185,6 +204,13 @@ fn relay(
                 }
             }
             out.push(b);
+        }
+        if let Some(rate) = bytes_per_s {
+            sent += out.len() as u64;
+            let due = Duration::from_micros(sent * 1_000_000 / rate);
+            if let Some(wait) = due.checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
         }
         if to.write_all(&out).is_err() {
             return;
@@ -346,5 +372,93 @@ async fn the_flow_lite_sensor_sketch_publishes_through_a_serial_line_to_a_tcp_su
         String::from_utf8_lossy(&out.stderr)
     );
     assert_eq!(damaged(&hub, &pty.a).await?, 0.0);
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_subscriber_on_a_slow_line_loses_the_oldest_and_says_so_while_tcp_gets_everything()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let hub_side = PtyPair::open(&dir.path().join("hub-line"), &dir.path().join("relay-a")).await?;
+    let board_side =
+        PtyPair::open(&dir.path().join("relay-b"), &dir.path().join("board-line")).await?;
+    let (lossless, spoilt, stop) = (
+        Arc::new(AtomicBool::new(false)),
+        Arc::new(AtomicU64::new(0)),
+        Arc::new(AtomicBool::new(false)),
+    );
+    let (a, b) = (open_rw(&hub_side.b)?, open_rw(&board_side.a)?);
+    // Towards the board at 115 200 baud; back at full speed.
+    for (from, to, rate) in [(a.try_clone()?, b.try_clone()?, Some(11_520)), (b, a, None)] {
+        let (lossless, spoilt, stop) = (lossless.clone(), spoilt.clone(), stop.clone());
+        std::thread::spawn(move || relay_at(from, to, lossless, spoilt, stop, rate));
+    }
+    let hub = hub_on_line(&dir, &hub_side.a).await?;
+    let board = satellite_on(&hub, &board_side.b, false).await?;
+    let slow = board.subscribe("Fast.samples").await?;
+    let source = hub.client("source").await?;
+    let watcher = hub.client("watcher").await?;
+    let fast = watcher.subscribe("Fast.samples").await?;
+    let publisher = source
+        .publisher("Fast.samples", r#"{"mime":"application/octet-stream"}"#)
+        .await?;
+    // Both subscribers are there before the first message.
+    let deadline = tokio::time::Instant::now() + PATIENCE;
+    while source
+        .channels()
+        .await?
+        .iter()
+        .find(|c| c.name == "Fast.samples")
+        .is_none_or(|c| c.stats.subscribers < 2)
+    {
+        ensure!(
+            tokio::time::Instant::now() < deadline,
+            "the board never subscribed"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    // 500 messages of 2 kB a second: 1 MB/s, which TCP carries easily and the line at 11.5 kB/s cannot; the board's
+    // lane (64 messages) fills and the hub drops its oldest.
+    const SENT: u32 = 200;
+    for seq in 0..SENT {
+        publisher.publish(payload(seq, 2000)).await?;
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    // The TCP subscriber is not held back by the line: it has everything, in order, while the line still drains.
+    for expected in 0..SENT {
+        assert_eq!(check(&first(&fast).await?)?, expected);
+    }
+    // The board gets the newest, intact, and the hub's sequence numbers show what it lost.
+    let (mut got, mut last_seq, mut gaps) = (0u32, 0u64, 0u64);
+    loop {
+        let data = tokio::time::timeout(PATIENCE, slow.recv())
+            .await
+            .context("the slow line delivered nothing more")?
+            .context("subscription ended")?;
+        let seq = check(&data.payload)?;
+        got += 1;
+        gaps += data.seq - last_seq - 1;
+        last_seq = data.seq;
+        if seq == SENT - 1 {
+            break;
+        }
+    }
+    let dropped = source
+        .channels()
+        .await?
+        .iter()
+        .find(|c| c.name == "Fast.samples")
+        .map_or(0, |c| c.stats.dropped);
+    println!("the slow line got {got} of {SENT}; gaps {gaps}; the hub dropped {dropped}");
+    ensure!(
+        got < SENT,
+        "a 115 200-baud line kept up with {SENT} messages of 2 kB"
+    );
+    assert_eq!(u64::from(got) + gaps, u64::from(SENT));
+    ensure!(
+        dropped >= gaps,
+        "the hub counted {dropped} drops for {gaps} missing"
+    );
+    stop.store(true, Ordering::Relaxed);
     Ok(())
 }
