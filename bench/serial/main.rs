@@ -65,7 +65,10 @@ fn pty_pair(a: &Path, b: &Path) -> anyhow::Result<Pty> {
 fn cpu() -> anyhow::Result<Duration> {
     let stat = std::fs::read_to_string("/proc/self/stat")?;
     // Fields after the command name (which may hold spaces) start after the last ')'.
-    let rest = stat.rsplit_once(')').map(|(_, r)| r).context("odd /proc/self/stat")?;
+    let rest = stat
+        .rsplit_once(')')
+        .map(|(_, r)| r)
+        .context("odd /proc/self/stat")?;
     let fields: Vec<&str> = rest.split_whitespace().collect();
     let ticks: u64 = fields[11].parse::<u64>()? + fields[12].parse::<u64>()?;
     // The kernel's USER_HZ is 100 on every Linux this runs on.
@@ -196,7 +199,8 @@ async fn main() -> anyhow::Result<()> {
         framed.push(f);
     }
     let n = args.messages as f64;
-    let per_msg = |rounds: &[Round], f: fn(&Round) -> f64| median(rounds.iter().map(f).collect()) / n;
+    let per_msg =
+        |rounds: &[Round], f: fn(&Round) -> f64| median(rounds.iter().map(f).collect()) / n;
     let (raw_bytes, framed_bytes) = (
         per_msg(&raw, |r| r.wire_bytes as f64),
         per_msg(&framed, |r| r.wire_bytes as f64),
