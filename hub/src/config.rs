@@ -46,6 +46,8 @@ pub struct Config {
 pub struct ServerSection {
     pub http: String,
     pub flow_tcp: String,
+    /// FlowProtocol over UDP (`net/udp.rs`); "" (the default) leaves it off.
+    pub flow_udp: String,
     pub flow_unix: String,
     pub data_dir: PathBuf,
     pub log: String,
@@ -278,6 +280,7 @@ impl Config {
             ));
         }
         addr("server.flow_tcp", &self.server.flow_tcp, true)?;
+        addr("server.flow_udp", &self.server.flow_udp, true)?;
         let h = &self.hub;
         if h.max_frame < 1024 || h.max_frame > 1 << 30 {
             return Err((

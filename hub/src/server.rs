@@ -33,6 +33,8 @@ pub struct RunningServer {
     /// With `[http] tls`: the certificate's SHA-256 fingerprint, to compare on the browser's warning page.
     pub tls_fingerprint: Option<String>,
     pub flow_tcp: Option<SocketAddr>,
+    /// The UDP edge's address (`server.flow_udp`), when on.
+    pub flow_udp: Option<SocketAddr>,
     pub flow_unix: Option<PathBuf>,
     pub shared: Arc<Shared>,
     tasks: Vec<JoinHandle<()>>,
@@ -165,6 +167,26 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         );
         Some(bound)
     };
+    let flow_udp = if shared.config.server.flow_udp.is_empty() {
+        None
+    } else {
+        let addr = &shared.config.server.flow_udp;
+        let std_socket = std::net::UdpSocket::bind(addr)
+            .and_then(|s| s.set_nonblocking(true).map(|()| s))
+            .with_context(|| format!("binding flow UDP {addr}"))?;
+        let socket = {
+            let _io = io.handle().enter();
+            tokio::net::UdpSocket::from_std(std_socket)
+                .with_context(|| format!("binding flow UDP {addr}"))?
+        };
+        let bound = socket.local_addr()?;
+        tasks.push(
+            io.handle()
+                .spawn(crate::net::udp::serve(socket, shared.clone())),
+        );
+        info!("flow hub: udp://{bound}");
+        Some(bound)
+    };
     let flow_unix = match shared.config.unix_socket() {
         None => None,
         Some(path) => {
@@ -224,12 +246,13 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
     for module in modules {
         module_tasks.push(crate::module::spawn(shared.clone(), module).await?);
     }
-    info!(%http, ?flow_tcp, ?flow_unix, ?fd_limit, "robot-agent is up");
+    info!(%http, ?flow_tcp, ?flow_udp, ?flow_unix, ?fd_limit, "robot-agent is up");
     Ok(RunningServer {
         http,
         page_url,
         tls_fingerprint,
         flow_tcp,
+        flow_udp,
         flow_unix,
         shared,
         tasks,

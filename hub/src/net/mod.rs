@@ -6,6 +6,7 @@ pub mod descriptors;
 pub mod io_runtime;
 pub mod serial;
 pub mod tcp;
+pub mod udp;
 pub mod unix;
 pub mod ws;
 

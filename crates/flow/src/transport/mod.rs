@@ -68,7 +68,9 @@ impl Link {
             FlowAddr::Serial { path, baud } => {
                 Link::Serial(serial::SerialTransport::open(path, *baud)?)
             }
-            FlowAddr::Udp(hostport) => Link::Udp(Box::new(udp::UdpTransport::connect(hostport).await?)),
+            FlowAddr::Udp(hostport) => {
+                Link::Udp(Box::new(udp::UdpTransport::connect(hostport).await?))
+            }
         })
     }
 }
