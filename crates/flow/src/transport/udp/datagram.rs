@@ -21,7 +21,7 @@
 //!   `u32` bitmap of those after it that arrived (bit `i`: `seq + 1 + i`).
 //! - `close` (6) and `keepalive` (7): no payload; `seq`, `frag`, `frags` are 0.
 //!
-//! Anything else (short, wrong magic or version, unknown kind, inconsistent fields) is an error: the caller drops
+//! A datagram is at most [`MAX_DATAGRAM`] bytes. Anything else (short, long, wrong magic or version, unknown kind, inconsistent fields) is an error: the caller drops
 //! the datagram and counts it, never answers it.
 
 use thiserror::Error;
@@ -34,6 +34,9 @@ pub const MAGIC: [u8; 2] = *b"FU";
 pub const VERSION: u8 = 1;
 /// The smallest hello datagram, padding included: an answer to it is never larger (no amplification).
 pub const HELLO_MIN: usize = 1200;
+/// The largest datagram either side sends or takes: what fits one 1500-byte Ethernet frame over IPv4 unfragmented.
+/// Bounding it bounds what a queue of datagrams may hold.
+pub const MAX_DATAGRAM: usize = 1472;
 
 /// What a datagram is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,6 +85,8 @@ pub struct Datagram<'a> {
 pub enum Malformed {
     #[error("shorter than the {HEADER}-byte header")]
     Short,
+    #[error("longer than {MAX_DATAGRAM} bytes")]
+    Long,
     #[error("not a FlowProtocol datagram (magic or version)")]
     Magic,
     #[error("unknown kind {0}")]
@@ -105,6 +110,9 @@ impl<'a> Datagram<'a> {
     pub fn decode(bytes: &'a [u8]) -> Result<Datagram<'a>, Malformed> {
         if bytes.len() < HEADER {
             return Err(Malformed::Short);
+        }
+        if bytes.len() > MAX_DATAGRAM {
+            return Err(Malformed::Long);
         }
         if bytes[0..2] != MAGIC || bytes[2] != VERSION {
             return Err(Malformed::Magic);
@@ -196,7 +204,9 @@ mod tests {
             Kind::Reliable | Kind::BestEffort => {
                 frags = rng.random_range(1..=u16::MAX);
                 frag = rng.random_range(0..frags);
-                payload.extend((0..rng.random_range(1..1500)).map(|_| rng.random::<u8>()));
+                payload.extend(
+                    (0..rng.random_range(1..=MAX_DATAGRAM - HEADER)).map(|_| rng.random::<u8>()),
+                );
             }
             Kind::Ack => payload.extend(rng.random::<u32>().to_le_bytes()),
             Kind::Hello | Kind::Close | Kind::Keepalive => seq = 0,
@@ -268,6 +278,9 @@ mod tests {
         let mut dirty_hello = Datagram::bare(Kind::Hello, 5, 0).to_vec();
         dirty_hello[100] = 1;
         corpus.push((dirty_hello, Malformed::Shape));
+        let mut huge = good.clone();
+        huge.resize(MAX_DATAGRAM + 1, 1);
+        corpus.push((huge, Malformed::Long));
         let mut long_ack = Datagram::bare(Kind::Ack, 5, 3).to_vec();
         long_ack.extend([0; 5]);
         corpus.push((long_ack, Malformed::Shape));

@@ -24,13 +24,13 @@ use std::time::Duration;
 use bytes::Bytes;
 use tokio::time::Instant;
 
-use super::datagram::{Datagram, HEADER, Kind};
+use super::datagram::{Datagram, HEADER, Kind, MAX_DATAGRAM};
 use crate::protocol::message::op;
 
 /// The tunables of a session. The defaults suit a LAN or the Internet at a 1280-byte IPv6 minimum MTU.
 #[derive(Debug, Clone)]
 pub struct Settings {
-    /// Frame bytes per datagram (the header's 16 bytes come on top).
+    /// Frame bytes per datagram (the header's 16 bytes come on top); at most `MAX_DATAGRAM - HEADER` (1456).
     pub mtu: usize,
     pub rto_min: Duration,
     pub rto_max: Duration,
@@ -204,6 +204,8 @@ impl Engine {
         now: Instant,
         guard: Option<(usize, Option<u32>)>,
     ) -> Self {
+        let mut settings = settings;
+        settings.mtu = settings.mtu.clamp(1, MAX_DATAGRAM - HEADER);
         Engine {
             settings,
             session,
@@ -628,8 +630,12 @@ impl Engine {
 
     /// When [`Engine::on_timer`] has work next.
     pub fn deadline(&self) -> Instant {
-        let mut at = (self.last_heard + self.settings.idle_timeout)
-            .min(self.last_sent + self.settings.keepalive);
+        let mut at = self.last_heard + self.settings.idle_timeout;
+        // A keepalive is due only when nothing else waits to go out (which, held by the budget before login, may
+        // wait long: that must not wake the driver over and over).
+        if self.out.is_empty() {
+            at = at.min(self.last_sent + self.settings.keepalive);
+        }
         for f in self.in_flight.values() {
             at = at.min(f.sent_at + f.rto);
         }

@@ -419,3 +419,99 @@ impl TransportWrite for UdpWriter {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::message::op;
+
+    fn frame(op_code: u8, req: u32, body_len: usize) -> Vec<u8> {
+        let mut f = ((body_len + 5) as u32).to_le_bytes().to_vec();
+        f.push(op_code);
+        f.extend(req.to_le_bytes());
+        f.extend((0..body_len).map(|i| (i as u32 * 7 + req) as u8));
+        f
+    }
+
+    /// Reads until `want` bytes came.
+    async fn read_exactly(reader: &mut UdpReader, want: usize) -> Vec<u8> {
+        let mut got = BytesMut::new();
+        while got.len() < want {
+            let n = reader.read_into(&mut got).await.expect("read");
+            assert!(n > 0, "closed after {} of {want} bytes", got.len());
+        }
+        got.to_vec()
+    }
+
+    /// A one-session hub end on a real socket: answers the first hello and feeds the session its datagrams.
+    async fn one_session_hub() -> (SocketAddr, tokio::sync::oneshot::Receiver<UdpTransport>) {
+        let socket = Arc::new(UdpSocket::bind("127.0.0.1:0").await.expect("bind"));
+        let addr = socket.local_addr().expect("addr");
+        let (give, take) = tokio::sync::oneshot::channel();
+        tokio::spawn(async move {
+            let mut give = Some(give);
+            let mut inbound: Option<(SocketAddr, mpsc::Sender<Bytes>)> = None;
+            let mut buf = vec![0u8; 65536];
+            while let Ok((n, from)) = socket.recv_from(&mut buf).await {
+                let Ok(d) = Datagram::decode(&buf[..n]) else {
+                    continue;
+                };
+                if d.kind == Kind::Hello {
+                    let ack = Datagram::bare(Kind::HelloAck, 77, d.session).to_vec();
+                    let (tx, rx) = mpsc::channel(512);
+                    let t = UdpTransport::accepted(
+                        socket.clone(),
+                        from,
+                        77,
+                        rx,
+                        n - ack.len(),
+                        Arc::default(),
+                    );
+                    if let Some(give) = give.take() {
+                        let _ = give.send(t);
+                        inbound = Some((from, tx));
+                    }
+                    let _ = socket.send_to(&ack, from).await;
+                } else if let Some((peer, tx)) = &inbound
+                    && *peer == from
+                {
+                    let _ = tx.send(Bytes::copy_from_slice(&buf[..n])).await;
+                }
+            }
+        });
+        (addr, take)
+    }
+
+    #[tokio::test]
+    async fn frames_cross_a_real_socket_whole_both_ways_and_a_close_ends_the_peer() {
+        let (addr, hub) = one_session_hub().await;
+        let client = UdpTransport::connect(&addr.to_string())
+            .await
+            .expect("connect");
+        let hub = hub.await.expect("session");
+        let (mut hub_r, mut hub_w) = hub.split();
+        let (mut cli_r, mut cli_w) = client.split();
+        // Before login the hub's end could not answer more than it heard: log in first.
+        let login = frame(op::LOGIN, 1, 60);
+        cli_w.write_all(&login).await.expect("write");
+        assert_eq!(read_exactly(&mut hub_r, login.len()).await, login);
+        let ok = frame(op::REPLY, 1, 1);
+        hub_w.write_all(&ok).await.expect("write");
+        assert_eq!(read_exactly(&mut cli_r, ok.len()).await, ok);
+        // Reliable frames of one and of many datagrams, in one write, arrive whole and in order.
+        let calls: Vec<u8> = [
+            frame(op::CALL, 2, 10),
+            frame(op::CALL, 3, 50_000),
+            frame(op::PING, 4, 0),
+        ]
+        .concat();
+        cli_w.write_all(&calls).await.expect("write");
+        assert_eq!(read_exactly(&mut hub_r, calls.len()).await, calls);
+        let data = frame(op::DATA, 0, 9000);
+        hub_w.write_all(&data).await.expect("write");
+        assert_eq!(read_exactly(&mut cli_r, data.len()).await, data);
+        cli_w.shutdown().await.expect("shutdown");
+        let mut rest = BytesMut::new();
+        assert_eq!(hub_r.read_into(&mut rest).await.expect("end"), 0);
+    }
+}
