@@ -215,8 +215,13 @@ impl Collector for UdpCollector {
             ),
             (
                 "flow_udp_retransmitted_datagrams",
-                "Reliable UDP datagrams the hub sent again",
+                "Reliable UDP datagrams, and best-effort fragments asked for, that the hub sent again",
                 &s.retransmitted,
+            ),
+            (
+                "flow_udp_nacks",
+                "Requests the hub sent for missing fragments of best-effort UDP messages",
+                &s.nacks,
             ),
             (
                 "flow_udp_duplicate_datagrams",

@@ -20,6 +20,9 @@
 //! - `ack` (5): `seq` is the next reliable sequence number expected (all before it arrived); the payload is a
 //!   `u32` bitmap of those after it that arrived (bit `i`: `seq + 1 + i`).
 //! - `close` (6) and `keepalive` (7): no payload; `seq`, `frag`, `frags` are 0.
+//! - `nack` (8): the receiver of best-effort frame `seq` lacks some of its fragments; the payload (1 byte or more)
+//!   is a bitmap of the missing ones (bit `i % 8` of byte `i / 8`: fragment `i`); `frag` and `frags` are 0. The
+//!   sender sends those fragments again if it still has them (`engine.rs`).
 //!
 //! A datagram is at most [`MAX_DATAGRAM`] bytes. Anything else (short, long, wrong magic or version, unknown kind, inconsistent fields) is an error: the caller drops
 //! the datagram and counts it, never answers it.
@@ -48,6 +51,7 @@ pub enum Kind {
     Ack = 5,
     Close = 6,
     Keepalive = 7,
+    Nack = 8,
 }
 
 impl Kind {
@@ -60,6 +64,7 @@ impl Kind {
             5 => Kind::Ack,
             6 => Kind::Close,
             7 => Kind::Keepalive,
+            8 => Kind::Nack,
             _ => return None,
         })
     }
@@ -146,6 +151,7 @@ impl<'a> Datagram<'a> {
             Kind::Ack => d.payload.len() == 4,
             Kind::HelloAck => d.payload.is_empty() && d.session != 0,
             Kind::Close | Kind::Keepalive => d.seq == 0 && d.payload.is_empty(),
+            Kind::Nack => !d.payload.is_empty(),
             Kind::Reliable | Kind::BestEffort => true,
         };
         if !shape_ok {
@@ -197,7 +203,7 @@ mod tests {
 
     fn random_datagram(rng: &mut impl Rng, payload: &mut Vec<u8>) -> (Kind, u32, u32, u16, u16) {
         payload.clear();
-        let kind = Kind::from_u8(rng.random_range(1..=7)).expect("kind");
+        let kind = Kind::from_u8(rng.random_range(1..=8)).expect("kind");
         let session = rng.random::<u32>() | 1;
         let (mut seq, mut frag, mut frags) = (rng.random(), 0, 0);
         match kind {
@@ -209,6 +215,7 @@ mod tests {
                 );
             }
             Kind::Ack => payload.extend(rng.random::<u32>().to_le_bytes()),
+            Kind::Nack => payload.extend((0..rng.random_range(1..=8)).map(|_| rng.random::<u8>())),
             Kind::Hello | Kind::Close | Kind::Keepalive => seq = 0,
             Kind::HelloAck => {}
         }
@@ -265,6 +272,8 @@ mod tests {
         let mut bad = good.clone();
         bad[3] = 9;
         corpus.push((bad, Malformed::Kind(9)));
+        // A nack that names no fragment.
+        corpus.push((Datagram::bare(Kind::Nack, 5, 3).to_vec(), Malformed::Shape));
         let mut bad = good.clone();
         bad[14] = 0; // frags = 0
         corpus.push((bad, Malformed::Fragment));

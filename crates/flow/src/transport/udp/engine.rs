@@ -8,6 +8,11 @@
 //!   fragment came, and delivers it at once; a frame with a missing fragment is dropped after
 //!   [`Settings::reassembly_timeout`] (or sooner when the reassembly memory is full, or when 64 newer frames have
 //!   begun) and counted in [`UdpStats::lost`], never delivered damaged. Duplicates are dropped by message number.
+//!   A frame of several fragments that stops coming together is asked for again: after [`Settings::nack_delay`]
+//!   without a new fragment the receiver sends a `nack` naming the missing ones, up to [`Settings::nacks`] times,
+//!   and the sender sends them again from the few frames it keeps ([`Settings::resend_bytes`]). A 52 kB picture
+//!   is 44 fragments: at 5% loss only 10% of pictures would otherwise arrive whole. A frame of one fragment is
+//!   not asked for (a lost audio packet is better skipped than late).
 //! - **reliable**: every other frame. Each fragment gets a sequence number and is kept until acknowledged, sent
 //!   again after `rto_min` doubling up to `rto_max`; with no acknowledgement for `give_up` the session fails. The
 //!   receiver delivers fragments in sequence order exactly once (duplicates are dropped by sequence number) and
@@ -52,6 +57,12 @@ pub struct Settings {
     pub idle_timeout: Duration,
     /// A keepalive goes out after this long without sending.
     pub keepalive: Duration,
+    /// An incomplete best-effort frame with no new fragment for this long asks for the missing ones (`nack`).
+    pub nack_delay: Duration,
+    /// How many times one frame's missing fragments are asked for.
+    pub nacks: u8,
+    /// Bytes of recent best-effort frames of several fragments the sender keeps to answer `nack`s.
+    pub resend_bytes: usize,
 }
 
 /// The default frame bytes per datagram.
@@ -72,6 +83,9 @@ impl Default for Settings {
             pre_login_max: 16 * 1024,
             idle_timeout: Duration::from_secs(15),
             keepalive: Duration::from_secs(3),
+            nack_delay: Duration::from_millis(10),
+            nacks: 3,
+            resend_bytes: 1 << 20,
         }
     }
 }
@@ -87,8 +101,10 @@ pub struct UdpStats {
     pub dropped: AtomicU64,
     /// Best-effort frames lost (a fragment missing) and dropped whole.
     pub lost: AtomicU64,
-    /// Reliable datagrams sent again.
+    /// Reliable datagrams sent again, and best-effort fragments sent again on a `nack`.
     pub retransmitted: AtomicU64,
+    /// `nack`s sent for best-effort frames missing fragments.
+    pub nacks: AtomicU64,
     /// Duplicate datagrams discarded.
     pub duplicates: AtomicU64,
     /// Sessions open now (the hub's edge).
@@ -136,6 +152,18 @@ struct Partial {
     got: BTreeMap<u16, Bytes>,
     bytes: usize,
     began: Instant,
+    /// When the last fragment (or the last `nack`) came: the next `nack` is due `nack_delay` after it.
+    progress: Instant,
+    nacked: u8,
+}
+
+/// A best-effort frame of several fragments the sender keeps to answer `nack`s.
+#[derive(Debug)]
+struct Kept {
+    message: u32,
+    fragments: Vec<Bytes>,
+    bytes: usize,
+    answered: u8,
 }
 
 /// The best-effort receiver's window: bit `i` of each map is message number `top - i`.
@@ -161,6 +189,8 @@ pub struct Engine {
     waiting: VecDeque<(u32, Bytes)>,
     next_message: u32,
     out: VecDeque<Bytes>,
+    kept: VecDeque<Kept>,
+    kept_bytes: usize,
     ack_due: bool,
     last_sent: Instant,
     // Receiving.
@@ -215,6 +245,8 @@ impl Engine {
             waiting: VecDeque::new(),
             next_message: 0,
             out: VecDeque::new(),
+            kept: VecDeque::new(),
+            kept_bytes: 0,
             ack_due: false,
             last_sent: now,
             rcv_next: 0,
@@ -279,6 +311,12 @@ impl Engine {
         if best {
             self.next_message = message.wrapping_add(1);
         }
+        let mut kept = (best && frags > 1).then(|| Kept {
+            message,
+            fragments: Vec::with_capacity(frags as usize),
+            bytes: 0,
+            answered: 0,
+        });
         for (i, chunk) in frame.chunks(mtu).enumerate() {
             let kind = if best {
                 Kind::BestEffort
@@ -296,13 +334,57 @@ impl Engine {
             };
             let bytes = Bytes::from(d.to_vec());
             if best {
+                if let Some(k) = &mut kept {
+                    k.bytes += bytes.len();
+                    k.fragments.push(bytes.clone());
+                }
                 self.out.push_back(bytes);
             } else {
                 self.waiting.push_back((seq, bytes));
                 self.next_seq = seq.wrapping_add(1);
             }
         }
+        if let Some(k) = kept {
+            self.keep(k);
+        }
         Ok(())
+    }
+
+    /// Keeps a best-effort frame for `nack`s: the newest frames within `resend_bytes`, and no more than the
+    /// receiver's window of 64 frames could still ask for.
+    fn keep(&mut self, k: Kept) {
+        self.kept_bytes += k.bytes;
+        self.kept.push_back(k);
+        while self.kept_bytes > self.settings.resend_bytes || self.kept.len() > 64 {
+            let Some(old) = self.kept.pop_front() else {
+                break;
+            };
+            self.kept_bytes -= old.bytes;
+        }
+    }
+
+    /// The peer lacks fragments of best-effort frame `message`: sends them again, if the frame is still kept and
+    /// has not been asked for too often (a peer cannot make us send a frame more than `nacks` times over).
+    fn on_nack(&mut self, d: &Datagram<'_>) {
+        let limit = self.settings.nacks;
+        let Some(k) = self.kept.iter_mut().find(|k| k.message == d.seq) else {
+            return;
+        };
+        if k.answered >= limit {
+            return;
+        }
+        k.answered += 1;
+        let mut again = 0;
+        for (i, fragment) in k.fragments.iter().enumerate() {
+            if d.payload
+                .get(i / 8)
+                .is_some_and(|b| b & (1 << (i % 8)) != 0)
+            {
+                self.out.push_back(fragment.clone());
+                again += 1;
+            }
+        }
+        UdpStats::add(&self.stats.retransmitted, again);
     }
 
     /// Whether the sender can take more frames now (its reliable backlog is within a window).
@@ -402,6 +484,13 @@ impl Engine {
             }
             Kind::Close => {
                 self.peer_closed = true;
+                Ok(())
+            }
+            Kind::Nack => {
+                // Before login there is nothing best effort to ask for.
+                if self.guard.is_none() {
+                    self.on_nack(d);
+                }
                 Ok(())
             }
             Kind::Keepalive | Kind::Hello | Kind::HelloAck => Ok(()),
@@ -599,11 +688,14 @@ impl Engine {
             got: BTreeMap::new(),
             bytes: 0,
             began: now,
+            progress: now,
+            nacked: 0,
         });
         if p.frags != d.frags || p.got.contains_key(&d.frag) {
             UdpStats::add(&self.stats.duplicates, 1);
             return;
         }
+        p.progress = now;
         p.bytes += d.payload.len();
         self.partial_bytes += d.payload.len();
         p.got.insert(d.frag, Bytes::copy_from_slice(d.payload));
@@ -641,6 +733,9 @@ impl Engine {
         }
         for p in self.partials.values() {
             at = at.min(p.began + self.settings.reassembly_timeout);
+            if p.nacked < self.settings.nacks {
+                at = at.min(p.progress + self.settings.nack_delay);
+            }
         }
         at
     }
@@ -679,6 +774,36 @@ impl Engine {
         for m in overdue {
             self.drop_partial(m);
         }
+        let (nacks, delay) = (self.settings.nacks, self.settings.nack_delay);
+        let mut asks = Vec::new();
+        for (&m, p) in self.partials.iter_mut() {
+            if p.nacked >= nacks || now < p.progress + delay {
+                continue;
+            }
+            p.nacked += 1;
+            p.progress = now;
+            let mut missing = vec![0u8; (p.frags as usize).div_ceil(8)];
+            for i in 0..p.frags {
+                if !p.got.contains_key(&i) {
+                    missing[i as usize / 8] |= 1 << (i % 8);
+                }
+            }
+            // The bitmap of a frame too large for one nack names its first fragments only; the next nack the rest.
+            missing.truncate(self.settings.mtu);
+            asks.push(
+                Datagram {
+                    kind: Kind::Nack,
+                    session: self.session,
+                    seq: m,
+                    frag: 0,
+                    frags: 0,
+                    payload: &missing,
+                }
+                .to_vec(),
+            );
+        }
+        UdpStats::add(&self.stats.nacks, asks.len() as u64);
+        self.out.extend(asks.into_iter().map(Bytes::from));
         if self.out.is_empty() && now >= self.last_sent + self.settings.keepalive {
             self.out.push_back(Bytes::from(
                 Datagram::bare(Kind::Keepalive, self.session, 0).to_vec(),
@@ -803,6 +928,82 @@ mod tests {
         // Every frame is delivered or counted, except those at the very end that no newer frame passed.
         assert!(got.len() as u64 + lost <= u64::from(n));
         assert!(got.len() as u64 + lost + 64 >= u64::from(n));
+    }
+
+    #[test]
+    fn pictures_missing_fragments_are_asked_for_again_and_arrive_whole_at_5_percent_loss() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let mut now = Instant::now();
+        let (mut a, mut b, sa, sb) = pair(now);
+        // 15 pictures a second of 52 kB (44 fragments): without asking again, 0.95^44 = 10% would arrive whole.
+        let n = 60u32;
+        let mut got = Vec::new();
+        for i in 0..n {
+            a.send_frames(&frame(op::PUBLISH, 0, &body(52_000, i)))
+                .expect("send");
+            for _ in 0..13 {
+                carry(&mut a, &mut b, now, &mut rng, 0.05);
+                carry(&mut b, &mut a, now, &mut rng, 0.05);
+                while let Some(f) = b.poll_frame() {
+                    got.push(f);
+                }
+                now += Duration::from_millis(5);
+                a.on_timer(now).expect("alive");
+                b.on_timer(now).expect("alive");
+            }
+        }
+        let mut seen = std::collections::HashSet::new();
+        for f in &got {
+            let i = (0..n)
+                .find(|&i| f[9..] == body(52_000, i)[..])
+                .expect("every delivered picture is one that was sent, intact");
+            assert!(seen.insert(i), "picture {i} delivered twice");
+        }
+        assert!(UdpStats::get(&sb.nacks) > 0, "nothing was asked for again");
+        assert!(UdpStats::get(&sa.retransmitted) > 0);
+        assert!(
+            got.len() as f64 >= 0.85 * f64::from(n),
+            "{} of {n} pictures arrived whole",
+            got.len()
+        );
+    }
+
+    #[test]
+    fn a_nack_is_answered_a_bounded_number_of_times_and_only_for_kept_frames() {
+        let now = Instant::now();
+        let (mut a, _b, sa, _) = pair(now);
+        a.send_frames(&frame(op::PUBLISH, 0, &body(5000, 1)))
+            .expect("send");
+        while a.poll_send(now).is_some() {}
+        let session = a.session();
+        let ask = |seq: u32| {
+            Datagram {
+                kind: Kind::Nack,
+                session,
+                seq,
+                frag: 0,
+                frags: 0,
+                payload: &[0b0000_0101],
+            }
+            .to_vec()
+        };
+        // Frame 0 is kept: fragments 0 and 2 go again, three times over at most.
+        for _ in 0..5 {
+            let d = ask(0);
+            a.on_datagram(&Datagram::decode(&d).expect("decodes"), now)
+                .expect("alive");
+        }
+        let mut again = 0;
+        while a.poll_send(now).is_some() {
+            again += 1;
+        }
+        assert_eq!(again, 2 * 3);
+        assert_eq!(UdpStats::get(&sa.retransmitted), 6);
+        // A frame never sent is not there to send.
+        let d = ask(9);
+        a.on_datagram(&Datagram::decode(&d).expect("decodes"), now)
+            .expect("alive");
+        assert!(a.poll_send(now).is_none());
     }
 
     #[test]
