@@ -85,6 +85,7 @@ fuzz:
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run decode -- -max_total_time=60
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run stamp -- -max_total_time=30
 	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run line -- -max_total_time=30
+	cd fuzz && RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run udp -- -max_total_time=30
 
 deps:
 	scripts/phase.sh deps scripts/deps.sh
