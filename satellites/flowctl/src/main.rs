@@ -24,7 +24,7 @@ mod wav;
 #[derive(Debug, Parser)]
 #[command(version)]
 struct Args {
-    /// Hub address: tcp://HOST:PORT, unix:PATH, ws://HOST:PORT/flow or serial:PATH?baud=N.
+    /// Hub address: tcp://HOST:PORT, unix:PATH, ws://HOST:PORT/flow, serial:PATH?baud=N or udp://HOST:PORT.
     #[arg(
         long,
         env = "FLOW_ADDR",
