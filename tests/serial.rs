@@ -417,12 +417,13 @@ async fn a_subscriber_on_a_slow_line_loses_the_oldest_and_says_so_while_tcp_gets
         );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
-    // 500 messages of 2 kB a second: 1 MB/s, which TCP carries easily and the line at 11.5 kB/s cannot; the board's
-    // lane (64 messages) fills and the hub drops its oldest.
+    // 100 messages of 2 kB a second: 200 kB/s, which TCP carries easily (a TCP subscriber would have to fall 640 ms
+    // behind to lose one) and the line at 11.5 kB/s cannot; the board's lane (64 messages) fills and the hub drops
+    // its oldest.
     const SENT: u32 = 200;
     for seq in 0..SENT {
         publisher.publish(payload(seq, 2000)).await?;
-        tokio::time::sleep(Duration::from_millis(2)).await;
+        tokio::time::sleep(Duration::from_millis(10)).await;
     }
     // The TCP subscriber is not held back by the line: it has everything, in order, while the line still drains.
     for expected in 0..SENT {

@@ -2,7 +2,7 @@
 
 import threading
 
-from conftest import PATIENCE, wait_until
+from conftest import PATIENCE, wait_subscribers, wait_until
 from flow import Client, Sketch
 
 
@@ -41,6 +41,10 @@ def test_pulses_fire_in_proportion_and_messages_reach_on_message(agent):
         echoes = peer.subscribe("Py.sketch.out")
         pub = peer.publisher("Py.sketch.in")
         assert pub.wait_subscribers(timeout=PATIENCE)
+        # The sketch subscribes before it creates its publisher, and our subscription to that publisher's channel
+        # takes effect only once the channel exists: an echo sent before that would be lost (seen on a loaded CI
+        # machine).
+        wait_subscribers(peer, "Py.sketch.out", 1)
         pub.publish({"hello": "sketch"})
         assert echoes.recv(timeout=PATIENCE).json() == {"echo": {"hello": "sketch"}}
     runner.join(timeout=PATIENCE)
