@@ -4,63 +4,17 @@
 //! survives; a line that goes away and comes back is opened again and the satellite logs in again.
 
 use std::io::{Read, Write};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::Stdio;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use agent_tests::metrics::{parse, scrape, value};
+use agent_tests::wires::{PtyPair, check, payload};
 use agent_tests::{Agent, DataDir, PATIENCE, binary};
 use anyhow::{Context, bail, ensure};
 use flow::{Client, ConnectOptions, FlowAddr, Subscription};
-use flow_lite::crc::crc32;
-
-/// Two linked pseudo-terminals, `a` and `b`, made by `socat`; killed when dropped.
-struct PtyPair {
-    child: Child,
-    a: PathBuf,
-    b: PathBuf,
-}
-
-impl PtyPair {
-    async fn open(a: &Path, b: &Path) -> anyhow::Result<PtyPair> {
-        let child = Command::new("socat")
-            .arg(format!("pty,raw,echo=0,link={}", a.display()))
-            .arg(format!("pty,raw,echo=0,link={}", b.display()))
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .context("starting socat (make deps installs it)")?;
-        let deadline = tokio::time::Instant::now() + PATIENCE;
-        while !(a.exists() && b.exists()) {
-            ensure!(
-                tokio::time::Instant::now() < deadline,
-                "socat made no pseudo-terminals"
-            );
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
-        Ok(PtyPair {
-            child,
-            a: a.to_path_buf(),
-            b: b.to_path_buf(),
-        })
-    }
-
-    /// Kills socat: both terminals go away.
-    fn close(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-        let _ = std::fs::remove_file(&self.a);
-        let _ = std::fs::remove_file(&self.b);
-    }
-}
-
-impl Drop for PtyPair {
-    fn drop(&mut self) {
-        self.close();
-    }
-}
 
 /// A hub serving the line at `path`.
 async fn hub_on_line(dir: &DataDir, path: &Path) -> anyhow::Result<Agent> {
@@ -82,26 +36,6 @@ async fn satellite_on(hub: &Agent, path: &Path, reconnect: bool) -> anyhow::Resu
     let mut opts = ConnectOptions::new("board", hub.token());
     opts.reconnect = reconnect;
     Ok(Client::connect(&addr, opts).await?)
-}
-
-/// A payload that proves itself: `[seq u32][crc32 of the rest u32][bytes]`.
-fn payload(seq: u32, len: usize) -> Vec<u8> {
-    let body: Vec<u8> = (0..len)
-        .map(|i| (i as u32).wrapping_mul(31).wrapping_add(seq) as u8)
-        .collect();
-    let mut p = seq.to_le_bytes().to_vec();
-    p.extend(crc32(&body).to_le_bytes());
-    p.extend(body);
-    p
-}
-
-/// The sequence number of an intact payload; an error for a damaged one.
-fn check(p: &[u8]) -> anyhow::Result<u32> {
-    ensure!(p.len() >= 8, "payload of {} bytes", p.len());
-    let seq = u32::from_le_bytes(p[0..4].try_into()?);
-    let crc = u32::from_le_bytes(p[4..8].try_into()?);
-    ensure!(crc32(&p[8..]) == crc, "payload {seq} is damaged");
-    Ok(seq)
 }
 
 /// Waits for the first message on `sub`.

@@ -11,55 +11,17 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use agent_tests::metrics::{parse, scrape, value};
+use agent_tests::wires::{check, hub_with_udp, payload};
 use agent_tests::{Agent, DataDir, PATIENCE};
 use anyhow::{Context, ensure};
 use bytes::Bytes;
 use flow::transport::udp::datagram::{Datagram, HELLO_MIN, Kind};
 use flow::{Client, FlowAddr, Subscription};
-use flow_lite::crc::crc32;
 use rand::{Rng, SeedableRng};
 use tokio::net::UdpSocket;
 
-/// A hub with its UDP edge on a free port, and that port.
-async fn hub_with_udp(dir: &DataDir, more: &str) -> anyhow::Result<(Agent, SocketAddr)> {
-    let hub = Agent::hub_with_config(
-        dir,
-        &format!("[server]\nflow_udp = \"127.0.0.1:0\"\n{more}"),
-    )
-    .await?;
-    hub.output.wait_for("flow hub: udp://", 1, PATIENCE).await?;
-    let line = hub.output.matching("flow hub: udp://").remove(0);
-    let addr = line
-        .split("flow hub: udp://")
-        .nth(1)
-        .and_then(|s| s.split_whitespace().next())
-        .context("no UDP address logged")?
-        .parse()?;
-    Ok((hub, addr))
-}
-
 async fn udp_client(hub: &Agent, addr: SocketAddr, name: &str) -> anyhow::Result<Client> {
     Ok(Client::connect(&FlowAddr::Udp(addr.to_string()), hub.options(name)).await?)
-}
-
-/// A payload that proves itself: `[seq u32][crc32 of the rest u32][bytes]`.
-fn payload(seq: u32, len: usize) -> Vec<u8> {
-    let body: Vec<u8> = (0..len)
-        .map(|i| (i as u32).wrapping_mul(31).wrapping_add(seq) as u8)
-        .collect();
-    let mut p = seq.to_le_bytes().to_vec();
-    p.extend(crc32(&body).to_le_bytes());
-    p.extend(body);
-    p
-}
-
-/// The sequence number of an intact payload; an error for a damaged one.
-fn check(p: &[u8]) -> anyhow::Result<u32> {
-    ensure!(p.len() >= 8, "payload of {} bytes", p.len());
-    let seq = u32::from_le_bytes(p[0..4].try_into()?);
-    let crc = u32::from_le_bytes(p[4..8].try_into()?);
-    ensure!(crc32(&p[8..]) == crc, "payload {seq} is damaged");
-    Ok(seq)
 }
 
 async fn next(sub: &Subscription) -> anyhow::Result<Vec<u8>> {

@@ -9,7 +9,6 @@
 //! messages per second.
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, ensure};
@@ -33,32 +32,6 @@ struct Args {
     /// Rounds of each kind (alternating); medians are reported.
     #[arg(long, default_value_t = 5)]
     rounds: usize,
-}
-
-/// Linked pseudo-terminals, killed when dropped.
-struct Pty(Child);
-
-impl Drop for Pty {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn pty_pair(a: &Path, b: &Path) -> anyhow::Result<Pty> {
-    let child = Command::new("socat")
-        .arg(format!("pty,raw,echo=0,link={}", a.display()))
-        .arg(format!("pty,raw,echo=0,link={}", b.display()))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .context("starting socat (make deps installs it)")?;
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while !(a.exists() && b.exists()) {
-        ensure!(Instant::now() < deadline, "socat made no terminals");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    Ok(Pty(child))
 }
 
 /// CPU time of this process so far (user + system, all threads).
@@ -177,7 +150,7 @@ async fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let dir = tempfile::Builder::new().prefix("serial-bench-").tempdir()?;
     let (a, b): (PathBuf, PathBuf) = (dir.path().join("a"), dir.path().join("b"));
-    let _pty = pty_pair(&a, &b)?;
+    let _pty = agent_tests::wires::PtyPair::open(&a, &b).await?;
     let frames: Vec<Bytes> = (0..args.messages).map(|n| frame(args.payload, n)).collect();
     let frame_len = frames[0].len();
     println!(

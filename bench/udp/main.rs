@@ -359,20 +359,6 @@ async fn towards_client(
     }
 }
 
-/// A hub with its UDP edge on a free port, and that port (read from its log, as tests/udp.rs does).
-async fn hub_with_udp(dir: &DataDir) -> anyhow::Result<(Agent, SocketAddr)> {
-    let hub = Agent::hub_with_config(dir, "[server]\nflow_udp = \"127.0.0.1:0\"\n").await?;
-    hub.output.wait_for("flow hub: udp://", 1, PATIENCE).await?;
-    let line = hub.output.matching("flow hub: udp://").remove(0);
-    let addr = line
-        .split("flow hub: udp://")
-        .nth(1)
-        .and_then(|s| s.split_whitespace().next())
-        .context("no UDP address logged")?
-        .parse()?;
-    Ok((hub, addr))
-}
-
 /// A counter of the hub's `/metrics` (text exposition, `NAME VALUE` lines); NaN if it cannot be read, since the
 /// counters only explain the figures and are not figures themselves.
 async fn counter(hub: &Agent, name: &str) -> f64 {
@@ -513,7 +499,7 @@ async fn main() -> anyhow::Result<()> {
     epoch();
 
     let dir = DataDir::new()?;
-    let (hub, udp) = hub_with_udp(&dir).await?;
+    let (hub, udp) = agent_tests::wires::hub_with_udp(&dir, "").await?;
     let (relay, relayed) = lossy_relay(udp, args.loss).await?;
     let loss_pct = args.loss * 100.0;
     println!(

@@ -16,6 +16,7 @@ pub mod recording;
 pub mod satellite;
 pub mod spoken;
 pub mod wait;
+pub mod wires;
 
 pub use agent::{Agent, AgentOptions, DataDir};
 pub use binaries::{binary, command, run};
