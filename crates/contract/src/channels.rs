@@ -74,6 +74,10 @@ pub const ASR_SUBMIT: Channel = service(
     "Agent.asr.submit",
     "transcript submission (whisper-sat relay)",
 );
+/// Chat turns for a language-model satellite ([`crate::chat`]): a turn in, the reply out when it ends.
+pub const CHAT: Channel = service("Agent.chat", "chat turns (llm-sat)");
+/// The chat turns' prompts, sentences as they are generated, tool calls and ends ([`crate::chat::ChatEvent`]).
+pub const CHAT_REPLY: Channel = stream("Agent.chat.reply", "chat reply sentences (llm-sat)");
 /// The prefix of the per-utterance claim channels of whisper satellites (`Agent.asr.claim.<start>`).
 pub const ASR_CLAIM_PREFIX: &str = "Agent.asr.claim.";
 /// The prefix of the presence channels of whisper satellites (`Agent.asr.sat.<name>`).
@@ -82,7 +86,7 @@ pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
 /// Every channel with a fixed name.
 pub const ALL: &[Channel] = &[
     AUDIO, VIDEO, VIDEO_Y, AUDIO_FFT, CTRL, AVATAR, SPEECH, SAY, TRANSCRIPT, FACES, MOTION, CODES,
-    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT,
+    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT, CHAT, CHAT_REPLY,
 ];
 
 /// Headers of the channels whose producer is fixed.
@@ -102,6 +106,11 @@ pub mod headers {
     pub const AVATAR: &str = r#"{"format":"json","commands":["blink","gaze","mood","visemes","speech_stop","say"],"source":"tts"}"#;
     /// `Agent.say`: what it takes and answers.
     pub const SAY: &str = r#"{"request":{"text":"string","voice":"optional espeak-ng voice","rate_wpm":"optional","pitch":"optional"},"cancel":{"cancel":"all | utterance number"},"answer":{"utterance":"number","cancelled":"[numbers]"}}"#;
+    /// `Agent.chat`: what it takes and answers.
+    pub const CHAT: &str = r#"{"request":"agent_contract::chat::ChatRequest","cancel":{"cancel":"turn"},"answer":"agent_contract::chat::ChatAnswer","doc":"docs/llm.md"}"#;
+    /// `Agent.chat.reply`.
+    pub const CHAT_REPLY: &str =
+        r#"{"format":"json","content":"chat events","source":"llm-sat","doc":"docs/llm.md"}"#;
     /// `Agent.rules`.
     pub const RULES: &str = r#"{"format":"json","content":"rule trace","doc":"docs/brain.md"}"#;
     /// `Agent.transcript`.

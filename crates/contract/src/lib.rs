@@ -5,6 +5,7 @@
 
 pub mod avatar;
 pub mod channels;
+pub mod chat;
 pub mod ctrl;
 pub mod detections;
 pub mod latency;
