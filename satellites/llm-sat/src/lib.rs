@@ -1,0 +1,4 @@
+//! The language-model satellite: the agent's chat turns (`Agent.chat`) answered by llama.cpp in-process or by an
+//! OpenAI-compatible endpoint, spoken sentence by sentence as the reply streams (docs/llm.md).
+
+pub mod generator;

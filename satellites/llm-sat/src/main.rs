@@ -1,0 +1,3 @@
+//! `llm-sat`: the language-model satellite's command line.
+
+fn main() {}
