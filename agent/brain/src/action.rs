@@ -22,6 +22,13 @@ pub enum Action {
     Set { key: String, value: Value },
     /// Stop what the agent is saying (and any speech queued).
     Cancel,
+    /// Hand the turn to the language model with what the user said. Without a tool the model answers in words;
+    /// with one (a service declared with `tool`), it must answer with a call of that service. The host asserts
+    /// `failed("chat", reason)` when no model serves or it fails mid-reply.
+    Chat { text: String, tool: Option<String> },
+    /// Forget the language model's memory of the conversation.
+    #[serde(rename = "forget_conversation")]
+    ForgetConversation,
 }
 
 impl fmt::Display for Action {
@@ -37,6 +44,12 @@ impl fmt::Display for Action {
             Action::Run { command } => write!(f, "run({command:?})"),
             Action::Set { key, value } => write!(f, "set({key:?}, {})", Quoted(value)),
             Action::Cancel => f.write_str("cancel"),
+            Action::Chat { text, tool: None } => write!(f, "chat({text:?})"),
+            Action::Chat {
+                text,
+                tool: Some(tool),
+            } => write!(f, "chat({text:?}, {tool:?})"),
+            Action::ForgetConversation => f.write_str("forget_conversation"),
         }
     }
 }

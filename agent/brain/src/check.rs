@@ -1,5 +1,5 @@
 //! Static checks of a parsed program: declarations, arities, variables bound before use, actions in their place,
-//! commands on the host's whitelist, no recursive procedures. Every error names the line and column.
+//! commands on the host's whitelist, tools declared once and named by `chat`, no recursive procedures. Every error names the line and column.
 
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
@@ -11,7 +11,7 @@ use crate::expr::{FUNCTIONS, function_arity};
 use crate::parser::Parsed;
 use crate::syntax::{
     ActionExpr, CompareOp, Decl, DeclKind, Expr, Guard, Pos, Primitive, Procedure, Rule,
-    TemplatePart,
+    TemplatePart, ToolDecl,
 };
 use crate::value::Value;
 
@@ -22,11 +22,14 @@ pub(crate) struct Checked {
     pub main: usize,
     /// The pair-database keys the program reads with `db("key")`.
     pub db_keys: BTreeSet<String>,
+    pub tools: Vec<ToolDecl>,
 }
 
 pub(crate) struct Checker<'a> {
     capabilities: &'a Capabilities,
     decls: BTreeMap<String, Decl>,
+    /// The declared tools' services, with where each was declared.
+    tools: BTreeMap<String, Pos>,
     procedures: BTreeMap<String, (usize, Pos)>,
     /// Filled while expressions are checked (hence a cell: the checks only read everything else).
     db_keys: RefCell<BTreeSet<String>>,
@@ -39,6 +42,7 @@ impl<'a> Checker<'a> {
         Checker {
             capabilities,
             decls: BTreeMap::new(),
+            tools: BTreeMap::new(),
             procedures: BTreeMap::new(),
             db_keys: RefCell::default(),
         }
@@ -58,6 +62,18 @@ impl<'a> Checker<'a> {
             self.decls.insert(decl.name.clone(), decl);
         }
         self.decls.entry(SAID.to_owned()).or_insert_with(said_decl);
+
+        for tool in &parsed.tools {
+            if let Some(first) = self.tools.insert(tool.service.clone(), tool.pos) {
+                return Err(Diagnostic::new(
+                    tool.pos,
+                    format!(
+                        "tool `{}` is already declared at line {}",
+                        tool.service, first.line
+                    ),
+                ));
+            }
+        }
 
         for procedure in &parsed.procedures {
             if let Some((_, first)) = self.procedures.get(&procedure.name) {
@@ -90,6 +106,7 @@ impl<'a> Checker<'a> {
             procedures: parsed.procedures,
             main,
             db_keys: self.db_keys.into_inner(),
+            tools: parsed.tools,
         })
     }
 
@@ -310,7 +327,7 @@ impl<'a> Checker<'a> {
                         *pos,
                         format!(
                             "unknown action or procedure `{name}`; actions are say, publish, call, run, set, \
-                             cancel, remember and forget"
+                             cancel, remember, forget, chat and forget_conversation"
                         ),
                     ));
                 };
@@ -339,13 +356,18 @@ impl<'a> Checker<'a> {
                 pos,
             } => {
                 let primitive = *primitive;
-                if args.len() != primitive.arity() {
+                let (fewest, most) = primitive.arity();
+                if !(fewest..=most).contains(&args.len()) {
+                    let takes = if fewest == most {
+                        fewest.to_string()
+                    } else {
+                        format!("{fewest} to {most}")
+                    };
                     return Err(Diagnostic::new(
                         *pos,
                         format!(
-                            "`{}` takes {} argument(s), but {} are given",
+                            "`{}` takes {takes} argument(s), but {} are given",
                             primitive.name(),
-                            primitive.arity(),
                             args.len()
                         ),
                     ));
@@ -363,6 +385,10 @@ impl<'a> Checker<'a> {
                     Primitive::Run => self.command(&args[0]),
                     Primitive::Remember | Primitive::Forget => {
                         self.belief_update(primitive, &args[0], bound)
+                    }
+                    Primitive::Chat => {
+                        self.expr(&args[0], bound)?;
+                        args.get(1).map_or(Ok(()), |tool| self.tool(tool))
                     }
                     _ => args.iter().try_for_each(|arg| self.expr(arg, bound)),
                 }
@@ -394,6 +420,34 @@ impl<'a> Checker<'a> {
         Err(Diagnostic::new(
             *pos,
             format!("command `{name}` is not on the host's whitelist (whitelisted: {known})"),
+        ))
+    }
+
+    /// The tool `chat` forces the model to call must be a declared one: the host builds the model's grammar from
+    /// its declaration.
+    fn tool(&self, arg: &Expr) -> Result<(), Diagnostic> {
+        let Expr::Lit(Value::Text(service), pos) = arg else {
+            return Err(Diagnostic::new(
+                arg.pos(),
+                "`chat` takes the tool as a plain string naming a declared tool, such as \
+                 `chat(T, \"Robot.command\")`",
+            ));
+        };
+        if self.tools.contains_key(service) {
+            return Ok(());
+        }
+        let known: Vec<&str> = self.tools.keys().map(String::as_str).collect();
+        let known = if known.is_empty() {
+            "none".to_owned()
+        } else {
+            known.join(", ")
+        };
+        Err(Diagnostic::new(
+            *pos,
+            format!(
+                "tool `{service}` is not declared; declare it with `tool \"{service}\" \"what it does\" \
+                 {{arg: [\"value\", ...]}}` (declared tools: {known})"
+            ),
         ))
     }
 

@@ -521,6 +521,11 @@ fn instantiate(action: &ActionExpr, scope: &Scope<'_>) -> Result<Option<Deed>, S
             value: value(1)?,
         }),
         Primitive::Cancel => Deed::Act(Action::Cancel),
+        Primitive::Chat => Deed::Act(Action::Chat {
+            text: text(0)?,
+            tool: if args.len() > 1 { Some(text(1)?) } else { None },
+        }),
+        Primitive::ForgetConversation => Deed::Act(Action::ForgetConversation),
         Primitive::Remember | Primitive::Forget => {
             let (name, fact_args) = match &args[0] {
                 Expr::Call(name, fact_args, _) => (name.clone(), Some(fact_args)),

@@ -36,5 +36,6 @@ pub use expr::{NoPairDb, PairDb};
 pub use language::{Language, UnknownLanguage};
 pub use program::{Capabilities, Program, SAID};
 pub use store::{BeliefStore, Fact};
+pub use syntax::ToolDecl;
 pub use trace::{Binding, Evidence, RuleRef, Trace};
 pub use value::{Quoted, Value};

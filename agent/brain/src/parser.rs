@@ -1,10 +1,12 @@
 //! Reads program text into the syntax tree (recursive descent over the tokens; grammar in docs/brain.md).
 
+use std::collections::BTreeMap;
+
 use crate::error::Diagnostic;
 use crate::lexer::{Tok, Token, tokenize};
 use crate::syntax::{
     ActionExpr, ArgType, AtomExpr, CompareOp, Decl, DeclKind, Expr, Guard, Pos, Primitive,
-    Procedure, Rule, TemplatePart, Temporal,
+    Procedure, Rule, TemplatePart, Temporal, ToolDecl,
 };
 use crate::value::Value;
 
@@ -13,6 +15,7 @@ use crate::value::Value;
 pub(crate) struct Parsed {
     pub decls: Vec<Decl>,
     pub procedures: Vec<Procedure>,
+    pub tools: Vec<ToolDecl>,
 }
 
 pub(crate) fn parse(source: &str) -> Result<Parsed, Diagnostic> {
@@ -32,6 +35,10 @@ pub(crate) fn parse(source: &str) -> Result<Parsed, Diagnostic> {
                 parser.next();
                 parser.declarations(kind, &mut parsed.decls)?;
             }
+            Tok::Ident(word) if word == "tool" => {
+                parser.next();
+                parsed.tools.push(parser.tool(token.pos)?);
+            }
             Tok::Ident(word) if word == "procedure" => {
                 parser.next();
                 parsed.procedures.push(parser.procedure(token.pos)?);
@@ -40,7 +47,7 @@ pub(crate) fn parse(source: &str) -> Result<Parsed, Diagnostic> {
                 return Err(Diagnostic::new(
                     token.pos,
                     format!(
-                        "expected `percept`, `belief` or `procedure`, found {}",
+                        "expected `percept`, `belief`, `tool` or `procedure`, found {}",
                         other.describe()
                     ),
                 ));
@@ -178,6 +185,84 @@ impl Parser {
                 return Ok(());
             }
         }
+    }
+
+    fn string(&mut self, what: &str) -> Result<(String, Pos), Diagnostic> {
+        let token = self.peek().clone();
+        match token.tok {
+            Tok::Str(text) => {
+                self.next();
+                Ok((text, token.pos))
+            }
+            _ => Err(self.unexpected(what)),
+        }
+    }
+
+    /// `"Service.name" "what it does" { arg: ["value", ...], ... }`, after the `tool` keyword.
+    fn tool(&mut self, pos: Pos) -> Result<ToolDecl, Diagnostic> {
+        let (service, service_pos) =
+            self.string("the tool's service as a string, such as \"Robot.command\"")?;
+        if service.trim().is_empty() {
+            return Err(Diagnostic::new(service_pos, "a tool needs a service name"));
+        }
+        let (description, _) = self.string("a description of what the tool does, as a string")?;
+        self.expect(&Tok::LBrace, "to open the tool's arguments")?;
+        let mut args: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        if !self.eat(&Tok::RBrace) {
+            loop {
+                let key_token = self.next();
+                let arg = match key_token.tok {
+                    Tok::Ident(arg) | Tok::Str(arg) => arg,
+                    other => {
+                        return Err(Diagnostic::new(
+                            key_token.pos,
+                            format!(
+                                "expected an argument name of tool `{service}`, found {}",
+                                other.describe()
+                            ),
+                        ));
+                    }
+                };
+                if args.contains_key(&arg) {
+                    return Err(Diagnostic::new(
+                        key_token.pos,
+                        format!("argument `{arg}` of tool `{service}` appears twice"),
+                    ));
+                }
+                self.expect(&Tok::Colon, "after the argument name")?;
+                let list_pos = self.expect(&Tok::LBracket, "to open the argument's values")?;
+                let mut values = Vec::new();
+                if !self.eat(&Tok::RBracket) {
+                    loop {
+                        values.push(self.string("a value as a string, such as \"left\"")?.0);
+                        if !self.eat(&Tok::Comma) {
+                            self.expect(&Tok::RBracket, "to close the values")?;
+                            break;
+                        }
+                    }
+                }
+                if values.is_empty() {
+                    // The model's answer is constrained to these values: none would leave it nothing to say.
+                    return Err(Diagnostic::new(
+                        list_pos,
+                        format!(
+                            "argument `{arg}` of tool `{service}` needs at least one value it may take"
+                        ),
+                    ));
+                }
+                args.insert(arg, values);
+                if !self.eat(&Tok::Comma) {
+                    self.expect(&Tok::RBrace, "to close the tool's arguments")?;
+                    break;
+                }
+            }
+        }
+        Ok(ToolDecl {
+            service,
+            description,
+            args,
+            pos,
+        })
     }
 
     fn procedure(&mut self, pos: Pos) -> Result<Procedure, Diagnostic> {

@@ -7,7 +7,7 @@ use std::time::Duration;
 use crate::check::Checker;
 use crate::error::LoadError;
 use crate::parser::parse;
-use crate::syntax::{Decl, Expr, Guard, Procedure, Temporal};
+use crate::syntax::{Decl, Expr, Guard, Procedure, Temporal, ToolDecl};
 
 pub use crate::capabilities::{Capabilities, SAID};
 
@@ -24,6 +24,7 @@ pub struct Program {
     /// Whether any guard reads `time.*` or `date.*`, which then needs a re-evaluation each minute.
     pub(crate) reads_clock: bool,
     db_keys: BTreeSet<String>,
+    tools: Vec<ToolDecl>,
 }
 
 impl Program {
@@ -46,6 +47,7 @@ impl Program {
             holds: BTreeMap::new(),
             reads_clock: false,
             db_keys: checked.db_keys,
+            tools: checked.tools,
         };
         program.index();
         Ok(program)
@@ -64,6 +66,11 @@ impl Program {
     /// The pair-database keys the program reads (`db("key")`), which the host keeps up to date.
     pub fn db_keys(&self) -> impl Iterator<Item = &str> {
         self.db_keys.iter().map(String::as_str)
+    }
+
+    /// The services the language model may call (`tool` declarations), in source order.
+    pub fn tools(&self) -> &[ToolDecl] {
+        &self.tools
     }
 
     /// How many rules the program has, over all procedures.

@@ -1,5 +1,6 @@
 //! The syntax tree of a teleo-reactive program, as the parser builds it and the checker and evaluator read it.
 
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 use crate::value::Value;
@@ -61,6 +62,19 @@ pub struct Decl {
     pub event: bool,
     /// How long after it was last sensed a fact is still believed; `None` keeps it until it is retracted.
     pub fresh: Option<Duration>,
+    pub pos: Pos,
+}
+
+/// `tool "Robot.command" "turns the robot's head" {action: ["turn"], direction: ["left", "right"]}`: a service
+/// the language model may call when a rule hands it the turn with `chat(T, "Robot.command")`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ToolDecl {
+    /// The service channel the host calls with the model's arguments.
+    pub service: String,
+    /// What the service does, told to the model so that it picks the right values.
+    pub description: String,
+    /// Each argument is a text field limited to the listed values (never empty).
+    pub args: BTreeMap<String, Vec<String>>,
     pub pos: Pos,
 }
 
@@ -173,6 +187,10 @@ pub enum Primitive {
     Cancel,
     Remember,
     Forget,
+    /// `chat(T)` or `chat(T, "Service.name")`: hand the turn to the language model.
+    Chat,
+    /// `forget_conversation`: the host forgets the language model's chat memory.
+    ForgetConversation,
 }
 
 impl Primitive {
@@ -186,6 +204,8 @@ impl Primitive {
             "cancel" => Primitive::Cancel,
             "remember" => Primitive::Remember,
             "forget" => Primitive::Forget,
+            "chat" => Primitive::Chat,
+            "forget_conversation" => Primitive::ForgetConversation,
             _ => return None,
         })
     }
@@ -200,23 +220,33 @@ impl Primitive {
             Primitive::Cancel => "cancel",
             Primitive::Remember => "remember",
             Primitive::Forget => "forget",
+            Primitive::Chat => "chat",
+            Primitive::ForgetConversation => "forget_conversation",
         }
     }
 
-    /// How many arguments the primitive takes.
-    pub fn arity(self) -> usize {
+    /// The fewest and the most arguments the primitive takes.
+    pub fn arity(self) -> (usize, usize) {
         match self {
-            Primitive::Say | Primitive::Run | Primitive::Remember | Primitive::Forget => 1,
-            Primitive::Publish | Primitive::Call | Primitive::Set => 2,
-            Primitive::Cancel => 0,
+            Primitive::Say | Primitive::Run | Primitive::Remember | Primitive::Forget => (1, 1),
+            Primitive::Publish | Primitive::Call | Primitive::Set => (2, 2),
+            Primitive::Cancel | Primitive::ForgetConversation => (0, 0),
+            // The optional second argument names the tool the model must call.
+            Primitive::Chat => (1, 2),
         }
     }
 
     /// Whether the primitive only makes sense once, on entry (it has nothing to stop on exit).
     pub fn discrete_only(self) -> bool {
+        // A chat turn is one exchange with the model, so it fires once like a belief update; it has no
+        // utterance of its own that a rule could stop.
         matches!(
             self,
-            Primitive::Cancel | Primitive::Remember | Primitive::Forget
+            Primitive::Cancel
+                | Primitive::Remember
+                | Primitive::Forget
+                | Primitive::Chat
+                | Primitive::ForgetConversation
         )
     }
 }

@@ -179,19 +179,27 @@ fn stop_cancels_speech() {
         );
     }
     // "stop" inside another request is not a command to stop.
-    assert_eq!(answer("don't stop me now"), CONFUSED);
+    assert_eq!(
+        assistant().hear("don't stop me now"),
+        vec![chat("don't stop me now", None)]
+    );
+}
+
+/// The effect of handing `text` to the language model, forced to call `tool` if one is given.
+fn chat(text: &str, tool: Option<&str>) -> Effect {
+    Effect::Fire(Action::Chat {
+        text: text.into(),
+        tool: tool.map(String::from),
+    })
 }
 
 #[test]
-fn anything_else_is_not_understood() {
+fn anything_else_is_handed_to_the_language_model() {
     for asked in [
         "Blue elephants are dancing.",
         "what is the capital of France",
     ] {
-        assert_eq!(
-            answer(asked),
-            "Sorry, I did not understand. You can ask me the time, or what I see."
-        );
+        assert_eq!(assistant().hear(asked), vec![chat(asked, None)]);
     }
     // Transcripts of silence or noise get no answer at all.
     let mut sim = assistant();
@@ -258,6 +266,70 @@ fn remote_satellite_services_are_called_and_their_reply_spoken() {
         vec![Value::from("Robot.command"), Value::from("Turning left.")],
     );
     assert_eq!(says(&replied), ["Turning left."]);
+}
+
+#[test]
+fn when_no_language_model_serves_the_agent_apologises_as_before() {
+    let mut sim = assistant();
+    sim.hear("what is the capital of France");
+    sim.advance(ms(100));
+    let failed = sim.perceive("failed", vec![Value::from("chat"), Value::from("gone")]);
+    assert_eq!(says(&failed), [CONFUSED]);
+    // The failure is dealt with once.
+    sim.advance(ms(3000));
+    assert_eq!(sim.said(), [CONFUSED]);
+}
+
+#[test]
+fn forget_our_conversation_forgets_the_chat_memory() {
+    for asked in [
+        "Forget our conversation.",
+        "please forget what we said",
+        "Forget everything!",
+    ] {
+        assert_eq!(
+            assistant().hear(asked),
+            vec![
+                Effect::Fire(Action::ForgetConversation),
+                Effect::Fire(Action::Say {
+                    text: "All right, I have forgotten our conversation.".into()
+                })
+            ],
+            "asked {asked:?}"
+        );
+    }
+}
+
+#[test]
+fn turning_towards_something_is_a_tool_call_the_model_must_make() {
+    for asked in [
+        "Face the window.",
+        "look towards the door",
+        "turn your head to the left a bit",
+    ] {
+        assert_eq!(
+            assistant().hear(asked),
+            vec![chat(asked, Some("Robot.command"))],
+            "asked {asked:?}"
+        );
+    }
+    // The exact phrases stay on the rule path.
+    assert!(matches!(
+        assistant().hear("turn left").as_slice(),
+        [Effect::Fire(Action::Call { .. })]
+    ));
+}
+
+#[test]
+fn the_default_program_declares_the_robot_command_tool() {
+    let program = default_program();
+    let [tool] = program.tools() else {
+        panic!("one tool expected, got {:?}", program.tools());
+    };
+    assert_eq!(tool.service, "Robot.command");
+    assert_eq!(tool.description, "turns the robot's head");
+    assert_eq!(tool.args["action"], ["turn"]);
+    assert_eq!(tool.args["direction"], ["left", "right"]);
 }
 
 /// Face frames at 15 fps for `seconds`.

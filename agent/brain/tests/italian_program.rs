@@ -70,9 +70,68 @@ fn people_codes_greetings_and_the_rest() {
     assert_eq!(risposta("Ciao"), "Ciao! Come posso aiutarti?");
     assert_eq!(risposta("Grazie mille"), "Prego.");
     assert_eq!(
-        risposta("Parlami del tempo"),
-        "Scusa, non ho capito. Puoi chiedermi l'ora, o cosa vedo."
+        assistente().hear("Parlami del tempo"),
+        vec![chat("Parlami del tempo", None)]
     );
+}
+
+const CONFUSO: &str = "Scusa, non ho capito. Puoi chiedermi l'ora, o cosa vedo.";
+
+/// The effect of handing `text` to the language model, forced to call `tool` if one is given.
+fn chat(text: &str, tool: Option<&str>) -> Effect {
+    Effect::Fire(Action::Chat {
+        text: text.into(),
+        tool: tool.map(String::from),
+    })
+}
+
+#[test]
+fn without_a_language_model_the_italian_program_apologises() {
+    let mut sim = assistente();
+    sim.hear("Parlami del tempo");
+    sim.advance(ms(100));
+    let failed = sim.perceive("failed", vec![Value::from("chat"), Value::from("gone")]);
+    assert_eq!(says(&failed), [CONFUSO]);
+}
+
+#[test]
+fn dimentica_tutto_forgets_the_conversation_in_italian() {
+    for asked in ["Dimentica la nostra conversazione.", "dimentica tutto"] {
+        assert_eq!(
+            assistente().hear(asked),
+            vec![
+                Effect::Fire(Action::ForgetConversation),
+                Effect::Fire(Action::Say {
+                    text: "D'accordo, ho dimenticato la nostra conversazione.".into()
+                })
+            ],
+            "{asked}"
+        );
+    }
+}
+
+#[test]
+fn girati_verso_is_a_tool_call_the_model_must_make() {
+    for asked in [
+        "Girati verso la finestra.",
+        "guarda verso la porta",
+        "gira la testa",
+    ] {
+        assert_eq!(
+            assistente().hear(asked),
+            vec![chat(asked, Some("Robot.command"))],
+            "{asked}"
+        );
+    }
+    let italian = shipped_program("brain.it.tr");
+    let [tool] = italian.tools() else {
+        panic!("one tool expected, got {:?}", italian.tools());
+    };
+    assert_eq!(
+        (tool.service.as_str(), tool.description.as_str()),
+        ("Robot.command", "gira la testa del robot")
+    );
+    assert_eq!(tool.args["direction"], ["left", "right"]);
 }
 
 #[test]

@@ -104,7 +104,7 @@ fn syntax_errors() {
         "when x",
         1,
         "^when",
-        "expected `percept`, `belief` or `procedure`",
+        "expected `percept`, `belief`, `tool` or `procedure`",
     );
     expect(
         &with_main("  a: true ++ say(\"x\") $"),
