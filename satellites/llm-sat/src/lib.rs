@@ -2,3 +2,5 @@
 //! OpenAI-compatible endpoint, spoken sentence by sentence as the reply streams (docs/llm.md).
 
 pub mod generator;
+pub mod grammar;
+pub mod spoken;
