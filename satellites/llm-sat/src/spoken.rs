@@ -14,7 +14,8 @@ const NEVER_END: [&str; 13] = [
     "mr.", "mrs.", "ms.", "dr.", "st.", "prof.", "sig.", "dott.", "e.g.", "i.e.", "vs.", "es.",
     "p.es.",
 ];
-/// Words whose dot ends a sentence only when no lowercase word follows (`etc. and` goes on, `etc. Then` does not).
+/// Words whose dot ends a sentence only when no lowercase word follows (`etc. and` goes on, `etc. Then` does not);
+/// dotted acronyms (`p.m.`, `U.S.`) are read the same way.
 const MAYBE_END: [&str; 2] = ["etc.", "ecc."];
 
 /// A streaming splitter: pieces of a reply in (token by token, a piece may be part of a word), sentences out in
@@ -181,7 +182,7 @@ impl Sentences {
         if NEVER_END.contains(&word.as_str()) {
             return Verdict::NotEnd;
         }
-        if MAYBE_END.contains(&word.as_str()) {
+        if MAYBE_END.contains(&word.as_str()) || is_dotted_acronym(&word) {
             return match cs[end..].iter().find(|c| !c.is_whitespace()) {
                 None => Verdict::Unknown,
                 Some(next) if next.is_lowercase() => Verdict::NotEnd,
@@ -227,6 +228,15 @@ impl Sentences {
         }
         kept
     }
+}
+
+/// `p.m.`, `U.S.`, `a.C.`: letters each followed by a dot, at least two of them.
+fn is_dotted_acronym(word: &str) -> bool {
+    let cs: Vec<char> = word.chars().collect();
+    cs.len() >= 4
+        && cs
+            .chunks(2)
+            .all(|pair| matches!(pair, [letter, '.'] if letter.is_alphabetic()))
 }
 
 /// How the words of one language read symbols and units.
@@ -728,11 +738,12 @@ fn ordinal(core: &str) -> Option<&'static str> {
     ORDINALS.get(n.checked_sub(1)?).copied()
 }
 
-/// Whitespace collapsed, no space before punctuation.
+/// Whitespace collapsed, no space before punctuation or inside brackets.
 fn tidy(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
     for word in s.split_whitespace() {
-        let glued = word.starts_with([',', '.', ';', ':', '!', '?']) && !out.is_empty();
+        let glued = word.starts_with([',', '.', ';', ':', '!', '?', ')', ']', '}'])
+            || out.ends_with(['(', '[', '{']);
         if !out.is_empty() && !glued {
             out.push(' ');
         }
@@ -824,6 +835,19 @@ mod tests {
             "the next word decides"
         );
         assert_eq!(sentences.push("then"), Vec::<String>::new());
+    }
+
+    #[test]
+    fn dotted_acronyms_end_a_sentence_only_before_a_capital() {
+        assert_eq!(
+            split_all("It is 3 p.m. now. The U.S. is big. Come at 5 p.m. Then eat."),
+            [
+                "It is 3 p.m. now.",
+                "The U.S. is big.",
+                "Come at 5 p.m.",
+                "Then eat."
+            ]
+        );
     }
 
     #[test]
@@ -1024,6 +1048,11 @@ mod tests {
     #[test]
     fn whitespace_is_collapsed() {
         assert_eq!(speakable("  a \t b\n\n c  ", "en"), "a b c");
+        assert_eq!(
+            speakable("25°C (77°F).", "en"),
+            "25 degrees Celsius (77 degrees Fahrenheit)."
+        );
+        assert_eq!(speakable("( ~5 )", "en"), "(about 5)");
     }
 
     #[test]
