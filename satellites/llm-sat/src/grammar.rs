@@ -468,7 +468,6 @@ mod tests {
     /// weights are not loaded). Skipped, saying why, where `make model-llm` has not provisioned the model.
     #[test]
     fn llama_cpp_accepts_the_grammars_and_they_admit_the_calls() {
-        use llama_cpp_2::llama_backend::LlamaBackend;
         use llama_cpp_2::model::LlamaModel;
         use llama_cpp_2::model::params::LlamaModelParams;
         use llama_cpp_2::sampling::LlamaSampler;
@@ -477,25 +476,14 @@ mod tests {
 
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../models/llm/SmolLM2-135M-Instruct.Q4_1.gguf");
-        if !path.exists() {
-            eprintln!(
-                "skipped: no model at {} (make model-llm provisions it)",
-                path.display()
-            );
-            return;
-        }
-        let mut backend = match LlamaBackend::init() {
-            Ok(backend) => backend,
-            Err(e) => {
-                eprintln!(
-                    "skipped: llama.cpp's backend is already held by another test of this process: {e}"
-                );
-                return;
-            }
-        };
-        backend.void_logs();
+        assert!(
+            path.exists(),
+            "no model at {} (make model-llm provisions it)",
+            path.display()
+        );
+        let backend = crate::engine::backend().expect("llama.cpp's backend starts");
         let params = LlamaModelParams::default().with_vocab_only(true);
-        let model = LlamaModel::load_from_file(&backend, &path, &params)
+        let model = LlamaModel::load_from_file(backend, &path, &params)
             .expect("the model's vocabulary loads");
         let vocab = model.vocab();
         let n_tokens = vocab.n_tokens();

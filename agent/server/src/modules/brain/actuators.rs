@@ -110,6 +110,8 @@ impl Actuators {
                     self.running.push((action, task));
                 }
             }
+            // The module itself performs chat turns (they need its percepts and memory).
+            Action::Chat { .. } | Action::ForgetConversation => {}
             Action::Set { key, value } => {
                 let client = self.client.clone();
                 let (key, value) = (key.clone(), serde_json::to_value(value).unwrap_or_default());
@@ -137,7 +139,11 @@ impl Actuators {
                 });
             }
             // A publication, a write or a cancel has nothing left to stop.
-            Action::Publish { .. } | Action::Set { .. } | Action::Cancel => {}
+            Action::Publish { .. }
+            | Action::Set { .. }
+            | Action::Cancel
+            | Action::Chat { .. }
+            | Action::ForgetConversation => {}
         }
     }
 

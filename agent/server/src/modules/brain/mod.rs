@@ -3,6 +3,7 @@
 //! and run whitelisted commands; every rule change is published on `Agent.rules`. See docs/brain.md.
 
 mod actuators;
+mod chat;
 mod params;
 mod percepts;
 mod program_file;
@@ -10,12 +11,14 @@ mod speech;
 mod wire;
 
 use std::collections::BTreeMap;
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use agent_brain::{
     Action, Brain, Capabilities, EchoFilter, Effect, Language, Now, PerceptError, Value, WallClock,
 };
 use agent_contract::channels;
+use agent_contract::chat::{ChatEvent, Facts, Tool};
+use agent_contract::rules::ChatStep;
 use flow::tick::Tick;
 use flow::{Client, Data, Publisher, Subscription};
 use tokio::sync::mpsc;
@@ -23,6 +26,7 @@ use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
 use actuators::{Actuators, OUTCOME_QUEUE, Outcome};
+use chat::{Chats, DONE_QUEUE, Next};
 use flow_hub::module::{Module, ModuleContext, ModuleFuture};
 use params::BrainParams;
 use percepts::{Hearing, Percept};
@@ -85,6 +89,8 @@ struct Mind {
     counters: Counters,
     /// The last reply asked of the TTS module, for the trace entry of a barge-in that cuts it off.
     saying: Option<String>,
+    /// Chat turns with the language-model satellite.
+    chats: Chats,
 }
 
 async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
@@ -101,6 +107,9 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     let detections = client.subscribe(channels::DETECTIONS.name).await?;
     let speech_out = client.subscribe(channels::SPEECH.name).await?;
     let avatar = client.subscribe(channels::AVATAR.name).await?;
+    let chat_reply = client.subscribe(channels::CHAT_REPLY.name).await?;
+    let (chat_done_tx, mut chat_done) = mpsc::channel(DONE_QUEUE);
+    let speech = Speech::start(client.clone());
     let rules = client
         .publisher(channels::RULES.name, channels::headers::RULES)
         .await?;
@@ -108,12 +117,7 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     let mut mind = Mind {
         brain: Brain::new(program),
         file,
-        actuators: Actuators::new(
-            client.clone(),
-            Speech::start(client.clone()),
-            &params,
-            outcome_tx,
-        ),
+        actuators: Actuators::new(client.clone(), speech.clone(), &params, outcome_tx),
         echo: EchoFilter::new(params.echo_window(), params.echo_threshold),
         rules,
         playout: PlayoutClock::default(),
@@ -125,7 +129,16 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         language,
         counters: Counters::default(),
         saying: None,
+        chats: Chats::new(
+            client.clone(),
+            speech,
+            chat_done_tx,
+            params.chat_timeout(),
+            params.chat_memory_turns,
+            params.chat_forget_after(),
+        ),
     };
+    mind.chats.recall().await;
     mind.refresh_db().await;
     mind.step().await;
 
@@ -157,6 +170,14 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
                 Some(data) => mind.avatar(&data),
                 None => break,
             },
+            data = chat_reply.recv() => match data {
+                Some(data) => mind.chat_event(&data).await,
+                None => break,
+            },
+            Some(done) = chat_done.recv() => {
+                let next = mind.chats.done(done);
+                mind.chat_next(next).await;
+            }
             Some(outcome) = outcomes.recv() => mind.outcome(outcome),
             tick = ticks.recv() => {
                 if matches!(tick, Ok(Tick::OneSec)) {
@@ -294,7 +315,160 @@ impl Mind {
                 debug!("brain: the barge-in entry was dropped, the link is busy");
             }
         }
+        if stop.barge_in {
+            self.chat_interrupted();
+        }
         self.playout.stop();
+    }
+
+    /// Generation of the running chat turn stops, and the trace says what the user heard of it.
+    fn chat_interrupted(&mut self) {
+        if let Some((turn, heard)) = self.chats.interrupt(Instant::now()) {
+            info!(turn, heard, "brain: the chat turn is interrupted");
+            self.chat_trace(turn, "interrupted", heard);
+        }
+    }
+
+    /// One event of `Agent.chat.reply`.
+    async fn chat_event(&mut self, data: &Data) {
+        let event = match serde_json::from_slice::<ChatEvent>(&data.payload) {
+            Ok(event) => event,
+            Err(e) => {
+                self.counters.bad_messages += 1;
+                warn!("brain: bad message on {}: {e}", channels::CHAT_REPLY.name);
+                return;
+            }
+        };
+        if let ChatEvent::Sentence { text, .. } = &event
+            && self.chats.running() == Some(event.turn())
+        {
+            self.echo.said(Instant::now().into_std(), text);
+            self.saying = Some(text.clone());
+        }
+        let playout_end = self.playout.speaking_until(Instant::now());
+        let next = self.chats.event(event, playout_end);
+        self.chat_next(next).await;
+    }
+
+    async fn chat_next(&mut self, next: Next) {
+        match next {
+            Next::Nothing => {}
+            Next::Trace { turn, step, text } => self.chat_trace(turn, step, text),
+            Next::Call {
+                turn,
+                service,
+                payload,
+            } => {
+                let listed = self
+                    .brain
+                    .program()
+                    .tools()
+                    .iter()
+                    .any(|tool| tool.service == service);
+                let text = payload.to_string();
+                if !listed {
+                    warn!(
+                        service,
+                        "brain: the model called a service the program does not list"
+                    );
+                    self.chat_trace(turn, "failed", format!("{service} is not a tool: {text}"));
+                    return;
+                }
+                self.chat_trace(turn, "call", format!("{service} {text}"));
+                let action = Action::Call {
+                    service,
+                    payload: wire::value_from_json(payload),
+                };
+                self.actuators.perform(Effect::Fire(action)).await;
+            }
+            Next::Failed { turn, reason } => {
+                warn!(turn, "brain: the chat turn failed: {reason}");
+                self.chat_trace(turn, "failed", reason.clone());
+                self.perceive(
+                    "failed",
+                    vec![Value::Text("chat".into()), Value::Text(reason)],
+                );
+            }
+        }
+    }
+
+    fn chat_trace(&mut self, turn: u64, step: &str, text: String) {
+        let now = self.now();
+        let active = wire::rule_path(&self.active_rules());
+        let message = wire::chat_message(
+            now.clock.unix_ms,
+            self.brain.program().origin(),
+            &active,
+            ChatStep {
+                turn,
+                step: step.to_owned(),
+                text,
+            },
+        );
+        if let Ok(false) = self.rules.try_publish(message) {
+            debug!("brain: a chat trace entry was dropped, the link is busy");
+        }
+    }
+
+    /// What the agent perceives now, for a chat turn.
+    fn facts(&self, now: &Now) -> Facts {
+        let store = self.brain.store();
+        let fresh = |name: &str, window: Duration| {
+            store
+                .named(name)
+                .find(|fact| fact.is_fresh(now.at, Some(window)))
+                .map(|fact| fact.args.clone())
+        };
+        let text = |value: Option<&Value>| {
+            value.map(|v| v.as_text().map_or_else(|| v.to_string(), str::to_owned))
+        };
+        let face = fresh("face", Duration::from_millis(1500));
+        let faces = face
+            .as_ref()
+            .and_then(|args| match args.first() {
+                Some(Value::Num(n)) => Some(*n as u32),
+                _ => None,
+            })
+            .unwrap_or(0);
+        let field = |path: [&str; 2]| {
+            now.clock
+                .field(&path.map(str::to_owned))
+                .map(|v| v.to_string())
+                .unwrap_or_default()
+        };
+        Facts {
+            faces,
+            face_where: face.as_ref().and_then(|args| text(args.get(1))),
+            code: fresh("code", Duration::from_secs(10)).and_then(|args| text(args.first())),
+            motion: fresh("motion", Duration::from_millis(1500))
+                .and_then(|args| text(args.first())),
+            time: field(["time", "spoken"]),
+            date: field(["date", "spoken"]),
+            last_said: store
+                .named(agent_brain::SAID)
+                .next()
+                .and_then(|fact| text(fact.args.first())),
+        }
+    }
+
+    /// Starts a chat turn for `chat(T)` or `chat(T, "Service")`.
+    fn chat(&mut self, now: &Now, text: &str, tool: Option<String>) {
+        let tools: Vec<Tool> = self
+            .brain
+            .program()
+            .tools()
+            .iter()
+            .map(|tool| Tool {
+                service: tool.service.clone(),
+                description: tool.description.clone(),
+                args: tool.args.clone(),
+            })
+            .collect();
+        let facts = self.facts(now);
+        let turn = self
+            .chats
+            .start(text, self.language.code(), facts, tools, tool);
+        debug!(turn, text, "brain: a chat turn starts");
     }
 
     fn outcome(&mut self, outcome: Outcome) {
@@ -376,7 +550,20 @@ impl Mind {
                 self.saying = Some(text.clone());
             }
             if matches!(effect, Effect::Fire(Action::Cancel)) {
+                self.chat_interrupted();
                 self.playout.stop();
+            }
+            match effect.action() {
+                Action::Chat { text, tool } if !matches!(effect, Effect::Stop(_)) => {
+                    let (text, tool) = (text.clone(), tool.clone());
+                    self.chat(&now, &text, tool);
+                    continue;
+                }
+                Action::ForgetConversation => {
+                    self.chats.forget();
+                    continue;
+                }
+                _ => {}
             }
             self.actuators.perform(effect).await;
         }

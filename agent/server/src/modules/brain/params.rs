@@ -39,6 +39,16 @@ pub struct BrainParams {
     /// recent utterance for the transcript to be dropped as an echo.
     #[serde(default = "default_echo_threshold")]
     pub echo_threshold: f64,
+    /// How long a `chat` turn may take, from the request to the last sentence, before it counts as failed (the
+    /// language-model satellite ends a reply by its own `--timeout-s` first).
+    #[serde(default = "default_chat_timeout_ms")]
+    pub chat_timeout_ms: u64,
+    /// Turns of the conversation a chat turn carries (and the pair database keeps), each a question and its reply.
+    #[serde(default = "default_chat_memory_turns")]
+    pub chat_memory_turns: usize,
+    /// The conversation is forgotten after this long without a chat turn.
+    #[serde(default = "default_chat_forget_after_s")]
+    pub chat_forget_after_s: u64,
     /// The local time zone as minutes east of UTC, for `time.*`; by default the server's own.
     #[serde(default)]
     pub utc_offset_minutes: Option<i32>,
@@ -60,6 +70,18 @@ fn default_command_timeout_ms() -> u64 {
 
 fn default_call_timeout_ms() -> u64 {
     3000
+}
+
+fn default_chat_timeout_ms() -> u64 {
+    30_000
+}
+
+fn default_chat_memory_turns() -> usize {
+    6
+}
+
+fn default_chat_forget_after_s() -> u64 {
+    600
 }
 
 fn default_answer_chars() -> usize {
@@ -106,6 +128,8 @@ impl BrainParams {
         for (key, value) in [
             ("command_timeout_ms", self.command_timeout_ms),
             ("call_timeout_ms", self.call_timeout_ms),
+            ("chat_timeout_ms", self.chat_timeout_ms),
+            ("chat_forget_after_s", self.chat_forget_after_s),
         ] {
             if value == 0 {
                 return Err((key, "must be at least 1".into()));
@@ -141,6 +165,14 @@ impl BrainParams {
 
     pub fn call_timeout(&self) -> Duration {
         Duration::from_millis(self.call_timeout_ms)
+    }
+
+    pub fn chat_timeout(&self) -> Duration {
+        Duration::from_millis(self.chat_timeout_ms)
+    }
+
+    pub fn chat_forget_after(&self) -> Duration {
+        Duration::from_secs(self.chat_forget_after_s)
     }
 
     pub fn echo_window(&self) -> Duration {

@@ -3,7 +3,7 @@
 
 use agent_brain::{Trace, Value};
 use agent_contract::avatar::AvatarCommand;
-use agent_contract::rules::RuleChange;
+use agent_contract::rules::{ChatStep, RuleChange};
 
 /// The `Agent.rules` message for one rule change: the fields the page shows (`ts_ms`, `program`, `rule`,
 /// `action`, `because`) and the full trace for tools.
@@ -34,6 +34,7 @@ pub fn trace_message(trace: &Trace, origin: &str) -> Vec<u8> {
         because,
         trace: serde_json::to_value(trace).unwrap_or_default(),
         interrupted: None,
+        chat: None,
     };
     // Plain data with string keys always serialises.
     serde_json::to_vec(&message).unwrap_or_default()
@@ -63,6 +64,26 @@ pub fn interruption_message(unix_ms: i64, origin: &str, active: &str, said: &str
         because: vec!["the user spoke over it".to_owned()],
         trace: serde_json::Value::Null,
         interrupted: Some(said.to_owned()),
+        chat: None,
+    };
+    serde_json::to_vec(&message).unwrap_or_default()
+}
+
+/// The `Agent.rules` entry of one step of a chat turn, under the rule path `active`.
+pub fn chat_message(unix_ms: i64, origin: &str, active: &str, step: ChatStep) -> Vec<u8> {
+    let program = std::path::Path::new(origin)
+        .file_name()
+        .map_or(origin.into(), |name| name.to_string_lossy());
+    let message = RuleChange {
+        ts_ms: unix_ms,
+        program: program.into_owned(),
+        rule: active.to_owned(),
+        index: 0,
+        action: format!("chat {} {}: {}", step.turn, step.step, step.text),
+        because: Vec::new(),
+        trace: serde_json::Value::Null,
+        interrupted: None,
+        chat: Some(step),
     };
     serde_json::to_vec(&message).unwrap_or_default()
 }

@@ -1,0 +1,381 @@
+//! The brain's chat turns (`chat(T)`): one turn at a time handed to the language-model satellite over `Agent.chat`,
+//! its sentences spoken as they arrive on `Agent.chat.reply`, stopped by a barge-in or `cancel`, and the
+//! conversation kept in the pair database (forgotten after an idle time or by `forget_conversation`).
+
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use agent_contract::channels::CHAT;
+use agent_contract::chat::{ChatAnswer, ChatEvent, ChatMessage, ChatRequest, Facts, Role, Tool};
+use flow::Client;
+use serde::{Deserialize, Serialize};
+use tokio::sync::mpsc;
+use tokio::time::Instant;
+use tracing::{debug, info, warn};
+
+use super::speech::Speech;
+
+/// The pair-database key of the conversation.
+pub const MEMORY_KEY: &str = "agent.chat.memory";
+
+/// How long a cancel may take to reach the satellite.
+const CANCEL_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Finished calls waiting for the brain's loop (one per turn; turns are seconds apart).
+pub const DONE_QUEUE: usize = 8;
+
+/// The end of a turn's `Agent.chat` call.
+#[derive(Debug)]
+pub struct Done {
+    pub turn: u64,
+    pub result: Result<ChatAnswer, String>,
+}
+
+/// What the loop must do after a chat event or the end of a call.
+#[derive(Debug, PartialEq)]
+pub enum Next {
+    Nothing,
+    /// Put a step in the rule trace.
+    Trace {
+        turn: u64,
+        step: &'static str,
+        text: String,
+    },
+    /// The model called a tool: perform the call (the rule program listed it).
+    Call {
+        turn: u64,
+        service: String,
+        payload: serde_json::Value,
+    },
+    /// The turn failed: assert `failed("chat", reason)`.
+    Failed {
+        turn: u64,
+        reason: String,
+    },
+}
+
+/// The conversation as the pair database keeps it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+struct Memory {
+    /// When the last turn ended (ms since the Unix epoch).
+    updated_ms: i64,
+    lines: Vec<ChatMessage>,
+}
+
+/// A sentence sent to the TTS module, and when its audio should start.
+#[derive(Debug)]
+struct Said {
+    text: String,
+    starts: Instant,
+}
+
+/// The turn in progress.
+#[derive(Debug)]
+struct Turn {
+    turn: u64,
+    text: String,
+    said: Vec<Said>,
+    /// Set when the user interrupted it: what they heard of the reply.
+    interrupted: Option<Vec<String>>,
+}
+
+/// The brain's side of chat turns.
+#[derive(Debug)]
+pub struct Chats {
+    client: Client,
+    speech: Speech,
+    done: mpsc::Sender<Done>,
+    timeout: Duration,
+    memory_turns: usize,
+    forget_after: Duration,
+    next_turn: u64,
+    current: Option<Turn>,
+    /// The sentences of the last finished turn, while they may still be playing: a barge-in then shortens the
+    /// reply the memory keeps to what was heard.
+    finished: Vec<Said>,
+    memory: Memory,
+}
+
+impl Chats {
+    pub fn new(
+        client: Client,
+        speech: Speech,
+        done: mpsc::Sender<Done>,
+        timeout: Duration,
+        memory_turns: usize,
+        forget_after: Duration,
+    ) -> Chats {
+        Chats {
+            client,
+            speech,
+            done,
+            timeout,
+            memory_turns,
+            forget_after,
+            next_turn: unix_ms() as u64,
+            current: None,
+            finished: Vec::new(),
+            memory: Memory::default(),
+        }
+    }
+
+    /// Reads the conversation the pair database kept (a restart keeps it), unless it has been idle too long.
+    pub async fn recall(&mut self) {
+        match self.client.var_get(MEMORY_KEY).await {
+            Ok(Some(value)) => match serde_json::from_value::<Memory>(value) {
+                Ok(memory) if !self.stale(&memory) => {
+                    info!(
+                        lines = memory.lines.len(),
+                        "brain: the conversation is recalled"
+                    );
+                    self.memory = memory;
+                }
+                Ok(_) => debug!("brain: the kept conversation is too old"),
+                Err(e) => warn!("brain: {MEMORY_KEY} is not a conversation: {e}"),
+            },
+            Ok(None) => {}
+            Err(e) => debug!("brain: reading {MEMORY_KEY} failed: {e}"),
+        }
+    }
+
+    fn stale(&self, memory: &Memory) -> bool {
+        unix_ms().saturating_sub(memory.updated_ms) > self.forget_after.as_millis() as i64
+    }
+
+    /// Forgets the conversation (`forget_conversation`).
+    pub fn forget(&mut self) {
+        self.memory = Memory::default();
+        let client = self.client.clone();
+        tokio::spawn(async move {
+            if let Err(e) = client.var_del(MEMORY_KEY).await {
+                debug!("brain: forgetting the conversation failed: {e}");
+            }
+        });
+        info!("brain: the conversation is forgotten");
+    }
+
+    /// Starts a turn; one still running is cancelled first. Returns its number.
+    pub fn start(
+        &mut self,
+        text: &str,
+        language: &str,
+        facts: Facts,
+        tools: Vec<Tool>,
+        force_tool: Option<String>,
+    ) -> u64 {
+        self.interrupt(Instant::now());
+        if self.stale(&self.memory) && !self.memory.lines.is_empty() {
+            self.memory = Memory::default();
+        }
+        self.next_turn += 1;
+        let turn = self.next_turn;
+        let request = ChatRequest {
+            turn,
+            text: text.to_owned(),
+            language: language.to_owned(),
+            facts,
+            history: self.memory.lines.clone(),
+            tools,
+            force_tool,
+            speculative: false,
+        };
+        self.current = Some(Turn {
+            turn,
+            text: text.to_owned(),
+            said: Vec::new(),
+            interrupted: None,
+        });
+        let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);
+        let body = serde_json::to_vec(&request).unwrap_or_default();
+        tokio::spawn(async move {
+            let result = match client.call(CHAT.name, body, timeout).await {
+                Ok(answer) => serde_json::from_slice::<ChatAnswer>(&answer)
+                    .map_err(|e| format!("the model's answer is malformed: {e}")),
+                Err(e) => Err(e.to_string()),
+            };
+            // The queue holds a turn's end per turn; a full one means the loop is gone.
+            let _ = done.send(Done { turn, result }).await;
+        });
+        turn
+    }
+
+    /// An event of `Agent.chat.reply`. `playout_end` is when the speech already queued ends.
+    pub fn event(&mut self, event: ChatEvent, playout_end: Option<Instant>) -> Next {
+        let Some(current) = self
+            .current
+            .as_mut()
+            .filter(|t| t.turn == event.turn() && t.interrupted.is_none())
+        else {
+            return Next::Nothing;
+        };
+        match event {
+            ChatEvent::Prompt { turn, prompt, .. } => Next::Trace {
+                turn,
+                step: "prompt",
+                text: prompt,
+            },
+            ChatEvent::Sentence { turn, text, .. } => {
+                let speech = self.speech.clone();
+                let spoken = text.clone();
+                tokio::spawn(async move { speech.say(&spoken, false).await });
+                current.said.push(Said {
+                    text: text.clone(),
+                    starts: playout_end.unwrap_or_else(Instant::now),
+                });
+                Next::Trace {
+                    turn,
+                    step: "sentence",
+                    text,
+                }
+            }
+            ChatEvent::Call { turn, call } => Next::Call {
+                turn,
+                service: call.service,
+                payload: call.payload,
+            },
+            ChatEvent::End {
+                turn,
+                finish,
+                stats,
+            } => Next::Trace {
+                turn,
+                step: "end",
+                text: format!(
+                    "{} after {} tokens, first token in {} ms{}",
+                    serde_json::to_value(finish)
+                        .ok()
+                        .and_then(|v| v.as_str().map(str::to_owned))
+                        .unwrap_or_default(),
+                    stats.tokens,
+                    stats.first_token_ms,
+                    if stats.speculated { ", speculated" } else { "" }
+                ),
+            },
+        }
+    }
+
+    /// The user spoke over the reply, or a rule cancelled speech: generation stops and the memory keeps what they
+    /// heard. Returns the trace text when a turn was running.
+    pub fn interrupt(&mut self, at: Instant) -> Option<(u64, String)> {
+        let finished = std::mem::take(&mut self.finished);
+        if self.current.is_none() && finished.iter().any(|s| s.starts > at) {
+            let heard: Vec<String> = finished
+                .iter()
+                .filter(|s| s.starts <= at)
+                .map(|s| s.text.clone())
+                .collect();
+            if let Some(last) = self.memory.lines.last_mut()
+                && last.role == Role::Assistant
+            {
+                last.text = heard.join(" ");
+                last.interrupted = true;
+                self.save();
+            }
+            return None;
+        }
+        let current = self.current.as_mut()?;
+        if current.interrupted.is_some() {
+            return None;
+        }
+        let heard: Vec<String> = current
+            .said
+            .iter()
+            .filter(|s| s.starts <= at)
+            .map(|s| s.text.clone())
+            .collect();
+        let turn = current.turn;
+        current.interrupted = Some(heard.clone());
+        let client = self.client.clone();
+        let body = format!(r#"{{"cancel":{turn}}}"#);
+        tokio::spawn(async move {
+            if let Err(e) = client.call(CHAT.name, body, CANCEL_TIMEOUT).await {
+                debug!(turn, "brain: cancelling the chat turn failed: {e}");
+            }
+        });
+        Some((turn, heard.join(" ")))
+    }
+
+    /// A turn's call ended.
+    pub fn done(&mut self, done: Done) -> Next {
+        let Some(current) = self.current.take_if(|t| t.turn == done.turn) else {
+            return Next::Nothing;
+        };
+        match done.result {
+            Ok(answer) => {
+                let (reply, interrupted) = match current.interrupted {
+                    Some(heard) => (heard.join(" "), true),
+                    None => (
+                        current
+                            .said
+                            .iter()
+                            .map(|s| s.text.as_str())
+                            .collect::<Vec<_>>()
+                            .join(" "),
+                        false,
+                    ),
+                };
+                let reply = match (&answer.call, reply.is_empty()) {
+                    (Some(call), true) => format!("(called {})", call.service),
+                    _ => reply,
+                };
+                if !interrupted {
+                    self.finished = current.said;
+                }
+                self.remember(current.text, reply, interrupted);
+                Next::Nothing
+            }
+            // A turn the user interrupted may end with the satellite's error: nothing to apologise for.
+            Err(_) if current.interrupted.is_some() => Next::Nothing,
+            Err(reason) => Next::Failed {
+                turn: done.turn,
+                reason,
+            },
+        }
+    }
+
+    fn remember(&mut self, question: String, reply: String, interrupted: bool) {
+        let lines = &mut self.memory.lines;
+        lines.push(ChatMessage {
+            role: Role::User,
+            text: question,
+            interrupted: false,
+        });
+        lines.push(ChatMessage {
+            role: Role::Assistant,
+            text: reply,
+            interrupted,
+        });
+        let keep = self.memory_turns * 2;
+        if lines.len() > keep {
+            lines.drain(..lines.len() - keep);
+        }
+        self.memory.updated_ms = unix_ms();
+        self.save();
+    }
+
+    /// Writes the conversation to the pair database.
+    fn save(&self) {
+        let (client, value) = (
+            self.client.clone(),
+            serde_json::to_value(&self.memory).unwrap_or_default(),
+        );
+        tokio::spawn(async move {
+            if let Err(e) = client.var_set(MEMORY_KEY, &value).await {
+                warn!("brain: keeping the conversation failed: {e}");
+            }
+        });
+    }
+
+    /// Whether a turn is running (generating or speaking).
+    pub fn running(&self) -> Option<u64> {
+        self.current
+            .as_ref()
+            .filter(|t| t.interrupted.is_none())
+            .map(|t| t.turn)
+    }
+}
+
+fn unix_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
