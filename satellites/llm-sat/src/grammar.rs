@@ -341,13 +341,13 @@ mod tests {
 
     #[test]
     fn a_tool_without_args_takes_an_empty_object_and_one_without_values_any_text() {
-        let none = forced_call(&tool("Agent.wave", &[]));
+        let none = forced_call(&tool("Body.wave", &[]));
         assert!(
             none.gbnf.starts_with(r#"root ::= "{" ws "}""#),
             "{}",
             none.gbnf
         );
-        let free = forced_call(&tool("Agent.say", &[("text", &[])]));
+        let free = forced_call(&tool("Body.say", &[("text", &[])]));
         assert!(
             free.gbnf.contains("a-v0 ::= string\n") && free.gbnf.contains("string ::="),
             "{}",
@@ -514,7 +514,7 @@ mod tests {
         assert!(admits(&forced, r#"{"colour": "say \"hi\""}"#));
         assert!(admits(&forced, r#"{"colour":"back\\slash"}"#));
         assert!(!admits(&forced, r#"{"colour": "blue"}"#));
-        let offered = reply_or_call(&[robot(), lamp(), tool("Agent.say", &[("text", &[])])]);
+        let offered = reply_or_call(&[robot(), lamp(), tool("Body.say", &[("text", &[])])]);
         assert!(admits(&offered, "Hello there, how are you?"));
         assert!(admits(
             &offered,
@@ -522,10 +522,10 @@ mod tests {
         ));
         assert!(admits(
             &offered,
-            r#"{"tool":"Agent.say","args":{"text":"any \"words\" at all"}}"#
+            r#"{"tool":"Body.say","args":{"text":"any \"words\" at all"}}"#
         ));
         assert!(!admits(&offered, r#"{"tool": "Door.open""#));
         assert!(!admits(&offered, "Two\nlines"));
-        assert!(admits(&forced_call(&tool("Agent.wave", &[])), "{}"));
+        assert!(admits(&forced_call(&tool("Body.wave", &[])), "{}"));
     }
 }
