@@ -31,6 +31,8 @@ fn contract_channels(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     headers.set_item(channels::SAY.name, channels::headers::SAY)?;
     headers.set_item(channels::RULES.name, channels::headers::RULES)?;
     headers.set_item(channels::TRANSCRIPT.name, channels::headers::TRANSCRIPT)?;
+    headers.set_item(channels::CHAT.name, channels::headers::CHAT)?;
+    headers.set_item(channels::CHAT_REPLY.name, channels::headers::CHAT_REPLY)?;
     out.set_item("headers", headers)?;
     out.set_item("asr_claim_prefix", channels::ASR_CLAIM_PREFIX)?;
     out.set_item("asr_presence_prefix", channels::ASR_PRESENCE_PREFIX)?;

@@ -1,7 +1,9 @@
 """The end-to-end "turn left": with every module on, as `make run` starts them, a transcript "turn left" makes the
 brain call Robot.command, which examples/body.py serves; its reply is spoken (a caption and speech PCM)."""
 
-from conftest import EXAMPLES, PATIENCE, Agent, wait_subscribers, wait_until
+import subprocess
+
+from conftest import EXAMPLES, PATIENCE, REPO, Agent, binary, wait_subscribers, wait_until
 from flow import Client, agent as contract
 
 
@@ -31,3 +33,48 @@ def test_turn_left_is_served_by_the_python_body_and_its_answer_is_spoken(tmp_pat
         body.wait()
         hub.stop()
     assert "body: turned left, heading 270 degrees" in out, out
+
+
+def test_a_head_turning_request_reaches_the_python_body_through_the_models_forced_tool_call(tmp_path):
+    """"Face the window" is no exact command: the default program's `move` rule hands it to the language model with
+    `chat(T, "Robot.command")`, whose grammar lets it answer only with a valid call; the brain performs the call
+    and the body's answer is spoken. Which way the model turns is its choice: the test holds the path, not the
+    direction."""
+    hub = Agent(tmp_path / "data").start()
+    body = hub.python(EXAMPLES / "body.py")
+    model = REPO / "models" / "llm" / "SmolLM2-135M-Instruct.Q4_1.gguf"
+    llm = subprocess.Popen(
+        [str(binary("llm-sat")), "--addr", hub.addr, "--data-dir", str(hub.data_dir), "--model", str(model)],
+        stdin=subprocess.DEVNULL,
+    )
+    try:
+        with Client.connect(hub.addr, data_dir=str(hub.data_dir), name="ears", queue=4096) as client:
+            names = lambda: {c["name"] for c in client.channels()}  # noqa: E731
+            wait_until("the body and the model to serve", lambda: {"Robot.command", contract.CHAT} <= names())
+            avatar = client.subscribe(contract.AVATAR)
+            replies = client.subscribe(contract.CHAT_REPLY)
+            transcript = client.publisher(contract.TRANSCRIPT, contract.HEADERS[contract.TRANSCRIPT])
+            wait_subscribers(client, contract.TRANSCRIPT, 2)
+            transcript.publish({"text": "Please face the window.", "final": True})
+            while True:
+                event = replies.recv(timeout=PATIENCE).json()
+                if event["event"] == "call":
+                    break
+                assert event["event"] != "end", f"the turn ended without a call: {event}"
+            assert event["call"]["service"] == "Robot.command"
+            assert event["call"]["payload"]["action"] == "turn"
+            assert event["call"]["payload"]["direction"] in ("left", "right")
+            while True:
+                command = contract.Avatar.from_msg(avatar.recv(timeout=PATIENCE))
+                if command.cmd == "say" and command.text.startswith("Turning "):
+                    break
+            direction = event["call"]["payload"]["direction"]
+            assert command.text.startswith(f"Turning {direction}.")
+    finally:
+        llm.kill()
+        llm.wait()
+        body.kill()
+        out = body.stdout.read().decode()
+        body.wait()
+        hub.stop()
+    assert f"body: turned {direction}" in out, out

@@ -55,6 +55,8 @@ CODES = _name("codes")
 DETECTIONS = _name("detections")
 RULES = _name("rules")
 ASR_SUBMIT = _name("asr.submit")
+CHAT = _name("chat")
+CHAT_REPLY = _name("chat.reply")
 
 
 class Record:
