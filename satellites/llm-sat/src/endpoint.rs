@@ -1,6 +1,6 @@
 //! The remote generator: an OpenAI-compatible server (llama-server, Ollama, vLLM, llama-cpp-python) streaming
 //! `/chat/completions` as server-sent events, for a bigger model on a machine with a GPU. A constraint goes as a
-//! JSON-schema `response_format`.
+//! JSON-schema `response_format`, in the shape the server takes ([`SchemaFormat`]).
 
 use std::io::{BufRead, BufReader};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -21,6 +21,16 @@ pub struct EndpointOptions {
     pub model: String,
     pub api_key: Option<String>,
     pub temperature: f32,
+    pub schema_format: SchemaFormat,
+}
+
+/// How a constraint's JSON schema is sent: servers differ.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SchemaFormat {
+    /// `{"type": "json_object", "schema": ...}`: llama-server, llama-cpp-python.
+    JsonObject,
+    /// `{"type": "json_schema", "json_schema": {"name", "schema", "strict"}}`: OpenAI, vLLM, llama-server.
+    JsonSchema,
 }
 
 /// A client of one OpenAI-compatible server.
@@ -59,10 +69,15 @@ impl Endpoint {
             "temperature": self.options.temperature,
         });
         if let Some(constraint) = constraint {
-            body["response_format"] = json!({
-                "type": "json_schema",
-                "json_schema": { "name": "call", "strict": true, "schema": constraint.schema },
-            });
+            body["response_format"] = match self.options.schema_format {
+                SchemaFormat::JsonObject => {
+                    json!({ "type": "json_object", "schema": constraint.schema })
+                }
+                SchemaFormat::JsonSchema => json!({
+                    "type": "json_schema",
+                    "json_schema": { "name": "call", "strict": true, "schema": constraint.schema },
+                }),
+            };
         }
         body
     }

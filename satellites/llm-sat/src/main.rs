@@ -7,7 +7,7 @@ use std::time::Duration;
 use anyhow::Context;
 use flow::token::{TokenKind, resolve_token};
 use flow::{Client, ConnectOptions, FlowAddr};
-use llm_sat::endpoint::{Endpoint, EndpointOptions};
+use llm_sat::endpoint::{Endpoint, EndpointOptions, SchemaFormat};
 use llm_sat::engine::{Engine, EngineOptions};
 use llm_sat::generator::Generator;
 use llm_sat::satellite::{self, Settings};
@@ -44,6 +44,10 @@ struct Args {
     /// The model name sent to the endpoint.
     #[arg(long, default_value = "default")]
     endpoint_model: String,
+    /// How the endpoint takes a JSON schema for tool calls: `json-object` (llama-server, llama-cpp-python) or
+    /// `json-schema` (OpenAI, vLLM).
+    #[arg(long, value_enum, default_value = "json-object")]
+    schema_format: SchemaFormat,
     /// API key for the endpoint (sent as a bearer token).
     #[arg(long, env = "LLM_API_KEY", hide_env_values = true)]
     api_key: Option<String>,
@@ -94,6 +98,7 @@ fn main() -> anyhow::Result<()> {
             model: args.endpoint_model.clone(),
             api_key: args.api_key.clone(),
             temperature: args.temperature,
+            schema_format: args.schema_format,
         })),
         None => Box::new(
             Engine::load(
