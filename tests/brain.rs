@@ -327,7 +327,7 @@ async fn the_program_file_is_reloaded_and_a_broken_edit_keeps_the_old_one() -> a
     rig.hear("hello").await?;
     assert_eq!(rig.next_caption().await?, "Hi! Nice to hear from you.");
 
-    // A mistake on line 30: the error names the place, and the previous version keeps answering.
+    // A mistake on line 34: the error names the place, and the previous version keeps answering.
     let broken: String = program
         .replace("Hello! How can I help you?", "Hi! Nice to hear from you.")
         .replace(
@@ -339,10 +339,10 @@ async fn the_program_file_is_reloaded_and_a_broken_edit_keeps_the_old_one() -> a
         .output
         .wait_for("does not load, the previous one keeps running", 1, PATIENCE)
         .await?;
-    let errors = rig.agent.output.matching("brain.tr:30:");
+    let errors = rig.agent.output.matching("brain.tr:34:");
     if errors.is_empty() {
         bail!(
-            "no error naming brain.tr:30:\n{}",
+            "no error naming brain.tr:34:\n{}",
             rig.agent.output.lines().join("\n")
         );
     }
