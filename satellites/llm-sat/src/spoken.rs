@@ -5,6 +5,11 @@
 const SOFT_LIMIT: usize = 200;
 /// Text without any space is cut here (a run-away token stream must not grow the buffer without end).
 const HARD_LIMIT: usize = 400;
+/// The reply's first sentence is cut at a clause (`,` `;` `:` and whitespace) once it has this many words: the
+/// first audio then starts while the rest of that sentence is generated. Later sentences wait for their end.
+const FIRST_CLAUSE_WORDS: usize = 6;
+/// Characters that end a clause.
+const CLAUSE_ENDS: [char; 3] = [',', ';', ':'];
 /// Characters that end a sentence when whitespace follows them.
 const TERMINALS: [char; 4] = ['.', '!', '?', '…'];
 /// Characters that may close a sentence after its terminal: `"Yes."` and `**Done.**` end where the closer does.
@@ -30,12 +35,18 @@ pub struct Sentences {
     max_sentences: u32,
     count: u32,
     capped: bool,
+    /// A piece was handed out already (the first clause or sentence).
+    started: bool,
 }
 
 /// Where the pending text is cut.
 enum Cut {
-    /// The sentence is `pending[..end]`; the next one starts at `resume`.
-    At { end: usize, resume: usize },
+    /// The sentence (or, for the first, a clause of it) is `pending[..end]`; the next one starts at `resume`.
+    At {
+        end: usize,
+        resume: usize,
+        clause: bool,
+    },
     /// No end is known yet.
     Wait,
 }
@@ -60,6 +71,7 @@ impl Sentences {
             max_sentences,
             count: 0,
             capped: false,
+            started: false,
         }
     }
 
@@ -80,10 +92,14 @@ impl Sentences {
             self.trim_start();
             match self.next_cut() {
                 Cut::Wait => break,
-                Cut::At { end, resume } => {
+                Cut::At {
+                    end,
+                    resume,
+                    clause,
+                } => {
                     let raw: String = self.pending[..end].iter().collect();
                     self.pending.drain(..resume);
-                    self.hand_out(&raw, &mut done);
+                    self.hand_out(&raw, clause, &mut done);
                     if self.capped {
                         break;
                     }
@@ -100,7 +116,7 @@ impl Sentences {
         }
         let raw: String = self.pending.drain(..).collect();
         let mut done = Vec::new();
-        self.hand_out(&raw, &mut done);
+        self.hand_out(&raw, false, &mut done);
         self.in_fence = false;
         done.pop()
     }
@@ -129,12 +145,17 @@ impl Sentences {
     fn next_cut(&self) -> Cut {
         for (i, &c) in self.pending.iter().enumerate() {
             if i >= HARD_LIMIT {
-                return Cut::At { end: i, resume: i };
+                return Cut::At {
+                    end: i,
+                    resume: i,
+                    clause: false,
+                };
             }
             if c == '\n' {
                 return Cut::At {
                     end: i,
                     resume: i + 1,
+                    clause: false,
                 };
             }
             if self.in_fence {
@@ -142,13 +163,39 @@ impl Sentences {
             }
             if TERMINALS.contains(&c) {
                 match self.verdict(i) {
-                    Verdict::End(end) => return Cut::At { end, resume: end },
+                    Verdict::End(end) => {
+                        return Cut::At {
+                            end,
+                            resume: end,
+                            clause: false,
+                        };
+                    }
                     Verdict::Unknown => return Cut::Wait,
                     Verdict::NotEnd => {}
                 }
             }
+            if !self.started && CLAUSE_ENDS.contains(&c) {
+                match self.pending.get(i + 1) {
+                    None => return Cut::Wait,
+                    Some(after)
+                        if after.is_whitespace()
+                            && words(&self.pending[..i]) >= FIRST_CLAUSE_WORDS =>
+                    {
+                        return Cut::At {
+                            end: i + 1,
+                            resume: i + 1,
+                            clause: true,
+                        };
+                    }
+                    Some(_) => {}
+                }
+            }
             if c.is_whitespace() && i >= SOFT_LIMIT {
-                return Cut::At { end: i, resume: i };
+                return Cut::At {
+                    end: i,
+                    resume: i,
+                    clause: false,
+                };
             }
         }
         Cut::Wait
@@ -200,13 +247,18 @@ impl Sentences {
     }
 
     /// Hands out one cut of the text: its code dropped, in spoken form, if anything of it is left to speak.
-    fn hand_out(&mut self, raw: &str, done: &mut Vec<String>) {
+    fn hand_out(&mut self, raw: &str, clause: bool, done: &mut Vec<String>) {
         let outside = self.outside_fences(raw);
         let spoken = speakable(&outside, &self.language);
         if !spoken.chars().any(char::is_alphanumeric) {
             return;
         }
         done.push(spoken);
+        self.started = true;
+        // A clause is part of a sentence: the cap counts whole sentences.
+        if clause {
+            return;
+        }
         self.count += 1;
         if self.max_sentences > 0 && self.count >= self.max_sentences {
             self.capped = true;
@@ -228,6 +280,13 @@ impl Sentences {
         }
         kept
     }
+}
+
+/// How many words `text` holds.
+fn words(text: &[char]) -> usize {
+    text.split(|c| c.is_whitespace())
+        .filter(|w| w.iter().any(|c| c.is_alphanumeric()))
+        .count()
 }
 
 /// `p.m.`, `U.S.`, `a.C.`: letters each followed by a dot, at least two of them.
@@ -761,6 +820,24 @@ mod tests {
         let mut out = sentences.push(text);
         out.extend(sentences.finish());
         out
+    }
+
+    #[test]
+    fn the_first_sentence_is_cut_at_a_clause_once_it_has_six_words_and_the_cap_counts_sentences() {
+        let mut split = Sentences::new(2);
+        let mut out =
+            split.push("Well, the sky looks blue to us, because air scatters blue light. ");
+        out.extend(split.push("It is called Rayleigh scattering, after a physicist. A third one."));
+        out.extend(split.finish());
+        assert_eq!(
+            out,
+            [
+                "Well, the sky looks blue to us,",
+                "because air scatters blue light.",
+                "It is called Rayleigh scattering, after a physicist.",
+            ]
+        );
+        assert!(split.capped());
     }
 
     fn split_char_by_char(text: &str) -> Vec<String> {
