@@ -32,6 +32,12 @@ pub struct ChatRequest {
     /// publishes nothing until the same turn is asked for again without this flag, and drops it otherwise.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub speculative: bool,
+    /// The agent's limits for this reply (`[modules.brain] chat_max_sentences`, `chat_timeout_ms`); the satellite
+    /// applies the lower of these and its own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_sentences: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timeout_ms: Option<u64>,
 }
 
 /// What the agent perceives when the turn starts. Texts read from the world (a code) are quoted as data in the

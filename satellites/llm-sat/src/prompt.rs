@@ -189,6 +189,8 @@ mod tests {
             }],
             force_tool: None,
             speculative: false,
+            max_sentences: None,
+            timeout_ms: None,
         }
     }
 

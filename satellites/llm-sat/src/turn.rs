@@ -52,11 +52,18 @@ pub enum TurnError {
 pub fn run(
     generator: &mut dyn Generator,
     request: &ChatRequest,
-    limits: TurnLimits,
+    mut limits: TurnLimits,
     cancel: &AtomicBool,
     step: &mut dyn FnMut(Step),
 ) -> Result<Outcome, TurnError> {
     let started = Instant::now();
+    // The agent's limits for this reply, where they are lower than the satellite's own.
+    if let Some(max) = request.max_sentences.filter(|&m| m > 0) {
+        limits.max_sentences = limits.max_sentences.min(max);
+    }
+    if let Some(ms) = request.timeout_ms {
+        limits.timeout = limits.timeout.min(Duration::from_millis(ms));
+    }
     let chat = prompt::chat(request, limits.offer_tools);
     step(Step::Prompt(generator.render(&chat)?));
     let forced = request

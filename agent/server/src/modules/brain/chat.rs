@@ -14,6 +14,13 @@ use tracing::{debug, info, warn};
 
 use super::speech::Speech;
 
+/// The limits of a reply, from the configuration.
+#[derive(Debug, Clone, Copy)]
+pub struct ChatLimits {
+    pub max_sentences: u32,
+    pub reply_timeout: Duration,
+}
+
 /// The pair-database key of the conversation.
 pub const MEMORY_KEY: &str = "agent.chat.memory";
 
@@ -85,6 +92,8 @@ pub struct Chats {
     speech: Speech,
     done: mpsc::Sender<Done>,
     timeout: Duration,
+    reply_timeout: Duration,
+    max_sentences: u32,
     memory_turns: usize,
     forget_after: Duration,
     next_turn: u64,
@@ -100,7 +109,7 @@ impl Chats {
         client: Client,
         speech: Speech,
         done: mpsc::Sender<Done>,
-        timeout: Duration,
+        limits: ChatLimits,
         memory_turns: usize,
         forget_after: Duration,
     ) -> Chats {
@@ -108,7 +117,10 @@ impl Chats {
             client,
             speech,
             done,
-            timeout,
+            // The call outlives the reply's own limit by the time to say so.
+            timeout: limits.reply_timeout + Duration::from_secs(5),
+            reply_timeout: limits.reply_timeout,
+            max_sentences: limits.max_sentences,
             memory_turns,
             forget_after,
             next_turn: unix_ms() as u64,
@@ -177,6 +189,8 @@ impl Chats {
             tools,
             force_tool,
             speculative: false,
+            max_sentences: Some(self.max_sentences),
+            timeout_ms: Some(self.reply_timeout.as_millis() as u64),
         };
         self.current = Some(Turn {
             turn,

@@ -133,7 +133,10 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
             client.clone(),
             speech,
             chat_done_tx,
-            params.chat_timeout(),
+            chat::ChatLimits {
+                max_sentences: params.chat_max_sentences,
+                reply_timeout: params.chat_timeout(),
+            },
             params.chat_memory_turns,
             params.chat_forget_after(),
         ),

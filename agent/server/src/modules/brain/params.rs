@@ -39,10 +39,13 @@ pub struct BrainParams {
     /// recent utterance for the transcript to be dropped as an echo.
     #[serde(default = "default_echo_threshold")]
     pub echo_threshold: f64,
-    /// How long a `chat` turn may take, from the request to the last sentence, before it counts as failed (the
-    /// language-model satellite ends a reply by its own `--timeout-s` first).
+    /// A `chat` reply ends after this long, whatever it has said (the language-model satellite stops generating;
+    /// its own `--timeout-s` applies when lower). A satellite that has not answered 5 s later counts as failed.
     #[serde(default = "default_chat_timeout_ms")]
     pub chat_timeout_ms: u64,
+    /// Sentences per `chat` reply at most (the satellite's own `--max-sentences` applies when lower).
+    #[serde(default = "default_chat_max_sentences")]
+    pub chat_max_sentences: u32,
     /// Turns of the conversation a chat turn carries (and the pair database keeps), each a question and its reply.
     #[serde(default = "default_chat_memory_turns")]
     pub chat_memory_turns: usize,
@@ -73,7 +76,11 @@ fn default_call_timeout_ms() -> u64 {
 }
 
 fn default_chat_timeout_ms() -> u64 {
-    30_000
+    15_000
+}
+
+fn default_chat_max_sentences() -> u32 {
+    3
 }
 
 fn default_chat_memory_turns() -> usize {
@@ -134,6 +141,9 @@ impl BrainParams {
             if value == 0 {
                 return Err((key, "must be at least 1".into()));
             }
+        }
+        if self.chat_max_sentences == 0 {
+            return Err(("chat_max_sentences", "must be at least 1".into()));
         }
         if self.answer_chars == 0 {
             return Err(("answer_chars", "must be at least 1".into()));
