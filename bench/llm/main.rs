@@ -178,6 +178,14 @@ fn main() -> anyhow::Result<()> {
         python_load * 1000.0
     ));
 
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!(
+        "load average at end: {}",
+        load.split_whitespace()
+            .take(3)
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
     println!();
     for line in &summary {
         println!("{line}");
