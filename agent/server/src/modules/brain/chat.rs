@@ -213,7 +213,7 @@ impl Chats {
     }
 
     /// An event of `Agent.chat.reply`. `playout_end` is when the speech already queued ends.
-    pub fn event(&mut self, event: ChatEvent, playout_end: Option<Instant>) -> Next {
+    pub async fn event(&mut self, event: ChatEvent, playout_end: Option<Instant>) -> Next {
         let Some(current) = self
             .current
             .as_mut()
@@ -228,9 +228,8 @@ impl Chats {
                 text: prompt,
             },
             ChatEvent::Sentence { turn, text, .. } => {
-                let speech = self.speech.clone();
-                let spoken = text.clone();
-                tokio::spawn(async move { speech.say(&spoken, false).await });
+                // Queued in order on the speech task, behind anything the rules said before.
+                self.speech.say(&text, false).await;
                 current.said.push(Said {
                     text: text.clone(),
                     starts: playout_end.unwrap_or_else(Instant::now),

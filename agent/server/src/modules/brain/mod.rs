@@ -349,7 +349,7 @@ impl Mind {
             self.saying = Some(text.clone());
         }
         let playout_end = self.playout.speaking_until(Instant::now());
-        let next = self.chats.event(event, playout_end);
+        let next = self.chats.event(event, playout_end).await;
         self.chat_next(next).await;
     }
 
