@@ -8,11 +8,18 @@
 //! caused (`Agent.rules`) and the reply's first PCM frame (`Agent.speech`). The differences give the breakdown:
 //! VAD hangover, ASR, rules, first TTS chunk; the hub hop is measured on its own. See docs/bench-voice-latency.md.
 //!
+//! A second phase, the chat phase, starts one release `llm-sat` (the default model) beside the satellite and says open
+//! questions that the rules hand to the model with `chat(T)`: from the end of speech to the first PCM of the model's
+//! spoken reply, with the model's `prompt` and first `sentence` events (`Agent.chat.reply`) in the breakdown.
+//!
 //! Options: `--runs N` (default 20), `--threads N` (satellite inference threads, default 2), `--hangover-ms N`
 //! (default: the satellite's), `--satellite-arg ARG` (repeatable: passed on to `whisper-sat run`, to measure another
-//! setting), `--write PATH` (a Markdown report).
+//! setting), `--chat-runs N` (open questions, default 20; 0 skips the chat phase), `--llm-threads N` (llm-sat's
+//! generation threads, default 2), `--write PATH` (a Markdown report).
 
 mod barge_in;
+mod chat;
+mod chat_report;
 mod report;
 mod rig;
 mod speech_clip;
@@ -60,6 +67,8 @@ struct Options {
     satellite_args: Vec<String>,
     write: Option<PathBuf>,
     barge_ins: usize,
+    chat_runs: usize,
+    llm_threads: u32,
 }
 
 fn options() -> anyhow::Result<Options> {
@@ -70,6 +79,8 @@ fn options() -> anyhow::Result<Options> {
         satellite_args: Vec::new(),
         write: None,
         barge_ins: 8,
+        chat_runs: chat::QUESTIONS.len(),
+        llm_threads: 2,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -85,8 +96,14 @@ fn options() -> anyhow::Result<Options> {
             "--barge-ins" => {
                 o.barge_ins = value("--barge-ins")?.parse().context("--barge-ins N")?
             }
+            "--chat-runs" => {
+                o.chat_runs = value("--chat-runs")?.parse().context("--chat-runs N")?
+            }
+            "--llm-threads" => {
+                o.llm_threads = value("--llm-threads")?.parse().context("--llm-threads N")?
+            }
             other => bail!(
-                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --satellite-arg ARG, --barge-ins N, --write PATH)"
+                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --satellite-arg ARG, --barge-ins N, --chat-runs N, --llm-threads N, --write PATH)"
             ),
         }
     }
@@ -239,13 +256,49 @@ async fn main() -> anyhow::Result<()> {
         let talkers: Vec<&Clip> = turns.iter().collect();
         figures.barge_ins = barge_in::measure(&rig, &talkers, &burst, opts.barge_ins).await?;
     }
+    figures.load = (load_before, report::load_average());
+    let chat_figures = if opts.chat_runs > 0 {
+        println!(
+            "chat: {} open questions answered by llm-sat (default model, {} threads) beside whisper-sat",
+            opts.chat_runs, opts.llm_threads
+        );
+        let llm_pid = rig.start_llm_sat(&bins, opts.llm_threads)?;
+        watch::wait_channel(&watcher_client, ch::CHAT.name, Duration::from_secs(120))
+            .await
+            .context("llm-sat did not join (is the model there? `make model-llm`)")?;
+        // What the watcher queued during the barge-ins is not a question's.
+        watcher.until_quiet(Duration::from_millis(800)).await?;
+        Some(
+            chat::measure(
+                &mut watcher,
+                &say_tx,
+                opts.chat_runs,
+                llm_pid,
+                scratch.path(),
+            )
+            .await?,
+        )
+    } else {
+        None
+    };
     drop(say_tx);
     mic.await.context("the microphone task")??;
     figures.hop = hop;
-    figures.load = (load_before, report::load_average());
     figures.print(&opts_summary(&opts));
+    let chat_setup = format!(
+        "{} open questions, llm-sat SmolLM2-135M-Instruct Q4_1 with {} threads beside whisper-sat with {}",
+        opts.chat_runs, opts.llm_threads, opts.threads
+    );
+    if let Some(chat) = &chat_figures {
+        chat.print(&chat_setup);
+    }
     if let Some(path) = &opts.write {
-        report::write_figures(path, &figures.markdown(&opts_summary(&opts)))?;
+        let mut markdown = figures.markdown(&opts_summary(&opts));
+        if let Some(chat) = &chat_figures {
+            markdown.push('\n');
+            markdown.push_str(&chat.markdown(&chat_setup));
+        }
+        report::write_figures(path, &markdown)?;
         println!("wrote {}", path.display());
     }
     Ok(())

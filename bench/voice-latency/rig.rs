@@ -1,5 +1,6 @@
-//! The processes under test: a release `robot-agent` on free ports in a temporary data directory, and one
-//! `whisper-sat` satellite with the tiny.en model; both killed when the rig is dropped.
+//! The processes under test: a release `robot-agent` on free ports in a temporary data directory, one
+//! `whisper-sat` satellite with the tiny.en model and, for the chat phase, one `llm-sat` with its default model; all
+//! killed when the rig is dropped.
 
 use flow::token::{TokenKind, resolve_token};
 use std::path::{Path, PathBuf};
@@ -29,7 +30,7 @@ fn binary(dir: &Path, name: &str) -> anyhow::Result<PathBuf> {
     let path = dir.join(name);
     if !path.is_file() {
         bail!(
-            "{} does not exist: build it first (`cargo build --release -p robot-agent -p whisper-sat`) \
+            "{} does not exist: build it first (`cargo build --release -p robot-agent -p whisper-sat -p llm-sat`) \
              or point AGENT_BIN_DIR at the directory holding it",
             path.display()
         );
@@ -41,6 +42,7 @@ fn binary(dir: &Path, name: &str) -> anyhow::Result<PathBuf> {
 pub struct Rig {
     _agent: Child,
     satellite: Option<Child>,
+    llm: Option<Child>,
     data_dir: PathBuf,
     /// `tcp://HOST:PORT` of the hub.
     pub flow_tcp: String,
@@ -98,6 +100,7 @@ impl Rig {
         Ok(Rig {
             _agent: agent,
             satellite: None,
+            llm: None,
             data_dir,
             flow_tcp,
             token,
@@ -143,12 +146,50 @@ impl Rig {
         self.satellite = Some(child);
         Ok(())
     }
+    /// Starts `llm-sat` with the default model (`make model-llm`) and `threads` generation threads; returns its
+    /// process id (for its peak memory at the end).
+    pub fn start_llm_sat(&mut self, bins: &Path, threads: u32) -> anyhow::Result<u32> {
+        let model = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../models/llm/SmolLM2-135M-Instruct.Q4_1.gguf");
+        if !model.is_file() {
+            bail!(
+                "{} does not exist: provision it first (`make model-llm`)",
+                model.display()
+            );
+        }
+        let child = Command::new(binary(bins, "llm-sat")?)
+            .arg("--addr")
+            .arg(&self.flow_tcp)
+            .arg("--token")
+            .arg(&self.token)
+            .arg("--name")
+            .arg("bench-llm")
+            .arg("--model")
+            .arg(&model)
+            .arg("--threads")
+            .arg(threads.to_string())
+            .env(
+                "RUST_LOG",
+                std::env::var("VOICE_LATENCY_LLM_LOG").unwrap_or_else(|_| "warn".to_owned()),
+            )
+            .env("NO_COLOR", "1")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .kill_on_drop(true)
+            .spawn()
+            .context("starting llm-sat")?;
+        let pid = child.id().context("llm-sat exited at start")?;
+        self.llm = Some(child);
+        Ok(pid)
+    }
 }
 
 impl Drop for Rig {
     fn drop(&mut self) {
         // The processes die with their handles (kill_on_drop); the data directory goes too.
         drop(self.satellite.take());
+        drop(self.llm.take());
         let _ = std::fs::remove_dir_all(&self.data_dir);
     }
 }

@@ -1,5 +1,5 @@
-//! The observer: one hub client subscribed to `Agent.transcript`, `Agent.rules` and `Agent.speech`, stamping each
-//! message with the wall time it arrived, and the measurement of a single hub hop.
+//! The observer: one hub client subscribed to `Agent.transcript`, `Agent.rules`, `Agent.chat.reply` and
+//! `Agent.speech`, stamping each message with the wall time it arrived, and the measurement of a single hub hop.
 
 use agent_contract::channels as ch;
 use std::time::{Duration, Instant};
@@ -9,6 +9,7 @@ use bytes::Bytes;
 use flow::{Client, Subscription};
 use serde_json::Value;
 
+use crate::chat_report::ChatRunFigures;
 use crate::report::{Decode, RunFigures};
 use crate::speech_clip::Ending;
 
@@ -16,6 +17,8 @@ use crate::speech_clip::Ending;
 pub struct Watcher {
     transcript: Subscription,
     rules: Subscription,
+    /// The language model's events (`prompt`, `sentence`, `end`), for the chat phase.
+    reply: Subscription,
     speech: Subscription,
     /// Speech still arriving from the previous reply is not this run's.
     last_speech: Option<Instant>,
@@ -24,6 +27,7 @@ pub struct Watcher {
 enum Seen {
     Transcript(Value),
     Rules(Value),
+    Reply(Value),
     Speech,
 }
 
@@ -32,6 +36,7 @@ impl Watcher {
         Ok(Watcher {
             transcript: client.subscribe(ch::TRANSCRIPT.name).await?,
             rules: client.subscribe(ch::RULES.name).await?,
+            reply: client.subscribe(ch::CHAT_REPLY.name).await?,
             speech: client.subscribe(ch::SPEECH.name).await?,
             last_speech: None,
         })
@@ -47,6 +52,7 @@ impl Watcher {
                 biased;
                 d = self.transcript.recv() => json(&d.context("Agent.transcript ended")?.payload).map(Seen::Transcript),
                 d = self.rules.recv() => json(&d.context("Agent.rules ended")?.payload).map(Seen::Rules),
+                d = self.reply.recv() => json(&d.context("Agent.chat.reply ended")?.payload).map(Seen::Reply),
                 d = self.speech.recv() => d.context("Agent.speech ended").map(|_| Some(Seen::Speech))?,
             };
             let now = Instant::now();
@@ -67,83 +73,99 @@ impl Watcher {
         end_of_speech: Instant,
         deadline: Instant,
     ) -> anyhow::Result<RunFigures> {
-        let mut vad_end: Option<(Instant, String, u64)> = None;
-        let mut transcript: Option<(Instant, String, u64, Decode)> = None;
-        let mut rules: Option<Instant> = None;
-        // The rule changes seen after the transcript, to say why a run found none of its own.
-        let mut other_rules: Vec<String> = Vec::new();
+        let mut hearing = Hearing::new(end_of_speech);
+        loop {
+            let Ok(next) = tokio::time::timeout_at(deadline.into(), self.next()).await else {
+                bail!("no reply in time; {}", hearing.so_far());
+            };
+            let (at, seen) = next?;
+            if matches!(seen, Seen::Speech)
+                && let Some(figures) = hearing.figures(at)
+            {
+                return Ok(figures);
+            }
+            hearing.take(at, seen);
+        }
+    }
+
+    /// Follows one utterance answered by the language model, as [`Watcher::follow`] does, and the model's turn on
+    /// `Agent.chat.reply`: its `prompt` event, its first `sentence`, the first reply PCM after that sentence, and
+    /// its `end` (returned once the turn has ended, so the next question does not overlap it).
+    pub async fn follow_chat(
+        &mut self,
+        end_of_speech: Instant,
+        deadline: Instant,
+    ) -> anyhow::Result<ChatRunFigures> {
+        let mut hearing = Hearing::new(end_of_speech);
+        // The prompts seen since the end of speech, by turn: the turn of the first sentence picks its own.
+        let mut prompts: Vec<(Value, Instant)> = Vec::new();
+        let mut first_sentence: Option<(Value, Instant, String)> = None;
+        let mut base: Option<RunFigures> = None;
+        let mut ended: Option<(Instant, Value)> = None;
         loop {
             let Ok(next) = tokio::time::timeout_at(deadline.into(), self.next()).await else {
                 bail!(
-                    "no reply in time; vad end: {:?}, transcript: {:?}, rule change: {}, other rule changes: {:?}",
-                    vad_end.map(|v| v.1),
-                    transcript.map(|t| t.1),
-                    rules.is_some(),
-                    other_rules
+                    "no spoken reply from the model in time; {}, prompt events: {}, first sentence: {:?}, first PCM: {}, end: {}",
+                    hearing.so_far(),
+                    prompts.len(),
+                    first_sentence.map(|s| s.2),
+                    base.is_some(),
+                    ended.is_some()
                 );
             };
             let (at, seen) = next?;
             match seen {
-                Seen::Transcript(v) if v["vad"] == "end" && vad_end.is_none() => {
-                    // An end announced before our end of speech belongs to a pause inside the clip.
-                    if at >= end_of_speech
-                        && let Some(id) = v["utterance"].as_str()
+                Seen::Reply(v) => match v["event"].as_str() {
+                    Some("prompt") => prompts.push((v["turn"].clone(), at)),
+                    Some("sentence")
+                        if first_sentence.is_none()
+                            && v["index"] == 0
+                            && prompts.iter().any(|(turn, _)| *turn == v["turn"]) =>
                     {
-                        vad_end = Some((at, id.to_owned(), v["at_ms"].as_u64().unwrap_or(0)));
+                        let text = v["text"].as_str().unwrap_or_default().to_owned();
+                        first_sentence = Some((v["turn"].clone(), at, text));
                     }
-                }
-                Seen::Transcript(v) => {
-                    if let Some((_, id, _)) = &vad_end
-                        && v["utterance"].as_str() == Some(id.as_str())
-                        && let Some(text) = v["text"].as_str()
-                    {
-                        transcript = Some((
-                            at,
-                            text.trim().to_owned(),
-                            v["processing_ms"].as_u64().unwrap_or(0),
-                            Decode {
-                                speculative: v["speculative"].as_bool().unwrap_or(false),
-                                full_window_retry: v["full_window_retry"]
-                                    .as_bool()
-                                    .unwrap_or(false),
-                                turn: v["turn"].as_str().map(str::to_owned),
-                            },
-                        ));
-                    }
-                }
-                Seen::Rules(v) => {
-                    if let Some((_, text, _, _)) = &transcript
-                        && rules.is_none()
-                    {
-                        if heard(&v, text) {
-                            rules = Some(at);
-                        } else {
-                            other_rules.push(format!("{} because {}", v["rule"], v["because"]));
+                    Some("end") if prompts.iter().any(|(turn, _)| *turn == v["turn"]) => {
+                        match &first_sentence {
+                            None => bail!(
+                                "the model's turn ended without a sentence: {v}; {}",
+                                hearing.so_far()
+                            ),
+                            Some((turn, _, _)) if v["turn"] == *turn => {
+                                ended = Some((at, v["stats"].clone()));
+                            }
+                            Some(_) => {}
                         }
                     }
-                }
+                    _ => {}
+                },
                 Seen::Speech => {
-                    if let (
-                        Some(rules),
-                        Some((t_at, text, processing_ms, decode)),
-                        Some((v_at, _, vad_ms)),
-                    ) = (rules, &transcript, &vad_end)
-                        && at >= rules
+                    if base.is_none()
+                        && let Some((_, sentence_at, _)) = &first_sentence
+                        && at >= *sentence_at
                     {
-                        return Ok(RunFigures {
-                            end_of_speech,
-                            vad_end: *v_at,
-                            transcript: *t_at,
-                            rules,
-                            first_pcm: at,
-                            processing_ms: *processing_ms,
-                            decode: decode.clone(),
-                            vad_end_vs_ours_ms: *vad_ms as f64 - wall_ms(end_of_speech),
-                            text: text.clone(),
-                            ending: Ending::Turn,
-                        });
+                        base = hearing.figures(at);
                     }
                 }
+                other => hearing.take(at, other),
+            }
+            // The spoken reply's first PCM and the turn's end may come in either order (one sentence ends the turn
+            // at once).
+            if let (Some(base), Some((sentence_turn, sentence_at, text)), Some((end, stats))) =
+                (&base, &first_sentence, &ended)
+            {
+                let prompt = prompts
+                    .iter()
+                    .find(|(turn, _)| turn == sentence_turn)
+                    .map_or(*sentence_at, |(_, at)| *at);
+                return Ok(ChatRunFigures::new(
+                    base.clone(),
+                    prompt,
+                    *sentence_at,
+                    *end,
+                    stats,
+                    text.clone(),
+                ));
             }
         }
     }
@@ -158,6 +180,104 @@ impl Watcher {
             // Anything arriving meanwhile is the tail of this run; only its time matters.
             let _ = tokio::time::timeout(quiet - since, self.next()).await;
         }
+    }
+}
+
+/// How far one utterance has got on the hub: its `vad` end, its transcript and the rule trace that heard it.
+struct Hearing {
+    end_of_speech: Instant,
+    vad_end: Option<(Instant, String, u64)>,
+    transcript: Option<(Instant, String, u64, Decode)>,
+    rules: Option<Instant>,
+    /// The rule changes seen after the transcript, to say why a run found none of its own.
+    other_rules: Vec<String>,
+}
+
+impl Hearing {
+    fn new(end_of_speech: Instant) -> Hearing {
+        Hearing {
+            end_of_speech,
+            vad_end: None,
+            transcript: None,
+            rules: None,
+            other_rules: Vec::new(),
+        }
+    }
+
+    /// Takes in one transcript message or rule trace that arrived at `at`.
+    fn take(&mut self, at: Instant, seen: Seen) {
+        match seen {
+            Seen::Transcript(v) if v["vad"] == "end" && self.vad_end.is_none() => {
+                // An end announced before our end of speech belongs to a pause inside the clip.
+                if at >= self.end_of_speech
+                    && let Some(id) = v["utterance"].as_str()
+                {
+                    self.vad_end = Some((at, id.to_owned(), v["at_ms"].as_u64().unwrap_or(0)));
+                }
+            }
+            Seen::Transcript(v) => {
+                if let Some((_, id, _)) = &self.vad_end
+                    && v["utterance"].as_str() == Some(id.as_str())
+                    && let Some(text) = v["text"].as_str()
+                {
+                    self.transcript = Some((
+                        at,
+                        text.trim().to_owned(),
+                        v["processing_ms"].as_u64().unwrap_or(0),
+                        Decode {
+                            speculative: v["speculative"].as_bool().unwrap_or(false),
+                            full_window_retry: v["full_window_retry"].as_bool().unwrap_or(false),
+                            turn: v["turn"].as_str().map(str::to_owned),
+                        },
+                    ));
+                }
+            }
+            Seen::Rules(v) => {
+                if let Some((_, text, _, _)) = &self.transcript
+                    && self.rules.is_none()
+                {
+                    if heard(&v, text) {
+                        self.rules = Some(at);
+                    } else {
+                        self.other_rules
+                            .push(format!("{} because {}", v["rule"], v["because"]));
+                    }
+                }
+            }
+            Seen::Reply(_) | Seen::Speech => {}
+        }
+    }
+
+    /// The run's figures with its first reply PCM at `first_pcm`, once everything before it has been seen.
+    fn figures(&self, first_pcm: Instant) -> Option<RunFigures> {
+        let (Some(rules), Some((t_at, text, processing_ms, decode)), Some((v_at, _, vad_ms))) =
+            (self.rules, &self.transcript, &self.vad_end)
+        else {
+            return None;
+        };
+        (first_pcm >= rules).then(|| RunFigures {
+            end_of_speech: self.end_of_speech,
+            vad_end: *v_at,
+            transcript: *t_at,
+            rules,
+            first_pcm,
+            processing_ms: *processing_ms,
+            decode: decode.clone(),
+            vad_end_vs_ours_ms: *vad_ms as f64 - wall_ms(self.end_of_speech),
+            text: text.clone(),
+            ending: Ending::Turn,
+        })
+    }
+
+    /// How far the utterance got, for a run given up.
+    fn so_far(&self) -> String {
+        format!(
+            "vad end: {:?}, transcript: {:?}, rule change: {}, other rule changes: {:?}",
+            self.vad_end.as_ref().map(|v| &v.1),
+            self.transcript.as_ref().map(|t| &t.1),
+            self.rules.is_some(),
+            self.other_rules
+        )
     }
 }
 
