@@ -48,7 +48,7 @@ test: deps build-debug model model-base model-face model-voice model-llm llm-ser
 ## blocks with the date and commit they were taken at.
 BENCH_LOGS := artifacts/bench
 bench: .SHELLFLAGS := -o pipefail -c
-bench: deps model-release model-face model-voice model-llm build
+bench: deps model-release model-face model-voice model-llm llm-server build
 	mkdir -p $(BENCH_LOGS)
 	$(TARGET_DIR)/release/hub-bench --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
 	$(TARGET_DIR)/release/serial-bench | tee $(BENCH_LOGS)/serial-bench.log
@@ -69,8 +69,7 @@ bench: deps model-release model-face model-voice model-llm build
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PYTHONUNBUFFERED=1 satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md | tee $(BENCH_LOGS)/bench_python.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_record --write docs/bench-record.md | tee $(BENCH_LOGS)/bench_record.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/federation-bench --write docs/bench-federation.md | tee $(BENCH_LOGS)/federation-bench.log
-	test -x models/llm-bench-venv/bin/python || (python3 -m venv models/llm-bench-venv && CMAKE_ARGS="-DGGML_NATIVE=OFF" models/llm-bench-venv/bin/pip install -q llama-cpp-python==0.3.36)
-	LLM_PYTHON=models/llm-bench-venv/bin/python $(TARGET_DIR)/release/llm-bench | tee $(BENCH_LOGS)/llm-bench.log
+	LLM_PYTHON=models/llm-server-venv/bin/python $(TARGET_DIR)/release/llm-bench | tee $(BENCH_LOGS)/llm-bench.log
 	$(TARGET_DIR)/release/bench-summary --logs $(BENCH_LOGS) --doc docs/benchmarks.md
 
 ## The soak (not part of the tests): the whole agent with a browser, two satellites and the recorder for MINUTES

@@ -59,7 +59,7 @@ struct Args {
     #[arg(
         long,
         env = "LLM_PYTHON",
-        default_value = "models/llm-bench-venv/bin/python"
+        default_value = "models/llm-server-venv/bin/python"
     )]
     python: PathBuf,
     /// Serve the Rust side over stdin and stdout (the bench starts itself this way).
