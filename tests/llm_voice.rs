@@ -198,10 +198,16 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
         sentences.len() > 1,
         "a reply of one sentence cannot show speech before its end: {of_turn:#?}"
     );
-    assert!(
-        sentences.len() <= 3,
-        "the sentence cap was passed: {of_turn:#?}"
-    );
+    // The cap counts whole sentences; a long one may be spoken in pieces cut at a comma.
+    let whole = sentences
+        .iter()
+        .filter(|(_, v)| {
+            v["text"]
+                .as_str()
+                .is_some_and(|t| t.trim_end().ends_with(['.', '?', '!']))
+        })
+        .count();
+    assert!(whole <= 3, "the sentence cap was passed: {of_turn:#?}");
     assert!(
         end["stats"]["tokens"].as_u64().is_some_and(|t| t > 0),
         "{end}"
