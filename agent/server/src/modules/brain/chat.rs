@@ -83,6 +83,11 @@ struct Turn {
     said: Vec<Said>,
     /// Set when the user interrupted it: what they heard of the reply.
     interrupted: Option<Vec<String>>,
+    /// The `end` event came (on `Agent.chat.reply`, after every sentence).
+    ended: bool,
+    /// The call's answer came. It travels on the hub's control lane and may overtake the last sentences on the
+    /// stream's, so the turn is settled only once both are in (or every sentence the answer counts).
+    answer: Option<ChatAnswer>,
 }
 
 /// The brain's side of chat turns.
@@ -174,7 +179,12 @@ impl Chats {
         tools: Vec<Tool>,
         force_tool: Option<String>,
     ) -> u64 {
+        // A turn still running (or waiting for its answer) is cut off here: the memory keeps what was heard of it.
         self.interrupt(Instant::now());
+        if let Some(old) = self.current.take() {
+            let heard = old.interrupted.unwrap_or_default().join(" ");
+            self.remember(old.text, heard, true);
+        }
         if self.stale(&self.memory) && !self.memory.lines.is_empty() {
             self.memory = Memory::default();
         }
@@ -197,6 +207,8 @@ impl Chats {
             text: text.to_owned(),
             said: Vec::new(),
             interrupted: None,
+            ended: false,
+            answer: None,
         });
         let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);
         let body = serde_json::to_vec(&request).unwrap_or_default();
@@ -249,20 +261,24 @@ impl Chats {
                 turn,
                 finish,
                 stats,
-            } => Next::Trace {
-                turn,
-                step: "end",
-                text: format!(
-                    "{} after {} tokens, first token in {} ms{}",
-                    serde_json::to_value(finish)
-                        .ok()
-                        .and_then(|v| v.as_str().map(str::to_owned))
-                        .unwrap_or_default(),
-                    stats.tokens,
-                    stats.first_token_ms,
-                    if stats.speculated { ", speculated" } else { "" }
-                ),
-            },
+            } => {
+                current.ended = true;
+                self.settle();
+                Next::Trace {
+                    turn,
+                    step: "end",
+                    text: format!(
+                        "{} after {} tokens, first token in {} ms{}",
+                        serde_json::to_value(finish)
+                            .ok()
+                            .and_then(|v| v.as_str().map(str::to_owned))
+                            .unwrap_or_default(),
+                        stats.tokens,
+                        stats.first_token_ms,
+                        if stats.speculated { ", speculated" } else { "" }
+                    ),
+                }
+            }
         }
     }
 
@@ -309,40 +325,65 @@ impl Chats {
 
     /// A turn's call ended.
     pub fn done(&mut self, done: Done) -> Next {
-        let Some(current) = self.current.take_if(|t| t.turn == done.turn) else {
+        let Some(current) = self.current.as_mut().filter(|t| t.turn == done.turn) else {
             return Next::Nothing;
         };
         match done.result {
             Ok(answer) => {
-                let (reply, interrupted) = match current.interrupted {
-                    Some(heard) => (heard.join(" "), true),
-                    None => (
-                        current
-                            .said
-                            .iter()
-                            .map(|s| s.text.as_str())
-                            .collect::<Vec<_>>()
-                            .join(" "),
-                        false,
-                    ),
-                };
-                let reply = match (&answer.call, reply.is_empty()) {
-                    (Some(call), true) => format!("(called {})", call.service),
-                    _ => reply,
-                };
-                if !interrupted {
-                    self.finished = current.said;
-                }
-                self.remember(current.text, reply, interrupted);
+                current.answer = Some(answer);
+                self.settle();
                 Next::Nothing
             }
-            // A turn the user interrupted may end with the satellite's error: nothing to apologise for.
-            Err(_) if current.interrupted.is_some() => Next::Nothing,
-            Err(reason) => Next::Failed {
-                turn: done.turn,
-                reason,
-            },
+            Err(reason) => {
+                let interrupted = current.interrupted.is_some();
+                self.current = None;
+                // A turn the user interrupted may end with the satellite's error: nothing to apologise for.
+                if interrupted {
+                    Next::Nothing
+                } else {
+                    Next::Failed {
+                        turn: done.turn,
+                        reason,
+                    }
+                }
+            }
         }
+    }
+
+    /// Ends the running turn once its answer and its last sentence are both in: the memory keeps it.
+    fn settle(&mut self) {
+        let settled = self.current.as_ref().is_some_and(|t| {
+            t.answer.as_ref().is_some_and(|answer| {
+                t.ended || t.interrupted.is_some() || t.said.len() as u32 >= answer.sentences
+            })
+        });
+        if !settled {
+            return;
+        }
+        let Some(current) = self.current.take() else {
+            return;
+        };
+        let (reply, interrupted) = match current.interrupted {
+            Some(heard) => (heard.join(" "), true),
+            None => (
+                current
+                    .said
+                    .iter()
+                    .map(|s| s.text.as_str())
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                false,
+            ),
+        };
+        let called = current.answer.and_then(|a| a.call);
+        let reply = match (called, reply.is_empty()) {
+            (Some(call), true) => format!("(called {})", call.service),
+            _ => reply,
+        };
+        if !interrupted {
+            self.finished = current.said;
+        }
+        self.remember(current.text, reply, interrupted);
     }
 
     fn remember(&mut self, question: String, reply: String, interrupted: bool) {
@@ -357,9 +398,12 @@ impl Chats {
             text: reply,
             interrupted,
         });
+        // Trimmed by half when full, not by one turn each time: the model's cache holds the prompt's prefix, and a
+        // conversation that lost its oldest turn on every question would be evaluated again whole every time.
         let keep = self.memory_turns * 2;
         if lines.len() > keep {
-            lines.drain(..lines.len() - keep);
+            let half = (keep / 2).max(2);
+            lines.drain(..lines.len() - half);
         }
         self.memory.updated_ms = unix_ms();
         self.save();
