@@ -68,6 +68,16 @@ pub struct HubSection {
     pub max_unauthenticated_per_address: usize,
     /// How long a logged-in client may take to finish a frame it has begun.
     pub frame_timeout_ms: u64,
+    /// Shared memory for clients on the Unix socket (docs/protocol.md, "Shared memory").
+    pub shm: bool,
+    /// Payloads from this many bytes go by reference.
+    pub shm_threshold: u32,
+    /// Slots in each segment.
+    pub shm_slots: u32,
+    /// Slots one subscriber may hold at once.
+    pub shm_held: usize,
+    /// Segments one channel may have.
+    pub shm_segments_per_channel: usize,
     /// `[[hub.serial]]`: serial lines (or pseudo-terminals) the hub serves a satellite on, one each.
     #[serde(default)]
     pub serial: Vec<SerialLine>,
@@ -294,7 +304,25 @@ impl Config {
                 format!("{} is outside 1..=64", h.io_threads),
             ));
         }
+        if h.shm_threshold < 4096 || h.shm_threshold as usize > h.max_frame {
+            return Err((
+                "hub.shm_threshold",
+                format!("{} is outside 4096..=hub.max_frame", h.shm_threshold),
+            ));
+        }
+        if h.shm_slots == 0 || h.shm_slots > flow::shm::layout::MAX_SLOTS {
+            return Err((
+                "hub.shm_slots",
+                format!(
+                    "{} is outside 1..={}",
+                    h.shm_slots,
+                    flow::shm::layout::MAX_SLOTS
+                ),
+            ));
+        }
         for (key, v) in [
+            ("hub.shm_held", h.shm_held),
+            ("hub.shm_segments_per_channel", h.shm_segments_per_channel),
             ("hub.subscriber_queue", h.subscriber_queue),
             ("hub.subscriber_queue_bytes", h.subscriber_queue_bytes),
             ("hub.control_queue", h.control_queue),

@@ -27,3 +27,5 @@ pub use shared::Shared;
 
 #[cfg(test)]
 mod shutdown_tests;
+#[cfg(test)]
+mod shm_tests;

@@ -180,6 +180,26 @@ impl Collector for HubCollector {
                 ConstGauge::new(n).encode(family.encode_family(&TransportLabel { transport })?)?;
             }
         }
+        let segments = self.hub.segments();
+        let shm = segments.stats();
+        ConstGauge::new(shm.segments()).encode(encoder.encode_descriptor(
+            "flow_shm_segments",
+            "Shared-memory segments alive now (a channel's, or a removed channel's whose slots are still held)",
+            None,
+            ConstGauge::new(0i64).metric_type(),
+        )?)?;
+        ConstGauge::new(shm.slots_held()).encode(encoder.encode_descriptor(
+            "flow_shm_slots_held",
+            "Shared-memory slots whose message a queue, a subscriber or the recorder holds now",
+            None,
+            ConstGauge::new(0i64).metric_type(),
+        )?)?;
+        ConstCounter::new(shm.messages()).encode(encoder.encode_descriptor(
+            "flow_shm_messages",
+            "Messages published by reference through shared memory",
+            None,
+            ConstCounter::new(0u64).metric_type(),
+        )?)?;
         {
             let mut family = encoder.encode_descriptor(
                 "flow_service_calls",

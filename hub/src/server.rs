@@ -15,7 +15,7 @@ use tracing::info;
 use crate::admission::Admission;
 use crate::config::Config;
 use crate::http::access::{self, Access};
-use crate::hub::{Hub, HubLimits, OutboxLimits};
+use crate::hub::{Hub, HubLimits, OutboxLimits, ShmSettings};
 use crate::metrics::Metrics;
 use crate::module::Module;
 use crate::net::IoRuntime;
@@ -121,7 +121,14 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         Duration::from_millis(config.ticks.fast_ms),
         Duration::from_millis(config.ticks.slow_ms),
     ));
-    let hub = Arc::new(Hub::new(limits));
+    let shm = ShmSettings {
+        enabled: h.shm,
+        threshold: h.shm_threshold,
+        slots: h.shm_slots,
+        per_channel: h.shm_segments_per_channel,
+        held: h.shm_held,
+    };
+    let hub = Arc::new(Hub::with_shm(limits, shm));
     let shared = Arc::new(Shared {
         metrics: Arc::new(Metrics::new(hub.clone())),
         hub,

@@ -9,7 +9,7 @@ use flow::protocol::{
 };
 use tracing::{debug, info, warn};
 
-use crate::hub::{ConnId, Hub, Outbox};
+use crate::hub::{ConnId, Hub, LeaseError, Outbox, ShmPeer};
 use crate::pairdb::{DEFAULT_DB, PairDb, PairDbError};
 use crate::tokens::Tokens;
 
@@ -52,6 +52,8 @@ pub struct Session {
     is_async: bool,
     /// Connections made inside the server by modules are trusted as admins.
     internal: bool,
+    /// Shared memory, on a connection that can take it (the Unix socket).
+    shm: Option<Arc<ShmPeer>>,
 }
 
 type CmdResult = Result<Reply, ErrorReply>;
@@ -91,7 +93,18 @@ impl Session {
             db: DEFAULT_DB.into(),
             is_async: false,
             internal,
+            shm: None,
         }
+    }
+
+    /// Offers shared memory on this connection (its transport passes descriptors).
+    pub fn set_shm_peer(&mut self, peer: Option<Arc<ShmPeer>>) {
+        self.shm = peer;
+    }
+
+    /// The connection's shared memory once the client accepted it.
+    fn accepted_shm(&self) -> Option<&Arc<ShmPeer>> {
+        self.shm.as_ref().filter(|peer| peer.accepted())
     }
 
     /// Whether the connection has logged in.
@@ -201,6 +214,44 @@ impl Session {
                     .map(Reply::Names)
             }
             Command::Ping => Ok(Reply::Pong),
+            Command::ShmAccept => match &self.shm {
+                Some(peer) if self.is_async => {
+                    peer.accept();
+                    let threshold = self.hub.segments().settings().threshold;
+                    Ok(Reply::Shm { threshold })
+                }
+                Some(_) => refuse(
+                    ErrorCode::BadRequest,
+                    "shared memory needs an asynchronous connection (SetAsync first)",
+                ),
+                None => refuse(
+                    ErrorCode::BadRequest,
+                    "shared memory is offered only over the hub's Unix socket, and only when hub.shm is on",
+                ),
+            },
+            Command::ShmOpen { chan, slot_size } => match self.accepted_shm() {
+                Some(_) => self
+                    .hub
+                    .shm_open(self.conn, chan, slot_size)
+                    .map(Reply::Segment),
+                None => refuse(ErrorCode::BadRequest, "ShmAccept first"),
+            },
+            Command::PublishRef { chan, slot } => {
+                if self.accepted_shm().is_none() {
+                    return Outcome::Close("a message by reference without ShmAccept".into());
+                }
+                match self.hub.publish_ref(self.conn, chan, slot) {
+                    Ok(()) => Ok(Reply::Done),
+                    Err(LeaseError::Unknown(e)) => refuse(ErrorCode::NotFound, e),
+                    Err(LeaseError::Violation(e)) => return Outcome::Close(e),
+                }
+            }
+            Command::Release { slots } => {
+                if let Some(peer) = &self.shm {
+                    peer.release(&slots);
+                }
+                Ok(Reply::Done)
+            }
         };
         self.reply(req, result);
         Outcome::Continue

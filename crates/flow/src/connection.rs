@@ -91,6 +91,11 @@ impl<R: TransportRead> FrameReader<R> {
         self.max_frame = max_frame;
     }
 
+    /// The oldest descriptor that came beside the bytes read so far (see [`TransportRead::take_fd`]).
+    pub fn take_fd(&mut self) -> Option<std::os::fd::OwnedFd> {
+        self.io.take_fd()
+    }
+
     /// Bytes of a frame begun but not complete yet (what a peer that stops mid-frame holds).
     pub fn partial(&self) -> usize {
         self.buf.len()
@@ -288,6 +293,19 @@ impl<W: TransportWrite> FrameWriter<W> {
     /// Bytes waiting to be written.
     pub fn pending(&self) -> usize {
         self.chunk_bytes + self.buf.len()
+    }
+
+    /// Writes everything queued, then `event` with `fd` beside it (a shared-memory segment's descriptor; Unix
+    /// socket only).
+    pub async fn send_event_with_fd(
+        &mut self,
+        event: &crate::protocol::Event,
+        fd: std::os::fd::BorrowedFd<'_>,
+    ) -> io::Result<()> {
+        self.flush().await?;
+        let mut frame = BytesMut::new();
+        codec::encode_event(event, &mut frame);
+        self.io.send_with_fd(&frame, fd).await
     }
 
     /// Writes everything queued.

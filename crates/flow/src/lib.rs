@@ -6,6 +6,7 @@
 //! - [`connection`]: framing over a transport.
 //! - [`client`]: the SDK: log in, create channels, publish, subscribe, serve and
 //!   call services, use the pair database, reconnect automatically.
+//! - [`shm`]: shared-memory segments and slots for clients on the hub's machine.
 //! - [`sketch`]: the setup-then-loop programming style of the paper's PySketch.
 
 pub mod client;
@@ -13,6 +14,7 @@ pub mod connection;
 pub mod error;
 pub mod protocol;
 pub mod queue;
+pub mod shm;
 pub mod sketch;
 pub mod tick;
 pub mod token;

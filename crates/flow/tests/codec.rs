@@ -412,7 +412,7 @@ fn lengths_above_the_maximum_are_refused() {
     );
 }
 
-const COMMAND_OPS: [u8; 21] = [
+const COMMAND_OPS: [u8; 25] = [
     op::LOGIN,
     op::SET_ASYNC,
     op::ADD_CHANNEL,
@@ -434,9 +434,13 @@ const COMMAND_OPS: [u8; 21] = [
     op::VAR_DEL,
     op::VAR_LIST,
     op::PING,
+    op::SHM_ACCEPT,
+    op::SHM_OPEN,
+    op::PUBLISH_REF,
+    op::RELEASE,
 ];
 
-const EVENT_OPS: [u8; 10] = [
+const EVENT_OPS: [u8; 12] = [
     op::REPLY,
     op::CHANNEL_ADDED,
     op::CHANNEL_REMOVED,
@@ -447,6 +451,8 @@ const EVENT_OPS: [u8; 10] = [
     op::DATA,
     op::DB_CHANGED,
     op::GOODBYE,
+    op::SEGMENT,
+    op::DATA_REF,
 ];
 
 #[test]
@@ -751,7 +757,7 @@ fn every_error_code_crosses_the_wire_as_its_number() {
 #[test]
 fn bad_tags_and_enum_values_are_refused() {
     let bad = |field: &'static str, value: i64| DecodeError::BadValue { field, value };
-    for tag in (8u8..0xff).step_by(17) {
+    for tag in (10u8..0xff).step_by(17) {
         assert_eq!(event_err(op::REPLY, &[tag]), bad("reply tag", tag.into()));
     }
     assert_eq!(event_err(op::REPLY, &[0xfe]), bad("reply tag", 0xfe));

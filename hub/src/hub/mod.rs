@@ -10,16 +10,20 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use bytes::Bytes;
 use flow::protocol::{
     CallId, ChanId, ChanRef, ChannelInfo, ChannelKind, ChannelStats, ErrorCode, ErrorReply, Event,
-    Reply, ReqId, channel_hash, validate_name,
+    Reply, ReqId, SegmentInfo, SlotRef, channel_hash, validate_name,
 };
 
 mod deadlines;
 mod graph;
 pub mod outbox;
+pub mod segments;
+mod shm_peer;
 
 pub use deadlines::MAX_CALL_TIMEOUT_MS;
 pub use graph::{Graph, GraphChannel, GraphNode};
 pub use outbox::{Outbox, OutboxLimits};
+pub use segments::{LeaseError, Segments, ShmSettings, ShmStats};
+pub use shm_peer::ShmPeer;
 
 /// A connection (satellite or module) as the hub knows it.
 pub type ConnId = u32;
@@ -107,6 +111,8 @@ struct State {
     last_rate: Option<Instant>,
     /// How service calls ended, by service name: kept across a service's removal and re-creation, for `/metrics`.
     call_outcomes: HashMap<String, CallOutcomes>,
+    /// The channels' shared-memory segments, retired with their channel.
+    segments: Arc<Segments>,
 }
 
 /// Most distinct service names whose call outcomes are kept; more share the name [`OTHER_SERVICES`], so that a
@@ -184,10 +190,16 @@ fn now_us() -> u64 {
 
 impl Hub {
     pub fn new(limits: HubLimits) -> Self {
+        Self::with_shm(limits, ShmSettings::default())
+    }
+
+    /// A hub whose shared-memory path has `shm`'s settings.
+    pub fn with_shm(limits: HubLimits, shm: ShmSettings) -> Self {
         Hub {
             state: Arc::new(Mutex::new(State {
                 next_conn: 1,
                 next_call: 1,
+                segments: Arc::new(Segments::new(shm)),
                 ..State::default()
             })),
             limits,
@@ -484,6 +496,37 @@ impl Hub {
         }
         ch.dropped += dropped as u64;
         Ok(())
+    }
+
+    /// The shared-memory segments (their settings, figures, and the slots payloads lie in).
+    pub fn segments(&self) -> Arc<Segments> {
+        self.lock().segments.clone()
+    }
+
+    /// A shared-memory segment for `conn`'s stream `id`, with slots of at least `slot_size` bytes.
+    pub fn shm_open(&self, conn: ConnId, id: ChanId, slot_size: u32) -> HubResult<SegmentInfo> {
+        let mut st = self.lock();
+        let ch = owned_channel(&mut st, conn, id)?;
+        if ch.kind != ChannelKind::Stream {
+            return err(
+                ErrorCode::WrongKind,
+                format!("{} is a service channel", ch.name),
+            );
+        }
+        let segments = st.segments.clone();
+        drop(st);
+        segments
+            .open(conn, id, slot_size)
+            .or_else(|e| err(ErrorCode::Limit, e))
+    }
+
+    /// Publishes the message `conn` wrote into a slot of its segment on `id`, like [`Hub::publish`]; the slot is
+    /// freed once nobody holds the message.
+    pub fn publish_ref(&self, conn: ConnId, id: ChanId, slot: SlotRef) -> Result<(), LeaseError> {
+        let segments = self.lock().segments.clone();
+        let payload = segments.lease(conn, id, slot)?;
+        self.publish(conn, id, payload)
+            .map_err(|e| LeaseError::Unknown(e.message))
     }
 
     /// Forwards a service request to the channel's owner; the reply to the
@@ -796,6 +839,7 @@ fn remove_channel_locked(st: &mut State, id: ChanId) {
     let Some(ch) = st.channels.remove(&id) else {
         return;
     };
+    st.segments.retire_channel(id);
     st.by_name.remove(&ch.name);
     st.by_hash.remove(&ch.hash);
     if let Some(owner) = st.conns.get_mut(&ch.owner) {

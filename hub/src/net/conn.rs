@@ -17,7 +17,8 @@ use flow::transport::{Transport, TransportWrite};
 use tracing::{debug, info, warn};
 
 use crate::admission::Stranger;
-use crate::hub::Outbox;
+use crate::hub::{Outbox, ShmPeer};
+use crate::net::shm_writer::ShmWriter;
 use crate::session::{Outcome, Session, SessionContext};
 use crate::shared::Shared;
 
@@ -72,6 +73,13 @@ pub async fn serve_connection<T: Transport>(
     mut stranger: Stranger,
 ) {
     let mut shutdown = shared.shutdown.subscribe();
+    // Shared memory is offered only where a segment's descriptor can be handed over: the Unix socket.
+    let segments = shared.hub.segments();
+    let shm_peer = (transport.passes_fds() && segments.settings().enabled)
+        .then(|| Arc::new(ShmPeer::new(segments.settings().held)));
+    let shm_writer = shm_peer
+        .clone()
+        .map(|peer| ShmWriter::new(peer, segments.clone()));
     let Connection {
         peer,
         mut reader,
@@ -79,7 +87,7 @@ pub async fn serve_connection<T: Transport>(
     } = Connection::new(transport, PRE_LOGIN_MAX_FRAME);
     let (conn, outbox) = shared.hub.connect(&peer);
     debug!(%peer, conn, "connection opened");
-    let mut writer_task = tokio::spawn(write_loop(writer, outbox.clone()));
+    let mut writer_task = tokio::spawn(write_loop(writer, outbox.clone(), shm_writer));
     // Set once the writer task has finished and been awaited: a finished
     // JoinHandle must not be polled again.
     let mut writer_done = false;
@@ -89,6 +97,7 @@ pub async fn serve_connection<T: Transport>(
         tokens: shared.tokens.clone(),
     };
     let mut session = Session::new(conn, peer.clone(), outbox.clone(), context, internal);
+    session.set_shm_peer(shm_peer.clone());
     let login_within = stranger.login_deadline(
         Duration::from_millis(shared.config.hub.login_timeout_ms),
         PRESSED_LOGIN,
@@ -200,6 +209,10 @@ pub async fn serve_connection<T: Transport>(
     };
     shared.hub.disconnect(conn);
     outbox.close(reason);
+    // Every slot this connection held goes back (and wakes its writer if it waited for one).
+    if let Some(peer) = &shm_peer {
+        peer.clear();
+    }
     // Let the writer send what is queued (e.g. the refusal of a bad login).
     if !writer_done
         && tokio::time::timeout(FLUSH_GRACE, &mut writer_task)
@@ -213,6 +226,7 @@ pub async fn serve_connection<T: Transport>(
 async fn write_loop<W: TransportWrite>(
     mut writer: FrameWriter<W>,
     outbox: Arc<Outbox>,
+    mut shm: Option<ShmWriter>,
 ) -> WriterEnd {
     let mut batch = Vec::new();
     loop {
@@ -224,10 +238,15 @@ async fn write_loop<W: TransportWrite>(
             }
             continue;
         }
+        let mut queued = Ok(());
         for event in batch.drain(..) {
-            writer.queue_event(&event);
+            match &mut shm {
+                Some(shm) if queued.is_ok() => queued = shm.queue(&mut writer, event).await,
+                Some(_) => {}
+                None => writer.queue_event(&event),
+            }
         }
-        if let Err(e) = writer.flush().await {
+        if let Err(e) = queued.and(writer.flush().await) {
             debug!("write failed: {e}");
             outbox.close(format!("write failed: {e}"));
             return WriterEnd::Failed(e.to_string());

@@ -5,6 +5,7 @@ pub mod conn;
 pub mod descriptors;
 pub mod io_runtime;
 pub mod serial;
+pub mod shm_writer;
 pub mod tcp;
 pub mod udp;
 pub mod unix;

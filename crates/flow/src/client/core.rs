@@ -13,6 +13,7 @@ use super::frame::{OutFrame, encode};
 use super::inbox::SubShared;
 use super::options::{ClientEvent, ConnectOptions, SessionInfo};
 use super::owned::Owned;
+use super::shm::ShmSession;
 use crate::error::FlowError;
 use crate::protocol::{ChanId, ChanRef, Command, Reply, ReqId};
 use crate::queue::lock;
@@ -66,9 +67,30 @@ pub(super) struct Inner {
     pub(super) connected: watch::Sender<bool>,
     pub(super) closing: watch::Sender<bool>,
     pub(super) closed: AtomicBool,
+    /// The current session's shared memory, while it has some (`shm.rs`).
+    pub(super) shm: Mutex<Option<Arc<ShmSession>>>,
+    /// Large messages sent inline because their segment had no free slot, over every session.
+    pub(super) shm_spilled: Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl Client {
+    /// The current session's shared memory, if it has some.
+    pub(super) fn shm_session(&self) -> Option<Arc<ShmSession>> {
+        lock(&self.inner.shm).clone()
+    }
+
+    /// Whether the current session moves large payloads through shared memory (a Unix-socket link whose hub
+    /// accepted it).
+    pub fn uses_shared_memory(&self) -> bool {
+        lock(&self.inner.shm).is_some()
+    }
+
+    /// Large messages published inline because every slot of their segment was still held (by subscribers that had
+    /// not let go of them yet): the publisher never waits for a slot.
+    pub fn shm_spilled(&self) -> u64 {
+        self.inner.shm_spilled.load(Ordering::Relaxed)
+    }
+
     /// Whether the connection is up now.
     pub fn is_connected(&self) -> bool {
         *self.inner.connected.borrow()

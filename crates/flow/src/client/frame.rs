@@ -13,6 +13,7 @@ pub(super) fn encode(req: ReqId, command: Command) -> OutFrame {
     OutFrame {
         head: buf.freeze(),
         payload: Bytes::new(),
+        chan: None,
     }
 }
 
@@ -23,6 +24,8 @@ pub(super) fn encode(req: ReqId, command: Command) -> OutFrame {
 pub(crate) struct OutFrame {
     head: Bytes,
     payload: Bytes,
+    /// The channel of a large publish, whose payload may go into shared memory instead (`shm.rs`).
+    chan: Option<ChanId>,
 }
 
 impl OutFrame {
@@ -37,7 +40,18 @@ impl OutFrame {
         OutFrame {
             head: head.freeze(),
             payload,
+            chan: Some(chan),
         }
+    }
+
+    /// The channel, when this is a large publish.
+    pub(super) fn publish_chan(&self) -> Option<ChanId> {
+        self.chan
+    }
+
+    /// A large publish's payload (empty otherwise).
+    pub(super) fn payload(&self) -> &Bytes {
+        &self.payload
     }
 
     /// Hands the frame to `writer`'s next batch.

@@ -28,6 +28,7 @@ mod options;
 mod owned;
 mod publisher;
 mod session;
+mod shm;
 mod subscription;
 
 pub use self::core::Client;
@@ -78,6 +79,8 @@ impl Client {
             connected: watch::channel(false).0,
             closing: watch::channel(false).0,
             closed: AtomicBool::new(false),
+            shm: Mutex::new(None),
+            shm_spilled: Default::default(),
         });
         let established = session::establish(&inner, link).await?;
         // Connected from now: requests may be queued before the task first runs.

@@ -23,6 +23,9 @@ pub struct ConnectOptions {
     pub queue: usize,
     /// How long to wait for a reply to an ordinary command.
     pub request_timeout: Duration,
+    /// Over a Unix socket, move large payloads through shared memory when the hub offers it (docs/protocol.md,
+    /// "Shared memory"). On by default; the environment variable `FLOW_SHM=0` turns it off for a whole process.
+    pub shm: bool,
 }
 
 impl ConnectOptions {
@@ -35,6 +38,7 @@ impl ConnectOptions {
             max_frame: DEFAULT_MAX_FRAME,
             queue: 64,
             request_timeout: Duration::from_secs(10),
+            shm: std::env::var("FLOW_SHM").map_or(true, |v| v != "0"),
         }
     }
 }

@@ -12,6 +12,7 @@ use super::core::{Client, Hook, Inner};
 use super::frame::{OutFrame, encode};
 use super::inbox::Data;
 use super::options::{ClientEvent, SessionInfo};
+use super::shm::ShmSession;
 use crate::connection::{Connection, FrameReader, FrameWriter};
 use crate::error::FlowError;
 use crate::protocol::{ChanRef, Command, ErrorCode, Event, PROTOCOL_VERSION, Reply, decode_event};
@@ -22,11 +23,14 @@ use crate::transport::{Link, LinkReader, LinkWriter};
 pub(super) struct Established {
     reader: FrameReader<LinkReader>,
     writer: FrameWriter<LinkWriter>,
+    /// The session's shared memory, when the link is a Unix socket and the hub accepted it.
+    shm: Option<Arc<ShmSession>>,
 }
 
 /// Logs in (and switches to async) over a fresh link, synchronously, before
 /// any loop runs.
 pub(super) async fn establish(inner: &Arc<Inner>, link: Link) -> Result<Established, FlowError> {
+    let unix = matches!(link, Link::Unix(_));
     let Connection {
         mut reader,
         mut writer,
@@ -50,13 +54,35 @@ pub(super) async fn establish(inner: &Arc<Inner>, link: Link) -> Result<Establis
     if inner.opts.asynchronous {
         handshake_step(&mut reader, &mut writer, 2, Command::SetAsync).await?;
     }
-    debug!(%peer, conn, "logged in to {server}");
+    // Shared memory needs descriptors passed over the socket and events flowing (segments, data by reference).
+    let mut shm = None;
+    if unix && inner.opts.asynchronous && inner.opts.shm {
+        match handshake_step(&mut reader, &mut writer, 3, Command::ShmAccept).await {
+            Ok(Reply::Shm { threshold }) => {
+                shm = Some(Arc::new(ShmSession::new(
+                    threshold,
+                    inner.shm_spilled.clone(),
+                )));
+            }
+            Ok(_) => return Err(FlowError::UnexpectedReply("shared memory")),
+            // A hub without shared memory (turned off, or older): payloads go as bytes.
+            Err(FlowError::Hub(e)) => debug!(%peer, "no shared memory: {e}"),
+            Err(e) => return Err(e),
+        }
+    }
+    debug!(%peer, conn, shm = shm.is_some(), "logged in to {server}");
+    // Known from now on, before the session's loops start (the client's owner may ask at once).
+    *lock(&inner.shm) = shm.clone();
     lock(&inner.state).session = Some(SessionInfo {
         conn,
         admin,
         server,
     });
-    Ok(Established { reader, writer })
+    Ok(Established {
+        reader,
+        writer,
+        shm,
+    })
 }
 
 async fn handshake_step(
@@ -173,13 +199,23 @@ async fn run(
     let Established {
         mut reader,
         mut writer,
+        shm,
     } = session;
+    *lock(&inner.shm) = shm.clone();
     let mut closing = inner.closing.subscribe();
     let read_loop = async {
         loop {
             match reader.read_frame().await {
                 Ok(Some(frame)) => match decode_event(frame) {
                     Ok(event) => {
+                        let event = match &shm {
+                            Some(shm) => match shm.receive(event, || reader.take_fd()) {
+                                Ok(Some(event)) => event,
+                                Ok(None) => continue,
+                                Err(reason) => return reason,
+                            },
+                            None => event,
+                        };
                         if let Some(reason) = dispatch(inner, event) {
                             return reason;
                         }
@@ -191,14 +227,30 @@ async fn run(
             }
         }
     };
+    let releases = shm.as_ref().map(|shm| shm.releases().clone());
     let write_loop = async {
-        while let Some(first) = out_rx.recv().await {
-            first.queue_on(&mut writer);
-            while writer.pending() < WRITE_BATCH {
-                match out_rx.try_recv() {
-                    Ok(more) => more.queue_on(&mut writer),
-                    Err(_) => break,
+        loop {
+            tokio::select! {
+                first = out_rx.recv() => {
+                    let Some(first) = first else { break };
+                    outgoing(inner, &shm, first).queue_on(&mut writer);
+                    while writer.pending() < WRITE_BATCH {
+                        match out_rx.try_recv() {
+                            Ok(more) => outgoing(inner, &shm, more).queue_on(&mut writer),
+                            Err(_) => break,
+                        }
+                    }
                 }
+                // Slots given back go out even while nothing is published.
+                () = async {
+                    match &releases {
+                        Some(releases) => releases.wake.notified().await,
+                        None => std::future::pending().await,
+                    }
+                } => {}
+            }
+            if let Some(release) = shm.as_ref().and_then(|shm| shm.take_releases()) {
+                release.queue_on(&mut writer);
             }
             if let Err(e) = writer.flush().await {
                 return e.to_string();
@@ -229,6 +281,14 @@ async fn run(
             .await;
             "client closed".to_string()
         }
+    }
+}
+
+/// A frame as it goes out: a large publish through shared memory when the session has it.
+fn outgoing(inner: &Arc<Inner>, shm: &Option<Arc<ShmSession>>, frame: OutFrame) -> OutFrame {
+    match shm {
+        Some(shm) => shm.publish(frame, inner),
+        None => frame,
     }
 }
 
@@ -329,6 +389,10 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
             let _ = inner.events.send(ClientEvent::Goodbye(reason.clone()));
             return Some(format!("hub said goodbye: {reason}"));
         }
+        // `shm.rs` turns these into data and mappings before dispatch; a session without shared memory never asked.
+        Event::Segment(_) | Event::DataRef { .. } => {
+            return Some("the hub sent shared memory this session did not ask for".into());
+        }
     }
     None
 }
@@ -393,6 +457,7 @@ fn forget_session(inner: &Arc<Inner>, reason: &str) {
         state.owned_ids.clear();
         state.early_listening.clear();
         state.session = None;
+        *lock(&inner.shm) = None;
         std::mem::take(&mut state.pending)
     };
     for (req, p) in pending {

@@ -94,6 +94,26 @@ pub fn encode_command(env: &Envelope, out: &mut BytesMut) {
         Command::VarDel { key } => body.str_op(key, op::VAR_DEL),
         Command::VarList => op::VAR_LIST,
         Command::Ping => op::PING,
+        Command::ShmAccept => op::SHM_ACCEPT,
+        Command::ShmOpen { chan, slot_size } => {
+            body.i16(*chan);
+            body.u32(*slot_size);
+            op::SHM_OPEN
+        }
+        Command::PublishRef { chan, slot } => {
+            body.i16(*chan);
+            body.slot(slot);
+            op::PUBLISH_REF
+        }
+        Command::Release { slots } => {
+            // A client holds at most a few slots per segment; a longer list is cut, never wrapped.
+            let count = slots.len().min(u16::MAX as usize);
+            body.u16(count as u16);
+            for slot in &slots[..count] {
+                body.slot(slot);
+            }
+            op::RELEASE
+        }
     };
     body.finish(op, env.req);
 }
@@ -160,6 +180,22 @@ pub fn encode_event(event: &Event, out: &mut BytesMut) {
         }
         Event::DbChanged { name } => (body.str_op(name, op::DB_CHANGED), 0),
         Event::Goodbye { reason } => (body.str_op(reason, op::GOODBYE), 0),
+        Event::Segment(info) => {
+            body.segment(info);
+            (op::SEGMENT, 0)
+        }
+        Event::DataRef {
+            chan,
+            seq,
+            ts_us,
+            slot,
+        } => {
+            body.i16(*chan);
+            body.u64(*seq);
+            body.u64(*ts_us);
+            body.slot(slot);
+            (op::DATA_REF, 0)
+        }
     };
     body.finish(op, req);
 }
@@ -277,6 +313,17 @@ impl<'a> BodyWriter<'a> {
         self.f32(s.msgs_per_s);
         self.f32(s.bytes_per_s);
     }
+    fn slot(&mut self, slot: &SlotRef) {
+        self.u32(slot.segment);
+        self.u32(slot.slot);
+        self.u32(slot.len);
+    }
+    fn segment(&mut self, info: &SegmentInfo) {
+        self.u32(info.id);
+        self.i16(info.chan);
+        self.u32(info.slots);
+        self.u32(info.slot_size);
+    }
     fn reply(&mut self, reply: &Reply) {
         match reply {
             Reply::Done => self.u8(0),
@@ -320,6 +367,14 @@ impl<'a> BodyWriter<'a> {
                 self.bytes(payload);
             }
             Reply::Pong => self.u8(7),
+            Reply::Shm { threshold } => {
+                self.u8(8);
+                self.u32(*threshold);
+            }
+            Reply::Segment(info) => {
+                self.u8(9);
+                self.segment(info);
+            }
         }
     }
 }
@@ -398,6 +453,24 @@ pub fn decode_command(frame: RawFrame) -> Result<Envelope, DecodeError> {
         op::VAR_DEL => Command::VarDel { key: r.str("key")? },
         op::VAR_LIST => Command::VarList,
         op::PING => Command::Ping,
+        op::SHM_ACCEPT => Command::ShmAccept,
+        op::SHM_OPEN => Command::ShmOpen {
+            chan: r.chan_id()?,
+            slot_size: r.u32("slot size")?,
+        },
+        op::PUBLISH_REF => Command::PublishRef {
+            chan: r.chan_id()?,
+            slot: r.slot()?,
+        },
+        op::RELEASE => {
+            let count = r.u16("slot count")? as usize;
+            // Each entry is 12 bytes, so the body bounds the count: a lying count fails as truncation.
+            let mut slots = Vec::with_capacity(count.min(r.left() / 12));
+            for _ in 0..count {
+                slots.push(r.slot()?);
+            }
+            Command::Release { slots }
+        }
         other => return Err(DecodeError::UnknownOp(other)),
     };
     r.end()?;
@@ -443,6 +516,13 @@ pub fn decode_event(frame: RawFrame) -> Result<Event, DecodeError> {
         },
         op::GOODBYE => Event::Goodbye {
             reason: r.str("reason")?,
+        },
+        op::SEGMENT => Event::Segment(r.segment()?),
+        op::DATA_REF => Event::DataRef {
+            chan: r.chan_id()?,
+            seq: r.u64("seq")?,
+            ts_us: r.u64("timestamp")?,
+            slot: r.slot()?,
         },
         other => return Err(DecodeError::UnknownOp(other)),
     };
@@ -535,6 +615,24 @@ impl BodyReader {
             n => Err(DecodeError::Trailing(n)),
         }
     }
+    fn left(&self) -> usize {
+        self.head.remaining() + self.tail.len()
+    }
+    fn slot(&mut self) -> Result<SlotRef, DecodeError> {
+        Ok(SlotRef {
+            segment: self.u32("segment")?,
+            slot: self.u32("slot")?,
+            len: self.u32("length")?,
+        })
+    }
+    fn segment(&mut self) -> Result<SegmentInfo, DecodeError> {
+        Ok(SegmentInfo {
+            id: self.u32("segment")?,
+            chan: self.chan_id()?,
+            slots: self.u32("slots")?,
+            slot_size: self.u32("slot size")?,
+        })
+    }
     fn kind(&mut self) -> Result<ChannelKind, DecodeError> {
         match self.u8("channel kind")? {
             0 => Ok(ChannelKind::Stream),
@@ -605,6 +703,10 @@ impl BodyReader {
             }
             6 => Reply::Payload(self.rest()),
             7 => Reply::Pong,
+            8 => Reply::Shm {
+                threshold: self.u32("threshold")?,
+            },
+            9 => Reply::Segment(self.segment()?),
             0xff => {
                 let raw = self.u16("error code")?;
                 let code = ErrorCode::from_u16(raw).ok_or(DecodeError::BadValue {

@@ -172,6 +172,37 @@ pub enum Command {
     VarList,
     /// [0x1f] empty. Replies `Pong`; keeps idle links honest.
     Ping,
+    /// [0x18] empty. This connection takes shared memory: segments handed over with their descriptors and messages
+    /// by reference ([`Event::Segment`], [`Event::DataRef`]). Unix socket only. Replies [`Reply::Shm`].
+    ShmAccept,
+    /// [0x19] `chan:i16 | slot_size:u32`. Asks for a segment to publish on `chan` (owner only) with slots of at least
+    /// `slot_size` bytes. Replies [`Reply::Segment`]; the segment's descriptor travels with the reply.
+    ShmOpen { chan: ChanId, slot_size: u32 },
+    /// [0x1a] `chan:i16 | slot-ref`. Publishes the message the owner wrote into a slot of its segment on `chan`.
+    PublishRef { chan: ChanId, slot: SlotRef },
+    /// [0x1b] `count:u16 | slot-ref * count`. Gives back slots received by reference ([`Event::DataRef`]).
+    Release { slots: Vec<SlotRef> },
+}
+
+/// A message in a slot of a shared-memory segment: `segment:u32 | slot:u32 | len:u32` (`slot-ref`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SlotRef {
+    pub segment: u32,
+    pub slot: u32,
+    /// Bytes of the message, from the start of the slot.
+    pub len: u32,
+}
+
+/// A shared-memory segment: `id:u32 | chan:i16 | slots:u32 | slot_size:u32` (`segment-info`). Its layout is in
+/// [`crate::shm::layout`]; its descriptor is passed beside the frame (`SCM_RIGHTS`), read-write to the publisher,
+/// read-only to subscribers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SegmentInfo {
+    pub id: u32,
+    /// The channel the segment carries (its messages are published there only).
+    pub chan: ChanId,
+    pub slots: u32,
+    pub slot_size: u32,
 }
 
 /// Successful reply bodies. Each starts with a tag byte so a reply decodes
@@ -186,6 +217,8 @@ pub enum Command {
 /// 5 Names     count:u32 | str * count
 /// 6 Payload   rest
 /// 7 Pong      (empty)
+/// 8 Shm       threshold:u32                (shared memory on; payloads from this size go by reference)
+/// 9 Segment   segment-info                 (its descriptor travels beside the frame)
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub enum Reply {
@@ -202,6 +235,10 @@ pub enum Reply {
     Names(Vec<String>),
     Payload(Bytes),
     Pong,
+    Shm {
+        threshold: u32,
+    },
+    Segment(SegmentInfo),
 }
 
 /// Why a command failed. On the wire a failed reply is tag `0xff | code:u16 | message:str`.
@@ -341,6 +378,17 @@ pub enum Event {
     DbChanged { name: String },
     /// [0x89] `reason:str`. The hub is closing this connection (shutdown, overflow).
     Goodbye { reason: String },
+    /// [0x8a] `segment-info`. A segment whose messages follow by reference; its read-only descriptor travels beside
+    /// the frame. Sent once per segment and connection, before the first [`Event::DataRef`] into it.
+    Segment(SegmentInfo),
+    /// [0x8b] `chan:i16 | seq:u64 | ts_us:u64 | slot-ref`. [`Event::Data`] whose payload lies in a shared-memory slot;
+    /// the slot is the subscriber's until it gives it back with [`Command::Release`].
+    DataRef {
+        chan: ChanId,
+        seq: u64,
+        ts_us: u64,
+        slot: SlotRef,
+    },
 }
 
 /// Opcodes, shared by the encoder and decoder.
@@ -366,6 +414,10 @@ pub mod op {
     pub const VAR_DEL: u8 = 0x16;
     pub const VAR_LIST: u8 = 0x17;
     pub const PING: u8 = 0x1f;
+    pub const SHM_ACCEPT: u8 = 0x18;
+    pub const SHM_OPEN: u8 = 0x19;
+    pub const PUBLISH_REF: u8 = 0x1a;
+    pub const RELEASE: u8 = 0x1b;
 
     pub const REPLY: u8 = 0x80;
     pub const CHANNEL_ADDED: u8 = 0x81;
@@ -377,6 +429,8 @@ pub mod op {
     pub const DATA: u8 = 0x87;
     pub const DB_CHANGED: u8 = 0x88;
     pub const GOODBYE: u8 = 0x89;
+    pub const SEGMENT: u8 = 0x8a;
+    pub const DATA_REF: u8 = 0x8b;
 }
 
 /// FNV-1a 64-bit hash of a channel name: stable across processes and versions.

@@ -90,6 +90,10 @@ impl Transport for Link {
         }
     }
 
+    fn passes_fds(&self) -> bool {
+        matches!(self, Link::Unix(_))
+    }
+
     fn split(self) -> (LinkReader, LinkWriter) {
         match self {
             Link::Tcp(t) => {
@@ -138,6 +142,13 @@ impl TransportRead for LinkReader {
             _ => Ok(None),
         }
     }
+
+    fn take_fd(&mut self) -> Option<std::os::fd::OwnedFd> {
+        match self {
+            LinkReader::Unix(r) => r.take_fd(),
+            _ => None,
+        }
+    }
 }
 
 impl TransportWrite for LinkWriter {
@@ -160,6 +171,20 @@ impl TransportWrite for LinkWriter {
             LinkWriter::Memory(w) => w.write_all_chunks(chunks).await,
             LinkWriter::Serial(w) => w.write_all_chunks(chunks).await,
             LinkWriter::Udp(w) => w.write_all_chunks(chunks).await,
+        }
+    }
+
+    async fn send_with_fd(
+        &mut self,
+        data: &[u8],
+        fd: std::os::fd::BorrowedFd<'_>,
+    ) -> io::Result<()> {
+        match self {
+            LinkWriter::Unix(w) => w.send_with_fd(data, fd).await,
+            _ => Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                "only a Unix socket passes descriptors",
+            )),
         }
     }
 

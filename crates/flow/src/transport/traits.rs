@@ -4,6 +4,7 @@
 
 use std::future::Future;
 use std::io;
+use std::os::fd::{BorrowedFd, OwnedFd};
 
 use bytes::{Bytes, BytesMut};
 
@@ -20,6 +21,10 @@ pub trait Transport: Send + 'static {
     type Writer: TransportWrite;
     /// Who is on the other side, for logs.
     fn peer(&self) -> String;
+    /// Whether descriptors can travel beside the bytes (a Unix socket): what shared memory needs.
+    fn passes_fds(&self) -> bool {
+        false
+    }
     fn split(self) -> (Self::Reader, Self::Writer);
 }
 
@@ -33,6 +38,11 @@ pub trait TransportRead: Send + 'static {
     fn take_exact(&mut self, len: usize) -> impl Future<Output = io::Result<Option<Bytes>>> + Send {
         let _ = len;
         async { Ok(None) }
+    }
+    /// The oldest descriptor received beside the bytes and not taken yet (a Unix socket's `SCM_RIGHTS`, which a
+    /// client's link keeps for the frame that introduces a shared-memory segment); `None` on every other transport.
+    fn take_fd(&mut self) -> Option<OwnedFd> {
+        None
     }
 }
 
@@ -56,6 +66,20 @@ pub trait TransportWrite: Send + 'static {
                 [one] => self.write_all(one).await,
                 many => self.write_all(&many.concat()).await,
             }
+        }
+    }
+    /// Sends `data` (whole frames) with `fd` beside its first byte; only a Unix socket can.
+    fn send_with_fd(
+        &mut self,
+        data: &[u8],
+        fd: BorrowedFd<'_>,
+    ) -> impl Future<Output = io::Result<()>> + Send {
+        let _ = (data, fd);
+        async {
+            Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                "only a Unix socket passes descriptors",
+            ))
         }
     }
     /// Closes the sending direction after flushing.

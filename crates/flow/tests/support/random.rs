@@ -8,15 +8,15 @@
 use bytes::Bytes;
 use flow::protocol::{
     ChanRef, ChannelInfo, ChannelKind, ChannelStats, Command, Envelope, ErrorCode, ErrorReply,
-    Event, Reply,
+    Event, Reply, SegmentInfo, SlotRef,
 };
 use rand::Rng;
 use rand::rngs::StdRng;
 
 /// Number of `Command` variants; `command` picks one of them by index.
-pub const COMMAND_VARIANTS: usize = 21;
+pub const COMMAND_VARIANTS: usize = 25;
 /// Number of `Event` variants plus reply kinds, so every reply shape is drawn often.
-pub const EVENT_VARIANTS: usize = 19;
+pub const EVENT_VARIANTS: usize = 23;
 
 /// A string of up to `max` characters mixing ASCII, accented letters, CJK and emoji.
 pub fn string(rng: &mut StdRng, max: usize) -> String {
@@ -172,6 +172,21 @@ pub fn command(rng: &mut StdRng, variant: usize) -> Command {
             key: string(rng, 30),
         },
         19 => Command::VarList,
+        20 => Command::ShmAccept,
+        21 => Command::ShmOpen {
+            chan: chan_id(rng),
+            slot_size: rng.random(),
+        },
+        22 => Command::PublishRef {
+            chan: chan_id(rng),
+            slot: slot_ref(rng),
+        },
+        23 => {
+            let n = rng.random_range(0..20);
+            Command::Release {
+                slots: (0..n).map(|_| slot_ref(rng)).collect(),
+            }
+        }
         _ => Command::Ping,
     }
 }
@@ -183,8 +198,25 @@ pub fn envelope(rng: &mut StdRng, variant: usize) -> Envelope {
     }
 }
 
+fn slot_ref(rng: &mut StdRng) -> SlotRef {
+    SlotRef {
+        segment: rng.random(),
+        slot: rng.random(),
+        len: rng.random(),
+    }
+}
+
+fn segment_info(rng: &mut StdRng) -> SegmentInfo {
+    SegmentInfo {
+        id: rng.random(),
+        chan: chan_id(rng),
+        slots: rng.random(),
+        slot_size: rng.random(),
+    }
+}
+
 fn reply(rng: &mut StdRng, variant: usize) -> Reply {
-    match variant % 8 {
+    match variant % 10 {
         0 => Reply::Done,
         1 => Reply::LoginOk {
             version: rng.random(),
@@ -203,13 +235,28 @@ fn reply(rng: &mut StdRng, variant: usize) -> Reply {
             Reply::Names((0..n).map(|_| string(rng, 20)).collect())
         }
         6 => Reply::Payload(payload(rng)),
-        _ => Reply::Pong,
+        7 => Reply::Pong,
+        8 => Reply::Shm {
+            threshold: rng.random(),
+        },
+        _ => Reply::Segment(segment_info(rng)),
     }
 }
 
-/// The `variant`-th event shape (replies count as nine shapes: eight successes and an error).
+/// The `variant`-th event shape (replies count as eleven shapes: ten successes and an error).
 pub fn event(rng: &mut StdRng, variant: usize) -> Event {
     match variant % EVENT_VARIANTS {
+        v @ 18..=19 => Event::Reply {
+            req: rng.random(),
+            result: Ok(reply(rng, v - 10)),
+        },
+        20 => Event::Segment(segment_info(rng)),
+        21 => Event::DataRef {
+            chan: chan_id(rng),
+            seq: rng.random(),
+            ts_us: rng.random(),
+            slot: slot_ref(rng),
+        },
         v @ 0..=7 => Event::Reply {
             req: rng.random(),
             result: Ok(reply(rng, v)),

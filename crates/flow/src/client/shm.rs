@@ -1,0 +1,279 @@
+//! A session's shared memory, on the client's side: the segments the hub introduced (subscriber), the segments this
+//! client publishes into (publisher), and the slots waiting to be given back.
+//!
+//! A session has it only over the Unix socket, after the hub accepted `ShmAccept` (`session.rs` asks at login). It
+//! lives and dies with the session: a reconnected client starts with none, as the new hub knows none.
+
+use std::collections::HashMap;
+use std::os::fd::OwnedFd;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use bytes::Bytes;
+use tokio::sync::Notify;
+use tracing::{debug, warn};
+
+use super::core::{Client, Inner};
+use super::frame::{OutFrame, encode};
+use crate::protocol::{ChanId, Command, Event, Reply, SegmentInfo, SlotRef};
+use crate::queue::lock;
+use crate::shm::{Mapping, SlotOwner, layout, slot_bytes};
+
+/// The shared memory of one session.
+#[derive(Debug)]
+pub(super) struct ShmSession {
+    /// Payloads from this size go into a slot (the hub's `hub.shm_threshold`).
+    threshold: usize,
+    /// Segments the hub introduced, by id: what `DataRef`s point into.
+    received: Mutex<HashMap<u32, Received>>,
+    /// This client's own segments, by channel.
+    publishing: Mutex<HashMap<ChanId, Publishing>>,
+    releases: Arc<Releases>,
+    /// Large messages that went inline because every slot of their segment was held.
+    spilled: Arc<AtomicU64>,
+}
+
+#[derive(Debug)]
+struct Received {
+    info: SegmentInfo,
+    map: Arc<Mapping>,
+    owner: Arc<dyn SlotOwner>,
+}
+
+#[derive(Debug)]
+enum Publishing {
+    /// Asked for; messages go inline until it comes.
+    Asked,
+    /// The hub refused (a limit): messages go inline.
+    Refused,
+    Ready {
+        info: SegmentInfo,
+        map: Arc<Mapping>,
+    },
+}
+
+/// Slots dropped by their last holder and not yet given back; the writer sends them as one `Release`. Its length is
+/// bounded by the slots the hub lets this client hold at once.
+#[derive(Debug, Default)]
+pub(super) struct Releases {
+    slots: Mutex<Vec<SlotRef>>,
+    pub(super) wake: Notify,
+}
+
+/// Gives a received segment's slots back through [`Releases`].
+#[derive(Debug)]
+struct GiveBack {
+    segment: u32,
+    releases: Arc<Releases>,
+}
+
+impl SlotOwner for GiveBack {
+    fn release(&self, slot: u32) {
+        lock(&self.releases.slots).push(SlotRef {
+            segment: self.segment,
+            slot,
+            len: 0,
+        });
+        self.releases.wake.notify_one();
+    }
+}
+
+impl ShmSession {
+    pub(super) fn new(threshold: u32, spilled: Arc<AtomicU64>) -> Self {
+        ShmSession {
+            threshold: (threshold as usize).max(crate::connection::ZERO_COPY_MIN),
+            received: Mutex::new(HashMap::new()),
+            publishing: Mutex::new(HashMap::new()),
+            releases: Arc::new(Releases::default()),
+            spilled,
+        }
+    }
+
+    pub(super) fn releases(&self) -> &Arc<Releases> {
+        &self.releases
+    }
+
+    /// The `Release` command for the slots given back since the last one, if any.
+    pub(super) fn take_releases(&self) -> Option<OutFrame> {
+        let slots = std::mem::take(&mut *lock(&self.releases.slots));
+        (!slots.is_empty()).then(|| encode(0, Command::Release { slots }))
+    }
+
+    /// Turns what the hub sent into what the rest of the client handles: a segment is mapped and kept (`None`), a
+    /// `DataRef` becomes `Data` whose payload is the slot itself, a granted segment is mapped before its reply goes
+    /// on. `take_fd` yields the descriptors that came beside the bytes, in order. An error ends the session.
+    pub(super) fn receive(
+        &self,
+        event: Event,
+        take_fd: impl FnOnce() -> Option<OwnedFd>,
+    ) -> Result<Option<Event>, String> {
+        match event {
+            Event::Segment(info) => {
+                let map = map_segment(&info, take_fd, false)?;
+                let owner: Arc<dyn SlotOwner> = Arc::new(GiveBack {
+                    segment: info.id,
+                    releases: self.releases.clone(),
+                });
+                lock(&self.received).insert(info.id, Received { info, map, owner });
+                Ok(None)
+            }
+            Event::Reply {
+                result: Ok(Reply::Segment(info)),
+                ..
+            } => {
+                let map = map_segment(&info, take_fd, true)?;
+                lock(&self.publishing).insert(info.chan, Publishing::Ready { info, map });
+                Ok(Some(event))
+            }
+            Event::DataRef {
+                chan,
+                seq,
+                ts_us,
+                slot,
+            } => {
+                let payload = {
+                    let received = lock(&self.received);
+                    received.get(&slot.segment).and_then(|r| {
+                        if slot.slot >= r.info.slots || slot.len > r.info.slot_size {
+                            return None;
+                        }
+                        let offset = layout::slot_offset(r.info.slots, r.info.slot_size, slot.slot);
+                        slot_bytes(
+                            r.map.clone(),
+                            offset,
+                            slot.len as usize,
+                            slot.slot,
+                            r.owner.clone(),
+                        )
+                    })
+                };
+                match payload {
+                    Some(payload) => Ok(Some(Event::Data {
+                        chan,
+                        seq,
+                        ts_us,
+                        payload,
+                    })),
+                    None => Err(format!(
+                        "the hub sent a message in slot {} of segment {}, which this client does not map",
+                        slot.slot, slot.segment
+                    )),
+                }
+            }
+            Event::ChannelRemoved { id, .. } => {
+                // The channel's segments are gone for new messages; slots still held keep their mapping alive.
+                lock(&self.received).retain(|_, r| r.info.chan != id);
+                lock(&self.publishing).remove(&id);
+                Ok(Some(event))
+            }
+            other => Ok(Some(other)),
+        }
+    }
+
+    /// The frame to send for `frame`: a `PublishRef` when its payload went into a free slot of the channel's
+    /// segment; the frame itself otherwise (small, no segment yet, or every slot held: then it is counted as
+    /// spilled). Never waits: a missing segment is asked for in the background.
+    pub(super) fn publish(&self, frame: OutFrame, inner: &Arc<Inner>) -> OutFrame {
+        let Some(chan) = frame.publish_chan() else {
+            return frame;
+        };
+        let payload = frame.payload();
+        if payload.len() < self.threshold {
+            return frame;
+        }
+        let mut publishing = lock(&self.publishing);
+        match publishing.get(&chan) {
+            Some(Publishing::Asked | Publishing::Refused) => frame,
+            Some(Publishing::Ready { info, map }) if payload.len() <= info.slot_size as usize => {
+                match write_into_free_slot(info, map, payload) {
+                    Some(slot) => encode(0, Command::PublishRef { chan, slot }),
+                    None => {
+                        self.spilled.fetch_add(1, Ordering::Relaxed);
+                        frame
+                    }
+                }
+            }
+            // No segment yet, or one too small for this message: ask for one that fits.
+            _ => {
+                let Some(slot_size) = layout::slot_size_for(payload.len()) else {
+                    return frame;
+                };
+                publishing.insert(chan, Publishing::Asked);
+                ask_segment(inner, chan, slot_size);
+                frame
+            }
+        }
+    }
+
+    /// Records that the hub refused a segment for `chan`.
+    fn refused(&self, chan: ChanId) {
+        lock(&self.publishing).insert(chan, Publishing::Refused);
+    }
+}
+
+/// Maps a segment the hub introduced, from the next descriptor that came.
+fn map_segment(
+    info: &SegmentInfo,
+    take_fd: impl FnOnce() -> Option<OwnedFd>,
+    writable: bool,
+) -> Result<Arc<Mapping>, String> {
+    let fd = take_fd().ok_or_else(|| format!("segment {} came without its descriptor", info.id))?;
+    layout::check_shape(info.slots, info.slot_size)
+        .map_err(|e| format!("segment {}: {e}", info.id))?;
+    let len = layout::segment_len(info.slots, info.slot_size);
+    Mapping::open(fd, len, writable)
+        .map(Arc::new)
+        .map_err(|e| format!("segment {}: {e}", info.id))
+}
+
+/// Takes the lowest free slot (so that a stream touches as few pages as it needs), copies `payload` into it and
+/// names it; `None` when every slot is held.
+fn write_into_free_slot(info: &SegmentInfo, map: &Mapping, payload: &Bytes) -> Option<SlotRef> {
+    for slot in 0..info.slots {
+        let state = map.state(info.slots, slot)?;
+        if state.load(Ordering::Relaxed) != layout::FREE {
+            continue;
+        }
+        if state
+            .compare_exchange(
+                layout::FREE,
+                layout::TAKEN,
+                Ordering::Acquire,
+                Ordering::Relaxed,
+            )
+            .is_err()
+        {
+            continue;
+        }
+        let offset = layout::slot_offset(info.slots, info.slot_size, slot);
+        if !map.write(offset, payload) {
+            state.store(layout::FREE, Ordering::Release);
+            return None;
+        }
+        return Some(SlotRef {
+            segment: info.id,
+            slot,
+            len: payload.len() as u32,
+        });
+    }
+    None
+}
+
+/// Asks the hub for a segment of `chan` on a task of its own; the reader maps it when the reply comes.
+fn ask_segment(inner: &Arc<Inner>, chan: ChanId, slot_size: u32) {
+    let client = Client {
+        inner: inner.clone(),
+    };
+    tokio::spawn(async move {
+        match client.request(Command::ShmOpen { chan, slot_size }).await {
+            Ok(Reply::Segment(_)) => {}
+            Ok(other) => warn!("the hub answered a segment request with {other:?}"),
+            Err(e) => {
+                debug!("no shared-memory segment for channel {chan}: {e}; its messages go inline");
+                if let Some(shm) = client.shm_session() {
+                    shm.refused(chan);
+                }
+            }
+        }
+    });
+}

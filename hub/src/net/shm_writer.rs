@@ -1,0 +1,106 @@
+//! A connection writer's turn of a payload that lies in a shared-memory segment into a `DataRef`, introducing the
+//! segment first with a read-only descriptor beside its frame; and the descriptor that goes with a granted segment.
+
+use std::collections::HashSet;
+use std::io;
+use std::os::fd::AsFd;
+use std::sync::Arc;
+
+use flow::connection::FrameWriter;
+use flow::protocol::{ErrorCode, ErrorReply, Event, Reply};
+use flow::transport::TransportWrite;
+
+use crate::hub::{Segments, ShmPeer};
+
+/// The writer's part: which segments this connection already maps.
+#[derive(Debug)]
+pub struct ShmWriter {
+    peer: Arc<ShmPeer>,
+    segments: Arc<Segments>,
+    known: HashSet<u32>,
+}
+
+impl ShmWriter {
+    pub fn new(peer: Arc<ShmPeer>, segments: Arc<Segments>) -> Self {
+        ShmWriter {
+            peer,
+            segments,
+            known: HashSet::new(),
+        }
+    }
+
+    /// Queues `event` on `writer`, by reference where it can; may flush (a descriptor goes out with its frame, and
+    /// a writer waiting for room has to let the client see what it holds).
+    pub async fn queue<W: TransportWrite>(
+        &mut self,
+        writer: &mut FrameWriter<W>,
+        event: Event,
+    ) -> io::Result<()> {
+        match event {
+            Event::Data {
+                chan,
+                seq,
+                ts_us,
+                payload,
+            } if self.peer.accepted()
+                && payload.len() >= self.segments.settings().threshold as usize =>
+            {
+                let Some((segment, slot)) = self.segments.locate(&payload) else {
+                    writer.queue_event(&Event::Data {
+                        chan,
+                        seq,
+                        ts_us,
+                        payload,
+                    });
+                    return Ok(());
+                };
+                if !self.known.contains(&slot.segment) {
+                    let fd = segment.mapping().read_only_fd()?;
+                    writer
+                        .send_event_with_fd(&Event::Segment(segment.info), fd.as_fd())
+                        .await?;
+                    self.known.insert(slot.segment);
+                }
+                while self.peer.held() >= self.peer.max_held() {
+                    let room = self.peer.room();
+                    writer.flush().await?;
+                    if self.peer.held() < self.peer.max_held() {
+                        break;
+                    }
+                    room.await;
+                }
+                self.peer.hold(slot, payload);
+                writer.queue_event(&Event::DataRef {
+                    chan,
+                    seq,
+                    ts_us,
+                    slot,
+                });
+            }
+            // The segment a publisher asked for goes with its read-write descriptor.
+            Event::Reply {
+                req,
+                result: Ok(Reply::Segment(info)),
+            } => match self.segments.get(info.id) {
+                Some(segment) => {
+                    let event = Event::Reply {
+                        req,
+                        result: Ok(Reply::Segment(info)),
+                    };
+                    writer
+                        .send_event_with_fd(&event, segment.mapping().fd())
+                        .await?;
+                }
+                None => writer.queue_event(&Event::Reply {
+                    req,
+                    result: Err(ErrorReply::new(
+                        ErrorCode::NotFound,
+                        "the segment is gone: its channel was removed",
+                    )),
+                }),
+            },
+            other => writer.queue_event(&other),
+        }
+        Ok(())
+    }
+}
