@@ -53,6 +53,7 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	$(TARGET_DIR)/release/hub-bench --rate-ms 10000 | tee $(BENCH_LOGS)/hub-bench.log
 	$(TARGET_DIR)/release/serial-bench | tee $(BENCH_LOGS)/serial-bench.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/udp-bench | tee $(BENCH_LOGS)/udp-bench.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/shm-bench | tee $(BENCH_LOGS)/shm-bench.log
 	test -x models/piper-venv/bin/piper || (python3 -m venv models/piper-venv && models/piper-venv/bin/pip install -q piper-tts==1.8.0)
 	$(MAKE) model-release MODEL=base
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PIPER_PYTHON=models/piper-venv/bin/python $(TARGET_DIR)/release/voice-bench | tee $(BENCH_LOGS)/voice-bench.log
