@@ -200,6 +200,13 @@ impl Collector for HubCollector {
             None,
             ConstCounter::new(0u64).metric_type(),
         )?)?;
+        ConstCounter::new(shm.inline()).encode(encoder.encode_descriptor(
+            "flow_shm_inline",
+            "Deliveries of such messages as bytes to a shared-memory subscriber that held all the slots it may \
+             (hub.shm_held)",
+            None,
+            ConstCounter::new(0u64).metric_type(),
+        )?)?;
         {
             let mut family = encoder.encode_descriptor(
                 "flow_service_calls",

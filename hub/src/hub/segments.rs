@@ -42,9 +42,9 @@ impl Default for ShmSettings {
         ShmSettings {
             enabled: true,
             threshold: 4096,
-            slots: 64,
+            slots: 128,
             per_channel: 4,
-            held: 8,
+            held: 32,
         }
     }
 }
@@ -55,6 +55,7 @@ pub struct ShmStats {
     segments: AtomicI64,
     slots_held: AtomicI64,
     messages: AtomicU64,
+    inline: AtomicU64,
 }
 
 impl ShmStats {
@@ -69,6 +70,13 @@ impl ShmStats {
     /// Messages published by reference since the start.
     pub fn messages(&self) -> u64 {
         self.messages.load(Ordering::Relaxed)
+    }
+    /// Deliveries of such messages as bytes to a shared-memory subscriber that held all the slots it may.
+    pub fn inline(&self) -> u64 {
+        self.inline.load(Ordering::Relaxed)
+    }
+    pub(crate) fn count_inline(&self) {
+        self.inline.fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -362,7 +370,7 @@ mod tests {
             Err(LeaseError::Violation(_))
         ));
         assert!(matches!(
-            segments.lease(7, 3, slot(info.id, 64, 10)),
+            segments.lease(7, 3, slot(info.id, 128, 10)),
             Err(LeaseError::Violation(_))
         ));
         assert!(matches!(

@@ -1,10 +1,11 @@
 //! One connection's side of shared memory: whether it takes messages by reference, and the slots it holds (the
 //! writer, `net/shm_writer.rs`, sends them; the session hears them given back).
 //!
-//! Overflow: a subscriber holds at most `hub.shm_held` slots at once. Past that its writer flushes and waits for a
-//! slot to come back; meanwhile its queue drops the oldest messages, counted as for any slow subscriber, and the
-//! publisher never waits. A subscriber that dies gives everything back: its held slots are dropped with the
-//! connection.
+//! Overflow: a subscriber holds at most `hub.shm_held` slots at once. Past that it gets messages as bytes, written
+//! from the segment, until it gives slots back: its writer never waits on it, so a subscriber that keeps messages
+//! (a ring of recent frames) costs copies, not a stall. A stalled subscriber stops reading its socket like any
+//! other, and its queue drops the oldest, counted; the publisher never waits. A subscriber that dies gives
+//! everything back: its held slots are dropped with the connection.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -12,7 +13,6 @@ use std::sync::{Mutex, MutexGuard};
 
 use bytes::Bytes;
 use flow::protocol::SlotRef;
-use tokio::sync::Notify;
 
 /// Shared memory as one connection has it; the session and the writer share it.
 #[derive(Debug)]
@@ -20,8 +20,6 @@ pub struct ShmPeer {
     accepted: AtomicBool,
     /// Slots sent by reference and not given back yet, with the message that holds each.
     held: Mutex<HashMap<(u32, u32), Bytes>>,
-    /// Wakes a writer waiting for a slot to come back.
-    room: Notify,
     max_held: usize,
 }
 
@@ -34,7 +32,6 @@ impl ShmPeer {
         ShmPeer {
             accepted: AtomicBool::new(false),
             held: Mutex::new(HashMap::new()),
-            room: Notify::new(),
             max_held: max_held.max(1),
         }
     }
@@ -58,14 +55,12 @@ impl ShmPeer {
         drop(held);
         // The slots free (and may free their segment) here, outside the lock.
         drop(freed);
-        self.room.notify_one();
     }
 
     /// Gives back everything the connection held: it is gone.
     pub fn clear(&self) {
         let all = std::mem::take(&mut *lock(&self.held));
         drop(all);
-        self.room.notify_one();
     }
 
     /// Slots held now.
@@ -76,11 +71,6 @@ impl ShmPeer {
     /// The most slots it may hold at once (`hub.shm_held`).
     pub fn max_held(&self) -> usize {
         self.max_held
-    }
-
-    /// Resolves once a slot came back (or the connection ended); create it before checking [`ShmPeer::held`].
-    pub fn room(&self) -> tokio::sync::futures::Notified<'_> {
-        self.room.notified()
     }
 
     /// Records a slot sent to the client, with the message that holds it.

@@ -29,8 +29,7 @@ impl ShmWriter {
         }
     }
 
-    /// Queues `event` on `writer`, by reference where it can; may flush (a descriptor goes out with its frame, and
-    /// a writer waiting for room has to let the client see what it holds).
+    /// Queues `event` on `writer`, by reference where it can; flushes before a frame that carries a descriptor.
     pub async fn queue<W: TransportWrite>(
         &mut self,
         writer: &mut FrameWriter<W>,
@@ -61,13 +60,17 @@ impl ShmWriter {
                         .await?;
                     self.known.insert(slot.segment);
                 }
-                while self.peer.held() >= self.peer.max_held() {
-                    let room = self.peer.room();
-                    writer.flush().await?;
-                    if self.peer.held() < self.peer.max_held() {
-                        break;
-                    }
-                    room.await;
+                // A subscriber that keeps many messages (a ring of recent frames) gets the rest as bytes: its writer
+                // never waits on it, so its other channels and its queue go on as for any subscriber.
+                if self.peer.held() >= self.peer.max_held() {
+                    self.segments.stats().count_inline();
+                    writer.queue_event(&Event::Data {
+                        chan,
+                        seq,
+                        ts_us,
+                        payload,
+                    });
+                    return Ok(());
                 }
                 self.peer.hold(slot, payload);
                 writer.queue_event(&Event::DataRef {
