@@ -39,7 +39,8 @@ impl Mode {
 enum Sender {
     Flow(FlowRig),
     Raw(RawRig),
-    Ice(IceRig),
+    // Boxed: the iceoryx2 ports are large, the other senders small.
+    Ice(Box<IceRig>),
 }
 
 /// A connected publisher with its subscribers running.
@@ -83,13 +84,13 @@ impl Rig {
                 None,
             ),
             Mode::Iceoryx2 => (
-                Sender::Ice(iceoryx::connect(
+                Sender::Ice(Box::new(iceoryx::connect(
                     t.name,
                     t.payload_len,
                     t.subscribers,
                     t.buffer,
                     tally.clone(),
-                )?),
+                )?)),
                 None,
             ),
         };
