@@ -91,6 +91,27 @@ async fn unix_subscribers_get_large_payloads_by_reference_and_give_every_slot_ba
     }
     assert!(segments.stats().slots_held() > 0 || kept.iter().all(|k| !flow::shm::is_shared(k)));
     drop(kept);
+    // Zero-copy publishing: a frame written in place into a loaned slot.
+    let mut loan = publisher
+        .loan(70_000)
+        .expect("the 70 kB messages' segment has a free slot");
+    loan.as_mut_slice().fill(0xab);
+    loan.truncate(65_000);
+    loan.publish().await?;
+    let a = tokio::time::timeout(Duration::from_secs(10), sub_ref.recv())
+        .await?
+        .expect("unix message");
+    let b = tokio::time::timeout(Duration::from_secs(10), sub_bytes.recv())
+        .await?
+        .expect("tcp message");
+    assert!(flow::shm::is_shared(&a.payload));
+    assert_eq!(a.payload.len(), 65_000);
+    assert!(a.payload.iter().all(|&x| x == 0xab) && a.payload == b.payload);
+    drop((a, b));
+    // A loan dropped unpublished frees its slot for the next one.
+    let first = publisher.loan(70_000).expect("free slot");
+    drop(first);
+    assert!(publisher.loan(70_000).is_some());
     // The first large message of each size goes inline while its segment is asked for; the rest by reference.
     assert!(
         shared_seen >= 20,

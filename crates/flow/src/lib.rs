@@ -21,7 +21,7 @@ pub mod token;
 pub mod transport;
 
 pub use client::{
-    Client, ClientEvent, ConnectOptions, Data, Publisher, Service, ServiceCall, Subscription,
+    Client, ClientEvent, ConnectOptions, Data, Loan, Publisher, Service, ServiceCall, Subscription,
 };
 pub use error::FlowError;
 pub use protocol::{ChanId, ChannelInfo, ChannelKind, ChannelStats, ErrorCode};

@@ -35,7 +35,7 @@ pub use self::core::Client;
 pub use inbox::Data;
 pub use options::{ClientEvent, ConnectOptions, SessionInfo};
 pub use owned::ServiceCall;
-pub use publisher::{Publisher, Service};
+pub use publisher::{Loan, Publisher, Service};
 pub use subscription::Subscription;
 
 use self::core::{Hook, Inner, State};

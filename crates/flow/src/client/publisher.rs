@@ -6,11 +6,12 @@ use bytes::Bytes;
 use tokio::sync::{mpsc, watch};
 
 use super::core::Client;
-use super::frame::{OutFrame, check_json};
+use super::frame::{OutFrame, check_json, encode};
 use super::owned::{Owned, ServiceCall};
 use crate::error::FlowError;
-use crate::protocol::{ChanId, Command};
+use crate::protocol::{ChanId, Command, SlotRef};
 use crate::queue::lock;
+use crate::shm::SlotMut;
 
 /// Publishes on a streaming channel this client owns. Dropping it removes the channel.
 #[derive(Debug)]
@@ -70,6 +71,23 @@ impl Publisher {
         Ok(OutFrame::publish(chan, payload))
     }
 
+    /// A slot of this channel's shared-memory segment to write a message of up to `len` bytes into, in place: the
+    /// zero-copy way to publish a large message (a camera frame decoded or rendered straight into it). `None` when
+    /// the link has no shared memory (not a Unix socket, or the hub's is off), when the channel's segment is not
+    /// there yet (it is asked for now: the next call may have it), or when every slot is still held; then publish
+    /// the message with [`Publisher::publish`], which never waits for a slot either.
+    pub fn loan(&self, len: usize) -> Option<Loan> {
+        let chan = self.owned.id()?;
+        let shm = self.client.shm_session()?;
+        let (info, slot) = shm.loan(chan, len, &self.client.inner)?;
+        Some(Loan {
+            chan,
+            segment: info.id,
+            slot,
+            client: self.client.clone(),
+        })
+    }
+
     /// Messages `try_publish` dropped because the link was saturated.
     pub fn skipped(&self) -> u64 {
         self.skipped.load(Ordering::Relaxed)
@@ -100,6 +118,59 @@ impl Publisher {
             })
             .await
             .map(drop)
+    }
+}
+
+/// A message being written in place into a shared-memory slot ([`Publisher::loan`]). Dropping it unpublished
+/// frees the slot.
+#[derive(Debug)]
+pub struct Loan {
+    chan: ChanId,
+    segment: u32,
+    slot: SlotMut,
+    client: Client,
+}
+
+impl Loan {
+    /// The message's bytes, to write.
+    pub fn as_mut_slice(&mut self) -> &mut [u8] {
+        self.slot.as_mut_slice()
+    }
+
+    pub fn len(&self) -> usize {
+        self.slot.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.slot.is_empty()
+    }
+
+    /// Shortens the message to `len` bytes (loaned at its largest size, written shorter).
+    pub fn truncate(&mut self, len: usize) {
+        self.slot.truncate(len);
+    }
+
+    /// Publishes the message, waiting if the link's send queue is full (as [`Publisher::publish`]).
+    pub async fn publish(self) -> Result<(), FlowError> {
+        let (slot, len) = self.slot.hand_over();
+        let slot = SlotRef {
+            segment: self.segment,
+            slot,
+            len: len as u32,
+        };
+        let frame = encode(
+            0,
+            Command::PublishRef {
+                chan: self.chan,
+                slot,
+            },
+        );
+        self.client
+            .inner
+            .out
+            .send(frame)
+            .await
+            .map_err(|_| FlowError::Closed)
     }
 }
 

@@ -9,7 +9,6 @@ use std::os::fd::OwnedFd;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use bytes::Bytes;
 use tokio::sync::Notify;
 use tracing::{debug, warn};
 
@@ -17,7 +16,7 @@ use super::core::{Client, Inner};
 use super::frame::{OutFrame, encode};
 use crate::protocol::{ChanId, Command, Event, Reply, SegmentInfo, SlotRef};
 use crate::queue::lock;
-use crate::shm::{Mapping, SlotOwner, layout, slot_bytes};
+use crate::shm::{Mapping, SlotMut, SlotOwner, layout, slot_bytes};
 
 /// The shared memory of one session.
 #[derive(Debug)]
@@ -181,26 +180,46 @@ impl ShmSession {
         if payload.len() < self.threshold {
             return frame;
         }
+        let Some((info, mut slot)) = self.loan(chan, payload.len(), inner) else {
+            return frame;
+        };
+        slot.as_mut_slice().copy_from_slice(payload);
+        let (slot, len) = slot.hand_over();
+        let slot = SlotRef {
+            segment: info.id,
+            slot,
+            len: len as u32,
+        };
+        encode(0, Command::PublishRef { chan, slot })
+    }
+
+    /// A free slot of `chan`'s segment to write a message of `len` bytes into, in place. `None` while the segment is
+    /// asked for (asking for one when there is none that fits), when the hub refused one, or when every slot is held
+    /// (counted as spilled: the message goes inline).
+    pub(super) fn loan(
+        &self,
+        chan: ChanId,
+        len: usize,
+        inner: &Arc<Inner>,
+    ) -> Option<(SegmentInfo, SlotMut)> {
         let mut publishing = lock(&self.publishing);
         match publishing.get(&chan) {
-            Some(Publishing::Asked | Publishing::Refused) => frame,
-            Some(Publishing::Ready { info, map }) if payload.len() <= info.slot_size as usize => {
-                match write_into_free_slot(info, map, payload) {
-                    Some(slot) => encode(0, Command::PublishRef { chan, slot }),
-                    None => {
-                        self.spilled.fetch_add(1, Ordering::Relaxed);
-                        frame
-                    }
+            Some(Publishing::Asked | Publishing::Refused) => None,
+            Some(Publishing::Ready { info, map }) if len <= info.slot_size as usize => {
+                // The lowest free slot, so that a stream touches as few pages as it needs.
+                let taken = (0..info.slots)
+                    .find_map(|slot| map.take_slot(info.slots, info.slot_size, slot, len));
+                if taken.is_none() {
+                    self.spilled.fetch_add(1, Ordering::Relaxed);
                 }
+                taken.map(|slot| (*info, slot))
             }
             // No segment yet, or one too small for this message: ask for one that fits.
             _ => {
-                let Some(slot_size) = layout::slot_size_for(payload.len()) else {
-                    return frame;
-                };
+                let slot_size = layout::slot_size_for(len)?;
                 publishing.insert(chan, Publishing::Asked);
                 ask_segment(inner, chan, slot_size);
-                frame
+                None
             }
         }
     }
@@ -224,39 +243,6 @@ fn map_segment(
     Mapping::open(fd, len, writable)
         .map(Arc::new)
         .map_err(|e| format!("segment {}: {e}", info.id))
-}
-
-/// Takes the lowest free slot (so that a stream touches as few pages as it needs), copies `payload` into it and
-/// names it; `None` when every slot is held.
-fn write_into_free_slot(info: &SegmentInfo, map: &Mapping, payload: &Bytes) -> Option<SlotRef> {
-    for slot in 0..info.slots {
-        let state = map.state(info.slots, slot)?;
-        if state.load(Ordering::Relaxed) != layout::FREE {
-            continue;
-        }
-        if state
-            .compare_exchange(
-                layout::FREE,
-                layout::TAKEN,
-                Ordering::Acquire,
-                Ordering::Relaxed,
-            )
-            .is_err()
-        {
-            continue;
-        }
-        let offset = layout::slot_offset(info.slots, info.slot_size, slot);
-        if !map.write(offset, payload) {
-            state.store(layout::FREE, Ordering::Release);
-            return None;
-        }
-        return Some(SlotRef {
-            segment: info.id,
-            slot,
-            len: payload.len() as u32,
-        });
-    }
-    None
 }
 
 /// Asks the hub for a segment of `chan` on a task of its own; the reader maps it when the reply comes.

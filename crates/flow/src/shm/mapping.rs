@@ -10,8 +10,8 @@
 use std::io;
 use std::os::fd::{AsFd, AsRawFd, BorrowedFd, OwnedFd};
 use std::ptr::NonNull;
-use std::sync::RwLock;
-use std::sync::atomic::AtomicU32;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, RwLock};
 
 use rustix::fs::{MemfdFlags, Mode, OFlags, SealFlags};
 use rustix::mm::{MapFlags, ProtFlags};
@@ -166,6 +166,97 @@ impl Mapping {
     }
 }
 
+/// A slot taken for writing (its state word turned from free to taken): the one place that may write it until it is
+/// published or dropped. Dropping it unpublished frees the slot again.
+#[derive(Debug)]
+pub struct SlotMut {
+    map: Arc<Mapping>,
+    slots: u32,
+    slot: u32,
+    offset: usize,
+    len: usize,
+    /// Published: the hub frees the slot from now on.
+    handed_over: bool,
+}
+
+impl Mapping {
+    /// Takes `slot` (free -> taken) to write `len` bytes into it; `None` when it is held, out of bounds, longer than
+    /// a slot, or the mapping is read-only.
+    pub fn take_slot(
+        self: &Arc<Self>,
+        slots: u32,
+        slot_size: u32,
+        slot: u32,
+        len: usize,
+    ) -> Option<SlotMut> {
+        if !self.writable || len > slot_size as usize {
+            return None;
+        }
+        let offset = layout::slot_offset(slots, slot_size, slot);
+        self.bytes(offset, len)?;
+        let state = self.state(slots, slot)?;
+        state
+            .compare_exchange(
+                layout::FREE,
+                layout::TAKEN,
+                Ordering::Acquire,
+                Ordering::Relaxed,
+            )
+            .ok()?;
+        Some(SlotMut {
+            map: self.clone(),
+            slots,
+            slot,
+            offset,
+            len,
+            handed_over: false,
+        })
+    }
+}
+
+impl SlotMut {
+    pub fn slot(&self) -> u32 {
+        self.slot
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The slot's bytes to write the message into.
+    pub fn as_mut_slice(&mut self) -> &mut [u8] {
+        // SAFETY: the range is inside a writable mapping (checked in `take_slot`), and this `SlotMut` is its only
+        // writer: the compare-exchange from free to taken succeeded here, no other process writes a taken slot, and
+        // nobody reads it before it is published, which consumes `self`.
+        unsafe { std::slice::from_raw_parts_mut(self.map.ptr.as_ptr().add(self.offset), self.len) }
+    }
+
+    /// Shortens the message to `len` bytes (a frame encoded into a slot of its largest size).
+    pub fn truncate(&mut self, len: usize) {
+        self.len = self.len.min(len);
+    }
+
+    /// The slot is published: from now on the hub frees it.
+    pub fn hand_over(mut self) -> (u32, usize) {
+        self.handed_over = true;
+        (self.slot, self.len)
+    }
+}
+
+impl Drop for SlotMut {
+    fn drop(&mut self) {
+        if !self.handed_over
+            && let Some(state) = self.map.state(self.slots, self.slot)
+        {
+            state.store(layout::FREE, Ordering::Release);
+        }
+    }
+}
+
 impl Drop for Mapping {
     fn drop(&mut self) {
         let start = self.ptr.as_ptr() as usize;
@@ -182,7 +273,6 @@ impl Drop for Mapping {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::Ordering;
 
     #[test]
     fn a_segment_reopened_read_only_sees_what_the_writer_wrote() {
@@ -204,6 +294,28 @@ mod tests {
         assert!(!super::super::is_shared(b"elsewhere"));
         assert!(ro.bytes(len - 1, 2).is_none());
         assert!(ro.state(4, 4).is_none());
+    }
+
+    #[test]
+    fn a_taken_slot_is_written_once_and_freed_unless_handed_over() {
+        let len = layout::segment_len(2, 4096);
+        let map = Arc::new(Mapping::create("flow-shm-test", len).expect("create"));
+        let mut slot = map.take_slot(2, 4096, 1, 3).expect("free");
+        assert!(map.take_slot(2, 4096, 1, 3).is_none(), "taken once");
+        slot.as_mut_slice().copy_from_slice(b"abc");
+        drop(slot);
+        let again = map.take_slot(2, 4096, 1, 3).expect("freed by the drop");
+        assert_eq!(again.hand_over(), (1, 3));
+        assert!(
+            map.take_slot(2, 4096, 1, 3).is_none(),
+            "handed over: the hub frees it"
+        );
+        assert!(
+            map.take_slot(2, 4096, 0, 4097).is_none(),
+            "longer than a slot"
+        );
+        let off = layout::slot_offset(2, 4096, 1);
+        assert_eq!(map.bytes(off, 3), Some(&b"abc"[..]));
     }
 
     #[test]

@@ -18,7 +18,7 @@ pub mod layout;
 mod mapping;
 mod view;
 
-pub use mapping::Mapping;
+pub use mapping::{Mapping, SlotMut};
 pub use view::{SlotOwner, slot_bytes};
 
 /// Whether `bytes` lie inside a shared-memory segment this process maps: how a program (or a test) tells that a
