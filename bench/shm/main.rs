@@ -64,8 +64,8 @@ struct Args {
     /// Flat-out measurement window of each cell (ms).
     #[arg(long, default_value_t = 2000)]
     window_ms: u64,
-    /// Messages the publisher may be ahead of the slowest subscriber: at most the slots a subscriber of the hub's
-    /// shared memory may hold (`hub.shm_held`, 8), so that no mode drops.
+    /// Messages the publisher may be ahead of the slowest subscriber: no more than the slots a subscriber of the
+    /// hub's shared memory may hold (`hub.shm_held`), so that the shm mode measures references, not its fallback.
     #[arg(long, default_value_t = 8)]
     window_msgs: u64,
     /// Bytes the publisher may be ahead of the slowest subscriber (fewer messages for large payloads): below the
