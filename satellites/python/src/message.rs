@@ -64,6 +64,13 @@ impl Message {
         self.gap
     }
 
+    /// Whether the payload lies in a shared-memory segment this process maps: it came by reference over the hub's
+    /// Unix socket, and every view of it (`memoryview`, numpy) reads the segment itself, without a copy.
+    #[getter]
+    fn in_shared_memory(&self) -> bool {
+        flow::shm::is_shared(&self.payload)
+    }
+
     /// The payload as a read-only `memoryview`, without a copy.
     #[getter]
     fn data<'py>(slf: Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {

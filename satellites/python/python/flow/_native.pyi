@@ -52,6 +52,10 @@ class Message:
     def gap(self) -> int:
         """Messages of this channel dropped just before this one (drop-oldest on a slow reader)."""
     @property
+    def in_shared_memory(self) -> bool:
+        """Whether the payload lies in a shared-memory segment this process maps (it came by reference over the
+        hub's Unix socket): its views, numpy arrays included, read the segment itself."""
+    @property
     def data(self) -> memoryview:
         """The payload as a read-only memoryview, without a copy."""
     def bytes(self) -> bytes:

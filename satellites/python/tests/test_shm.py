@@ -1,0 +1,116 @@
+"""Shared memory from Python: a 1 MB frame published over the hub's Unix socket reaches a Python subscriber there by
+reference, and reads as a numpy array that is a view of the segment the process maps (no copy), while a TCP
+subscriber of the same channel gets the same bytes by copy."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import PATIENCE, Output, binary, wait_subscribers, wait_until
+from flow import Client
+
+#: The hub's default hub.shm_threshold: payloads of this size and more travel by reference.
+THRESHOLD = 4096
+#: What the hub's segments are called in /proc/PID/maps.
+MEMFD = "memfd:flow-shm"
+
+
+class Hub:
+    """The hub alone (`flow-hub`, no agent modules: nothing here needs them) on free ports and its Unix socket."""
+
+    def __init__(self, data_dir: Path) -> None:
+        self.data_dir = data_dir
+        env = {k: v for k, v in os.environ.items() if k != "FLOW_SHM"}
+        env.update(RUST_LOG=os.environ.get("AGENT_TEST_LOG", "info"), NO_COLOR="1")
+        self.proc = subprocess.Popen(
+            [str(binary("flow-hub")), "--http", "127.0.0.1:0", "--flow-tcp", "127.0.0.1:0", "--flow-unix",
+             "flow.sock", "--data-dir", str(data_dir)],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env,
+        )
+        self.output = Output(self.proc.stdout)
+        wait_until(
+            f"flow-hub to listen:\n{self.output.text()}",
+            lambda: self.proc.poll() is not None or any("flow hub: unix:" in l for l in self.output.snapshot()),
+        )
+        if self.proc.poll() is not None:
+            pytest.fail(f"flow-hub exited at start ({self.proc.returncode}):\n{self.output.text()}")
+        lines = self.output.snapshot()
+        self.tcp = next(l.split()[2] for l in lines if l.startswith("flow hub: tcp://"))
+        self.unix = next(l.split()[2] for l in lines if l.startswith("flow hub: unix:"))
+
+    def client(self, addr: str, name: str) -> Client:
+        return Client.connect(addr, data_dir=str(self.data_dir), name=name, queue=16, reconnect=False)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout=PATIENCE)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+@pytest.fixture
+def hub(tmp_path):
+    h = Hub(tmp_path / "data")
+    yield h
+    h.stop()
+
+
+def mapping_of(address: int) -> str:
+    """The line of /proc/self/maps whose range holds `address`: what the kernel says lies there."""
+    for line in Path("/proc/self/maps").read_text().splitlines():
+        start, end = (int(x, 16) for x in line.split()[0].split("-"))
+        if start <= address < end:
+            return line
+    return ""
+
+
+def test_a_megabyte_frame_over_the_unix_socket_reads_as_a_numpy_view_of_shared_memory(hub):
+    frame = np.random.default_rng(39).integers(0, 256, size=1 << 20, dtype=np.uint8)
+    with hub.client(hub.unix, "py-shm-pub") as producer, hub.client(hub.unix, "py-shm-local") as local, \
+            hub.client(hub.tcp, "py-tcp-remote") as remote:
+        pub = producer.publisher("Py.shm.frames", {"format": "raw"})
+        by_reference = local.subscribe("Py.shm.frames")
+        by_copy = remote.subscribe("Py.shm.frames")
+        wait_subscribers(producer, "Py.shm.frames", 2)
+
+        # The SDK sends a channel's first large message inline while it asks the hub for a segment sized for it (a
+        # publisher never waits): frames go by reference once the segment has come.
+        for _ in range(100):
+            pub.publish(frame)  # from the array's own buffer; the SDK copies it once, into the segment
+            msg = by_reference.recv(timeout=PATIENCE)
+            copy = by_copy.recv(timeout=PATIENCE)
+            assert np.array_equal(np.frombuffer(msg, dtype=np.uint8), frame)
+            if msg.in_shared_memory:
+                break
+        assert msg.in_shared_memory, "100 frames over the Unix socket and none came by reference"
+        arr = np.frombuffer(msg, dtype=np.uint8)
+        # A view, not a copy: numpy owns nothing, may write nothing, and shares the message's own buffer...
+        assert not arr.flags.owndata and not arr.flags.writeable
+        assert np.shares_memory(arr, np.asarray(msg.data))
+        assert np.array_equal(arr, frame)
+        # ...which lies in the hub's memfd segment, mapped into this process, as the kernel tells it.
+        first, last = mapping_of(arr.ctypes.data), mapping_of(arr.ctypes.data + arr.nbytes - 1)
+        assert MEMFD in first and first == last, (first, last)
+
+        assert not copy.in_shared_memory
+        assert np.array_equal(np.frombuffer(copy, dtype=np.uint8), frame)
+        assert (copy.seq, copy.ts_us) == (msg.seq, msg.ts_us)
+
+        # The array keeps the message, and so its slot, alive after the message's name is gone.
+        del msg
+        assert np.array_equal(arr, frame)
+
+        # Below the threshold a payload travels inline, to both.
+        pub.publish(b"x" * (THRESHOLD - 1))
+        small = by_reference.recv(timeout=PATIENCE)
+        assert not small.in_shared_memory and small.bytes() == b"x" * (THRESHOLD - 1)
+        assert by_copy.recv(timeout=PATIENCE).bytes() == b"x" * (THRESHOLD - 1)
