@@ -1,8 +1,10 @@
 """Benchmark of the Python SDK (`flow`): a Python subscriber's throughput and CPU per message against redis-py pub/sub
-in the same run, and the jitter of a Python `flow.Sketch` at 100 Hz; prints SUMMARY lines and writes a markdown
-report (`--write docs/bench-python.md`).
+in the same run, 1 MB frames to a Python subscriber by shared memory (the Unix socket) against its TCP path, and the
+jitter of a Python `flow.Sketch` at 100 Hz; prints SUMMARY lines and writes a markdown report
+(`--write docs/bench-python.md`).
 
     satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md
+    satellites/python/.venv/bin/python bench/python/bench_python.py --shm-only   # the shared-memory phase alone
 
 It starts its own `flow-hub` (from $AGENT_BIN_DIR, else the release or debug build in $CARGO_TARGET_DIR or
 ./target) and its own `redis-server` on free ports, and always stops both. Every publisher and subscriber is a
@@ -52,6 +54,15 @@ FLOW_QUEUE = 256
 
 PCM_RATE = 22050
 PCM_CHUNK = 441  # 20 ms of s16 mono at 22050 Hz: 882 bytes, as on Agent.audio
+
+# The shared-memory phase: 1 MB frames (about a 640x480 RGB24 picture, the size shared memory is for) from a Python
+# publisher to a Python subscriber, both on the hub's Unix socket (the frame goes by reference: copied once into the
+# publisher's segment, read in place by the subscriber) or both over TCP (copied through both sockets).
+SHM_FRAME = 1 << 20
+# Four frames in flight at most: over TCP the hub's per-subscriber lane holds 8 MB (hub.subscriber_queue_bytes), and
+# a window of 32 megabyte frames would have it drop the oldest, so the TCP figure would be what survived a queue.
+SHM_WINDOW = 4
+SHM_TARGET = 5.0
 
 
 # ---------------------------------------------------------------------------------------------------- payloads
@@ -131,13 +142,15 @@ class Hub:
     addr: str
     data_dir: Path
     binary: Path
+    unix: str  # "unix:PATH", the hub's Unix socket (shared memory goes there)
 
 
 def start_hub(data_dir: Path) -> Hub:
     binary = hub_binary()
-    # No HTTP page and no Unix socket are needed; HTTP takes a free port since the hub always serves it.
+    # No HTTP page is needed (HTTP takes a free port since the hub always serves it); the Unix socket, in the data
+    # directory, is the shared-memory phase's.
     proc = subprocess.Popen(
-        [str(binary), "--http", "127.0.0.1:0", "--flow-tcp", "127.0.0.1:0", "--flow-unix", "", "--data-dir",
+        [str(binary), "--http", "127.0.0.1:0", "--flow-tcp", "127.0.0.1:0", "--flow-unix", "flow.sock", "--data-dir",
          str(data_dir)],
         stdin=subprocess.DEVNULL,
         stdout=subprocess.PIPE,
@@ -147,22 +160,24 @@ def start_hub(data_dir: Path) -> Hub:
     )
     lines: list[str] = []
     deadline = time.monotonic() + 30
-    addr = None
+    addr = unix = None
     assert proc.stdout is not None
-    while time.monotonic() < deadline:
+    # The hub prints its TCP address, then its socket's.
+    while time.monotonic() < deadline and unix is None:
         line = proc.stdout.readline()
         if not line:
             break
         lines.append(line.rstrip())
         if line.startswith("flow hub: tcp://"):
             addr = line.split()[2]  # "tcp://127.0.0.1:PORT", as Client.connect takes it
-            break
-    if addr is None:
+        elif line.startswith("flow hub: unix:"):
+            unix = line.split()[2]  # "unix:PATH"
+    if addr is None or unix is None:
         stop(proc)
         raise SystemExit("bench_python: flow-hub did not start:\n" + "\n".join(lines))
     # Keep reading its output so a chatty hub never blocks on a full pipe.
     threading.Thread(target=lambda: [None for _ in proc.stdout], daemon=True).start()  # type: ignore[union-attr]
-    return Hub(proc, addr, data_dir, binary)
+    return Hub(proc, addr, data_dir, binary, unix)
 
 
 def start_redis(work: Path) -> tuple[subprocess.Popen, int, str]:
@@ -228,7 +243,7 @@ def measure_loop(messages, acked, done, warmup: float, duration: float, on_msg) 
     raise RuntimeError("the subscription ended early")
 
 
-def flow_sub(addr, data_dir, channel, acked, done, ready, results, warmup, duration) -> None:
+def flow_sub(addr, data_dir, channel, acked, done, ready, results, warmup, duration, expect=None) -> None:
     import flow
 
     with flow.Client.connect(addr, data_dir=data_dir, name="bench-sub", queue=FLOW_QUEUE) as client:
@@ -236,18 +251,29 @@ def flow_sub(addr, data_dir, channel, acked, done, ready, results, warmup, durat
         ready.set()
         gaps = [0]
         size = [0]
+        shared = [0]  # messages that came by reference (shared memory), counted in the shared-memory phase only
+        checked = [False]
 
         def on_msg(m):
             # Touch the payload as a consumer would (a zero-copy view), and count what the hub or queue lost.
             size[0] = len(memoryview(m))
             gaps[0] += m.gap
 
-        out = measure_loop(sub, acked, done, warmup, duration, on_msg)
-        out.update(gap=gaps[0], dropped=sub.dropped, size=size[0])
+        def on_frame(m):
+            on_msg(m)
+            shared[0] += m.in_shared_memory
+            if not checked[0]:
+                # Once: the bytes are the publisher's.
+                if m.bytes() != expect:
+                    raise RuntimeError(f"{channel}: the payload differs from what was published")
+                checked[0] = True
+
+        out = measure_loop(sub, acked, done, warmup, duration, on_msg if expect is None else on_frame)
+        out.update(gap=gaps[0], dropped=sub.dropped, size=size[0], shared=shared[0], seen=int(acked.value))
         results.put(out)
 
 
-def flow_pub(addr, data_dir, channel, payload, acked, done, ready, results) -> None:
+def flow_pub(addr, data_dir, channel, payload, acked, done, ready, results, window=WINDOW) -> None:
     import flow
 
     with flow.Client.connect(addr, data_dir=data_dir, name="bench-pub") as client:
@@ -257,7 +283,7 @@ def flow_pub(addr, data_dir, channel, payload, acked, done, ready, results) -> N
         ready.set()
         sent = 0
         while not done.value:
-            if sent - acked.value >= WINDOW:
+            if sent - acked.value >= window:
                 time.sleep(0.00005)
                 continue
             pub.publish(payload)
@@ -374,17 +400,21 @@ def paced_pub(addr, data_dir, channel, payload, hz, done) -> None:
 CTX = mp.get_context("spawn")
 
 
-def run_pair(system: str, hub: Hub, redis_port: int, payload: bytes, channel: str, warmup: float,
-             duration: float) -> dict:
+def run_pair(system: str, hub: Hub, redis_port: Optional[int], payload: bytes, channel: str, warmup: float,
+             duration: float, addr: Optional[str] = None, window: int = WINDOW,
+             expect: Optional[bytes] = None) -> dict:
+    """One publisher and one subscriber process of `system`; flow's both connect to `addr` (default: the hub's TCP
+    address) and keep within `window`; `expect` makes the subscriber check its first payload against it."""
     acked = CTX.RawValue(ctypes.c_uint64, 0)
     done = CTX.RawValue(ctypes.c_int, 0)
     sub_ready, pub_ready = CTX.Event(), CTX.Event()
     sub_q, pub_q = CTX.Queue(), CTX.Queue()
     if system == "flow":
-        sub = CTX.Process(target=flow_sub, args=(hub.addr, str(hub.data_dir), channel, acked, done, sub_ready, sub_q,
-                                                 warmup, duration))
-        pub = CTX.Process(target=flow_pub, args=(hub.addr, str(hub.data_dir), channel, payload, acked, done, pub_ready,
-                                                 pub_q))
+        addr = addr or hub.addr
+        sub = CTX.Process(target=flow_sub, args=(addr, str(hub.data_dir), channel, acked, done, sub_ready, sub_q,
+                                                 warmup, duration, expect))
+        pub = CTX.Process(target=flow_pub, args=(addr, str(hub.data_dir), channel, payload, acked, done, pub_ready,
+                                                 pub_q, window))
     else:
         sub = CTX.Process(target=redis_sub, args=(redis_port, channel, acked, done, sub_ready, sub_q, warmup,
                                                   duration))
@@ -414,6 +444,79 @@ def wait_ready(proc, ready, what: str) -> None:
     while not ready.wait(0.1):
         if not proc.is_alive() or time.monotonic() > deadline:
             raise RuntimeError(f"{what} did not start (exit code {proc.exitcode})")
+
+
+def shm_frame() -> bytes:
+    """A deterministic 1 MB frame that compresses like noise (no page of it is all zeros)."""
+    import random
+
+    return random.Random(39).randbytes(SHM_FRAME)
+
+
+def run_shm(hub: Hub, rounds: int, warmup: float, duration: float) -> dict:
+    """1 MB frames to a Python subscriber over the Unix socket (shared memory) and over TCP, the transports in turn
+    within each round; the rounds of each, by transport."""
+    frame = shm_frame()
+    out: dict = {"unix": [], "tcp": []}
+    for i in range(rounds):
+        order = ["unix", "tcp"] if i % 2 == 0 else ["tcp", "unix"]
+        for transport in order:
+            addr = hub.unix if transport == "unix" else hub.addr
+            r = run_pair("flow", hub, None, frame, f"bench.shm.{transport}.{i}", warmup, duration, addr=addr,
+                         window=SHM_WINDOW, expect=frame)
+            if r["size"] != SHM_FRAME:
+                raise RuntimeError(f"{transport} delivered {r['size']} bytes, not {SHM_FRAME}")
+            out[transport].append(r)
+            print(f"  round {i + 1} 1MB  flow {transport:4} {'(shm)' if transport == 'unix' else '     '}: "
+                  f"{rate(r):8.0f} msg/s  {us_per_msg(r):6.1f} us cpu/msg  (by reference {by_reference(r):.0%}, "
+                  f"gap {r['gap']}, dropped {r['dropped']})", flush=True)
+    return out
+
+
+def by_reference(r: dict) -> float:
+    """The share of a subscriber's messages that came in shared memory."""
+    return r["shared"] / r["seen"] if r["seen"] else 0.0
+
+
+def median_round(rounds: list) -> dict:
+    # The round with the median rate, as Row.median: its CPU figure belongs to the same round.
+    rs = sorted(rounds, key=rate)
+    return rs[len(rs) // 2]
+
+
+def shm_summary(shm: dict) -> tuple[str, str, float]:
+    """The phase's SUMMARY line, its TARGET line and the ratio."""
+    u, t = median_round(shm["unix"]), median_round(shm["tcp"])
+    ratio = rate(u) / rate(t)
+    drops = {k: sum(x["gap"] + x["dropped"] for x in v) for k, v in shm.items()}
+    line = (f"SUMMARY python-shm 1MB unix(shm)={rate(u):.0f} msg/s tcp={rate(t):.0f} msg/s ratio={ratio:.2f} "
+            f"(target >= {SHM_TARGET}) cpu/msg unix={us_per_msg(u):.1f} us tcp={us_per_msg(t):.1f} us "
+            f"by-reference unix={by_reference(u):.0%} tcp={by_reference(t):.0%} "
+            f"drops unix={drops['unix']} tcp={drops['tcp']}")
+    target = f"TARGET python-shm 1MB >= {SHM_TARGET}x TCP: {'met' if ratio >= SHM_TARGET else 'MISSED'}"
+    return line, target, ratio
+
+
+def shm_only(args) -> int:
+    work = Path(tempfile.mkdtemp(prefix="bench-python-shm-"))
+    hub_proc = None
+    signal.signal(signal.SIGTERM, interrupt)
+    try:
+        hub = start_hub(work)
+        hub_proc = hub.proc
+        print(f"flow-hub {hub.binary} at {hub.addr} and {hub.unix}; 1 MB frames, window {SHM_WINDOW}, "
+              f"{args.rounds} rounds x {args.duration} s (+{args.warmup} s warm-up)", flush=True)
+        shm = run_shm(hub, args.rounds, args.warmup, args.duration)
+    except KeyboardInterrupt:
+        print("bench_python: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        stop(hub_proc)
+        shutil.rmtree(work, ignore_errors=True)
+    line, target, _ = shm_summary(shm)
+    print(line)
+    print(target)
+    return 0
 
 
 def run_sketch(hub: Hub, pcm: bytes, seconds: float) -> dict:
@@ -557,9 +660,14 @@ def main() -> int:
     ap.add_argument("--write", type=Path, help="write the markdown report here (e.g. docs/bench-python.md)")
     ap.add_argument("--sigint-only", action="store_true",
                     help="only time Ctrl-C into blocked satellites (needs no Redis; writes no report)")
+    ap.add_argument("--shm-only", action="store_true",
+                    help="only the shared-memory phase, 1 MB frames over the Unix socket vs TCP (needs no Redis; "
+                         "writes no report)")
     args = ap.parse_args()
     if args.sigint_only:
         return sigint_only()
+    if args.shm_only:
+        return shm_only(args)
     args.load = os.getloadavg()[0]
 
     import redis  # noqa: F401  (fail early, before starting servers, if redis-py is missing)
@@ -602,6 +710,9 @@ def main() -> int:
                     print(f"  round {i + 1} {row.name:4} {system:14}: {rate(r):8.0f} msg/s  {us_per_msg(r):6.1f} us "
                           f"cpu/msg  (gap {r['gap']}, dropped {r['dropped']})", flush=True)
 
+        print(f"shm: 1 MB frames to a Python subscriber over the Unix socket (shared memory) vs TCP, window "
+              f"{SHM_WINDOW}", flush=True)
+        shm = run_shm(hub, args.rounds, args.warmup, args.duration)
         print(f"sketch: 100 Hz fast tick for {args.jitter_seconds} s, with a 50 Hz PCM subscription", flush=True)
         sk = run_sketch(hub, pcm, args.jitter_seconds)
         print("sigint: Ctrl-C into a satellite blocked in recv and in call, 10 times each", flush=True)
@@ -625,6 +736,8 @@ def main() -> int:
             f"flow drops={drops}"
         )
         table.append((row, f, r, ratio, drops))
+    shm_line, _, shm_ratio = shm_summary(shm)
+    summary.append(shm_line)
     late_ms = [x * 1e3 for x in sk["late_s"]]
     rf = sk["rust"]["fast"]
     p99 = pct(late_ms, 0.99)
@@ -642,18 +755,19 @@ def main() -> int:
     for line in summary:
         print(line)
     targets = [(f"python-sub {row.name} >= {row.target}x redis-py", ratio >= row.target) for row, _, _, ratio, _ in
-               table] + [("python-sketch fast_tick p99 <= 2 ms", p99 <= 2.0),
+               table] + [(f"python-shm 1MB >= {SHM_TARGET}x TCP", shm_ratio >= SHM_TARGET),
+                         ("python-sketch fast_tick p99 <= 2 ms", p99 <= 2.0),
                          ("python-sigint every Ctrl-C within 100 ms", max(sig_all) <= 100.0)]
     for name, ok in targets:
         print(f"TARGET {name}: {'met' if ok else 'MISSED'}")
 
     if args.write:
-        write_doc(args, table, sk, late_ms, summary, targets, hub, redis_ver, parser, jpeg_src, pcm_src)
+        write_doc(args, table, shm, sk, late_ms, summary, targets, hub, redis_ver, parser, jpeg_src, pcm_src)
         print(f"wrote {args.write}")
     return 0
 
 
-def write_doc(args, table, sk, late_ms, summary, targets, hub, redis_ver, parser, jpeg_src, pcm_src) -> None:
+def write_doc(args, table, shm, sk, late_ms, summary, targets, hub, redis_ver, parser, jpeg_src, pcm_src) -> None:
     import redis as redis_mod
 
     rf = sk["rust"]["fast"]
@@ -704,6 +818,28 @@ def write_doc(args, table, sk, late_ms, summary, targets, hub, redis_ver, parser
         )
         + ". On this shared two-core VM the same code's rate drifts by up to a third between "
         "runs, for both systems alike; taking the systems in turn keeps the ratio fair under that drift.",
+        "",
+        "## Shared memory: 1 MB frames over the Unix socket against TCP",
+        "",
+        "A Python publisher and a Python subscriber, each a process of its own, both on the hub's Unix socket (the "
+        "frame is copied once into the publisher's segment and reaches the subscriber by reference, read in place "
+        "through `memoryview`) or both over TCP (copied through the publisher's socket, the hub and the "
+        f"subscriber's socket); a window of {SHM_WINDOW} frames, since over TCP the hub's 8 MB per-subscriber "
+        "lane would otherwise drop the oldest. Median of the rounds, the transports in turn; `by reference` is "
+        "the share of the subscriber's messages whose `Message.in_shared_memory` was true.",
+        "",
+        "| transport | msg/s | CPU/msg (subscriber) | by reference | drops |",
+        "|---|---:|---:|---:|---:|",
+        *[
+            f"| {name} | {rate(r):.0f} | {us_per_msg(r):.1f} us | {by_reference(r):.0%} | "
+            f"{sum(x['gap'] + x['dropped'] for x in shm[key])} |"
+            for key, name in (("unix", "Unix socket (shared memory)"), ("tcp", "TCP"))
+            for r in [median_round(shm[key])]
+        ],
+        "",
+        f"Ratio {rate(median_round(shm['unix'])) / rate(median_round(shm['tcp'])):.2f}x (target >= {SHM_TARGET}x). "
+        "Every round, msg/s (Unix / TCP): "
+        + ", ".join(f"{rate(a):.0f}/{rate(b):.0f}" for a, b in zip(shm["unix"], shm["tcp"])) + ".",
         "",
         "## Sketch at 100 Hz",
         "",
