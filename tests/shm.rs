@@ -765,8 +765,11 @@ async fn a_publisher_whose_slots_are_all_held_sends_inline_counted_and_never_wai
 -> anyhow::Result<()> {
     let dir = DataDir::new()?;
     // Four slots a segment, and a subscriber may hold eight: one stopped subscriber can hold them all.
-    let agent =
-        Agent::hub_with_config(&dir, "[hub]\nsubscriber_queue = 16\nshm_slots = 4\n").await?;
+    let agent = Agent::hub_with_config(
+        &dir,
+        "[hub]\nsubscriber_queue = 16\nshm_slots = 4\nshm_held = 8\n",
+    )
+    .await?;
     let producer = agent.unix_client("producer").await?;
     let reader = agent.unix_client("live-sub").await?;
     let publisher = producer.publisher("Shm.full", "{}").await?;
