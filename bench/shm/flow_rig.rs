@@ -68,9 +68,17 @@ pub async fn connect(
 }
 
 impl FlowRig {
-    /// Publishes a stamped copy of `template`: the frame a producer makes, handed to the SDK as `Bytes`, as any
-    /// satellite does (the SDK decides how it travels).
+    /// Publishes a stamped copy of `template`: the frame a producer makes. Where the link has shared memory it is
+    /// made in place in a loaned slot (`Publisher::loan`, as iceoryx2's publisher loans its slice); otherwise, or
+    /// while every slot is held, it is handed to the SDK as `Bytes`, as any satellite does.
     pub async fn send(&mut self, template: &[u8], seq: u64) -> anyhow::Result<()> {
+        if let Some(mut loan) = self.publisher.loan(template.len()) {
+            let frame = loan.as_mut_slice();
+            frame.copy_from_slice(template);
+            stamp::write(frame, seq);
+            loan.publish().await?;
+            return Ok(());
+        }
         let mut payload = template.to_vec();
         stamp::write(&mut payload, seq);
         self.publisher.publish(Bytes::from(payload)).await?;
