@@ -389,8 +389,8 @@ async fn data_is_identical_between_a_shared_memory_subscriber_and_a_tcp_subscrib
     sizes.extend([THRESHOLD - 1, THRESHOLD]);
     sizes.shuffle(&mut rng);
     let by_reference_before = metric(&agent, "flow_shm_messages_total").await?;
-    // Read strictly at the end, so that a hub without the counter still has the rest of this test run.
-    let spilled_before = metric(&agent, "flow_shm_spilled_total").await.ok();
+    // Spilling is the publisher's: its SDK counts the messages it sent inline because every slot was held.
+    let spilled_before = producer.shm_spilled();
     let mut large = 0.0;
     for (i, &size) in sizes.iter().enumerate() {
         let mut payload = vec![0u8; size];
@@ -449,8 +449,8 @@ async fn data_is_identical_between_a_shared_memory_subscriber_and_a_tcp_subscrib
     until_memfds(&agent, "none", |m| m.total() == 0).await?;
     assert_eq!(dev_shm_flow()?, dev_shm);
     assert_eq!(
-        metric(&agent, "flow_shm_spilled_total").await? - spilled_before.unwrap_or(0.0),
-        0.0,
+        producer.shm_spilled() - spilled_before,
+        0,
         "messages spilled with a subscriber that keeps up"
     );
     Ok(())
@@ -735,9 +735,7 @@ async fn a_stalled_shared_memory_subscriber_loses_its_oldest_messages_counted_wh
         n,
         channel["dropped"],
         metric(&agent, "flow_shm_messages_total").await?,
-        metric(&agent, "flow_shm_spilled_total")
-            .await
-            .map_or("not on /metrics".to_string(), |v| v.to_string())
+        producer.shm_spilled()
     );
 
     // Woken, the stalled subscriber finds a gap where its oldest messages were, then the newest one.
@@ -787,7 +785,7 @@ async fn a_publisher_whose_slots_are_all_held_sends_inline_counted_and_never_wai
     let mut n = until_by_reference(&publisher, &live, &[], SIZE).await?;
     stalled.until_printed(1).await?;
     signal(&stalled.child, "STOP")?;
-    let spilled_before = metric(&agent, "flow_shm_spilled_total").await.ok();
+    let spilled_before = producer.shm_spilled();
 
     // In step with the live subscriber, as in the test above: the publisher must go on, inline once every slot is
     // held by the stopped subscriber.
@@ -803,19 +801,18 @@ async fn a_publisher_whose_slots_are_all_held_sends_inline_counted_and_never_wai
         );
         inline += u64::from(!is_shared(&got.payload));
     }
-    let spilled = metric(&agent, "flow_shm_spilled_total").await;
+    let spilled = producer.shm_spilled();
     println!(
         "200 messages with every slot held: {inline} reached the live subscriber inline; \
-         flow_shm_spilled_total {spilled_before:?} -> {:?}",
-        spilled.as_ref().ok()
+         the publisher's Client::shm_spilled {spilled_before} -> {spilled}"
     );
     assert!(inline > 0, "no message went inline with every slot held");
     signal(&stalled.child, "CONT")?;
     kill9(&mut stalled.child).await?;
     until_metric(&agent, "flow_shm_slots_held", "0", |v| v == 0.0).await?;
     assert!(
-        spilled? > spilled_before.unwrap_or(0.0),
-        "the hub counted no spilled message"
+        spilled > spilled_before,
+        "the publisher counted no spilled message"
     );
     Ok(())
 }

@@ -39,16 +39,15 @@ struct Received {
     owner: Arc<dyn SlotOwner>,
 }
 
-#[derive(Debug)]
-enum Publishing {
-    /// Asked for; messages go inline until it comes.
-    Asked,
-    /// The hub refused (a limit): messages go inline.
-    Refused,
-    Ready {
-        info: SegmentInfo,
-        map: Arc<Mapping>,
-    },
+/// A channel's segments on the publishing side: a stream whose messages grow gets bigger ones beside the first.
+#[derive(Debug, Default)]
+struct Publishing {
+    /// The segments granted, smallest slots first.
+    ready: Vec<(SegmentInfo, Arc<Mapping>)>,
+    /// A segment asked for and not granted yet: messages that fit none of `ready` go inline meanwhile.
+    asked: bool,
+    /// The hub refused one (its limit per channel): messages that fit none of `ready` go inline.
+    refused: bool,
 }
 
 /// Slots dropped by their last holder and not yet given back; the writer sends them as one `Release`. Its length is
@@ -121,7 +120,11 @@ impl ShmSession {
                 ..
             } => {
                 let map = map_segment(&info, take_fd, true)?;
-                lock(&self.publishing).insert(info.chan, Publishing::Ready { info, map });
+                let mut publishing = lock(&self.publishing);
+                let channel = publishing.entry(info.chan).or_default();
+                channel.asked = false;
+                channel.ready.push((info, map));
+                channel.ready.sort_by_key(|(info, _)| info.slot_size);
                 Ok(Some(event))
             }
             Event::DataRef {
@@ -203,30 +206,46 @@ impl ShmSession {
         inner: &Arc<Inner>,
     ) -> Option<(SegmentInfo, SlotMut)> {
         let mut publishing = lock(&self.publishing);
-        match publishing.get(&chan) {
-            Some(Publishing::Asked | Publishing::Refused) => None,
-            Some(Publishing::Ready { info, map }) if len <= info.slot_size as usize => {
-                // The lowest free slot, so that a stream touches as few pages as it needs.
-                let taken = (0..info.slots)
-                    .find_map(|slot| map.take_slot(info.slots, info.slot_size, slot, len));
-                if taken.is_none() {
-                    self.spilled.fetch_add(1, Ordering::Relaxed);
-                }
-                taken.map(|slot| (*info, slot))
+        let channel = publishing.entry(chan).or_default();
+        let mut fitting = channel
+            .ready
+            .iter()
+            .filter(|(info, _)| len <= info.slot_size as usize)
+            .peekable();
+        if fitting.peek().is_some() {
+            // The smallest segment that fits with a free slot, and its lowest free slot, so that a stream touches
+            // as few pages as it needs.
+            let taken = fitting.find_map(|(info, map)| {
+                (0..info.slots)
+                    .find_map(|slot| map.take_slot(info.slots, info.slot_size, slot, len))
+                    .map(|slot| (*info, slot))
+            });
+            if taken.is_none() {
+                self.spilled.fetch_add(1, Ordering::Relaxed);
             }
-            // No segment yet, or one too small for this message: ask for one that fits.
-            _ => {
-                let slot_size = layout::slot_size_for(len)?;
-                publishing.insert(chan, Publishing::Asked);
-                ask_segment(inner, chan, slot_size);
-                None
-            }
+            return taken;
         }
+        if !channel.asked && !channel.refused {
+            // Four times the largest slot so far at least, so that a stream whose messages grow step by step
+            // needs few segments (the hub allows `hub.shm_segments_per_channel`).
+            let largest = channel
+                .ready
+                .last()
+                .map_or(0, |(info, _)| info.slot_size as usize);
+            let slot_size = layout::slot_size_for(len.max(largest.saturating_mul(4)))
+                .or_else(|| layout::slot_size_for(len))?;
+            channel.asked = true;
+            ask_segment(inner, chan, slot_size);
+        }
+        None
     }
 
     /// Records that the hub refused a segment for `chan`.
     fn refused(&self, chan: ChanId) {
-        lock(&self.publishing).insert(chan, Publishing::Refused);
+        let mut publishing = lock(&self.publishing);
+        let channel = publishing.entry(chan).or_default();
+        channel.asked = false;
+        channel.refused = true;
     }
 }
 
