@@ -18,7 +18,8 @@ use bytes::Bytes;
 use flow::protocol::{ChanId, SegmentInfo, SlotRef};
 use flow::shm::{Mapping, SlotOwner, layout, slot_bytes};
 
-use super::ConnId;
+/// A connection's id (`hub::ConnId`), spelled out so that this file needs nothing from the hub's core.
+type ConnId = u32;
 
 /// `[hub] shm*`: the shared-memory path's settings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -79,6 +79,26 @@ impl Client {
         lock(&self.inner.shm).clone()
     }
 
+    /// Asks the hub for a shared-memory segment of `chan` on a task of its own; the session's reader maps it when
+    /// the reply comes (`shm.rs`), and a refusal is recorded so that the channel's messages go inline.
+    pub(super) fn ask_segment(&self, chan: ChanId, slot_size: u32) {
+        let client = self.clone();
+        tokio::spawn(async move {
+            match client.request(Command::ShmOpen { chan, slot_size }).await {
+                Ok(Reply::Segment(_)) => {}
+                Ok(other) => tracing::warn!("the hub answered a segment request with {other:?}"),
+                Err(e) => {
+                    tracing::debug!(
+                        "no shared-memory segment for channel {chan}: {e}; its messages go inline"
+                    );
+                    if let Some(shm) = client.shm_session() {
+                        shm.refused(chan);
+                    }
+                }
+            }
+        });
+    }
+
     /// Whether the current session moves large payloads through shared memory (a Unix-socket link whose hub
     /// accepted it).
     pub fn uses_shared_memory(&self) -> bool {

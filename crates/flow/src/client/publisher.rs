@@ -79,7 +79,9 @@ impl Publisher {
     pub fn loan(&self, len: usize) -> Option<Loan> {
         let chan = self.owned.id()?;
         let shm = self.client.shm_session()?;
-        let (info, slot) = shm.loan(chan, len, &self.client.inner)?;
+        let (info, slot) = shm.loan(chan, len, |chan, slot_size| {
+            self.client.ask_segment(chan, slot_size)
+        })?;
         Some(Loan {
             chan,
             segment: info.id,

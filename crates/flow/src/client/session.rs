@@ -287,7 +287,12 @@ async fn run(
 /// A frame as it goes out: a large publish through shared memory when the session has it.
 fn outgoing(inner: &Arc<Inner>, shm: &Option<Arc<ShmSession>>, frame: OutFrame) -> OutFrame {
     match shm {
-        Some(shm) => shm.publish(frame, inner),
+        Some(shm) => shm.publish(frame, |chan, slot_size| {
+            Client {
+                inner: inner.clone(),
+            }
+            .ask_segment(chan, slot_size)
+        }),
         None => frame,
     }
 }

@@ -10,9 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use tokio::sync::Notify;
-use tracing::{debug, warn};
 
-use super::core::{Client, Inner};
 use super::frame::{OutFrame, encode};
 use crate::protocol::{ChanId, Command, Event, Reply, SegmentInfo, SlotRef};
 use crate::queue::lock;
@@ -175,7 +173,7 @@ impl ShmSession {
     /// The frame to send for `frame`: a `PublishRef` when its payload went into a free slot of the channel's
     /// segment; the frame itself otherwise (small, no segment yet, or every slot held: then it is counted as
     /// spilled). Never waits: a missing segment is asked for in the background.
-    pub(super) fn publish(&self, frame: OutFrame, inner: &Arc<Inner>) -> OutFrame {
+    pub(super) fn publish(&self, frame: OutFrame, ask: impl FnOnce(ChanId, u32)) -> OutFrame {
         let Some(chan) = frame.publish_chan() else {
             return frame;
         };
@@ -183,7 +181,7 @@ impl ShmSession {
         if payload.len() < self.threshold {
             return frame;
         }
-        let Some((info, mut slot)) = self.loan(chan, payload.len(), inner) else {
+        let Some((info, mut slot)) = self.loan(chan, payload.len(), ask) else {
             return frame;
         };
         slot.as_mut_slice().copy_from_slice(payload);
@@ -197,13 +195,13 @@ impl ShmSession {
     }
 
     /// A free slot of `chan`'s segment to write a message of `len` bytes into, in place. `None` while the segment is
-    /// asked for (asking for one when there is none that fits), when the hub refused one, or when every slot is held
-    /// (counted as spilled: the message goes inline).
+    /// asked for (`ask(chan, slot_size)` asks for one when there is none that fits), when the hub refused one, or when
+    /// every slot is held (counted as spilled: the message goes inline).
     pub(super) fn loan(
         &self,
         chan: ChanId,
         len: usize,
-        inner: &Arc<Inner>,
+        ask: impl FnOnce(ChanId, u32),
     ) -> Option<(SegmentInfo, SlotMut)> {
         let mut publishing = lock(&self.publishing);
         let channel = publishing.entry(chan).or_default();
@@ -235,13 +233,13 @@ impl ShmSession {
             let slot_size = layout::slot_size_for(len.max(largest.saturating_mul(4)))
                 .or_else(|| layout::slot_size_for(len))?;
             channel.asked = true;
-            ask_segment(inner, chan, slot_size);
+            ask(chan, slot_size);
         }
         None
     }
 
     /// Records that the hub refused a segment for `chan`.
-    fn refused(&self, chan: ChanId) {
+    pub(super) fn refused(&self, chan: ChanId) {
         let mut publishing = lock(&self.publishing);
         let channel = publishing.entry(chan).or_default();
         channel.asked = false;
@@ -262,23 +260,4 @@ fn map_segment(
     Mapping::open(fd, len, writable)
         .map(Arc::new)
         .map_err(|e| format!("segment {}: {e}", info.id))
-}
-
-/// Asks the hub for a segment of `chan` on a task of its own; the reader maps it when the reply comes.
-fn ask_segment(inner: &Arc<Inner>, chan: ChanId, slot_size: u32) {
-    let client = Client {
-        inner: inner.clone(),
-    };
-    tokio::spawn(async move {
-        match client.request(Command::ShmOpen { chan, slot_size }).await {
-            Ok(Reply::Segment(_)) => {}
-            Ok(other) => warn!("the hub answered a segment request with {other:?}"),
-            Err(e) => {
-                debug!("no shared-memory segment for channel {chan}: {e}; its messages go inline");
-                if let Some(shm) = client.shm_session() {
-                    shm.refused(chan);
-                }
-            }
-        }
-    });
 }

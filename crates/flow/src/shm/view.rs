@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use bytes::Bytes;
 
-use super::Mapping;
+use super::mapping::Mapping;
 
 /// Who gets a slot back once nobody holds its message: the hub (which frees it for the publisher) or a client
 /// (which tells the hub it is done).
