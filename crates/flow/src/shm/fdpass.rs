@@ -18,10 +18,8 @@ use tokio::net::UnixStream;
 /// Descriptors one read can take; the hub sends one per frame, so more only arrive when several segments are
 /// introduced back to back.
 const FDS_PER_READ: usize = 8;
-/// Bytes one read asks for when the buffer has no room made for a frame.
-const READ_CHUNK: usize = 64 * 1024;
-/// The most one read takes (about what a Unix socket buffers).
-const MAX_READ: usize = 256 * 1024;
+/// The scratch a reader keeps for `recvmsg`: what one read takes at most.
+pub const READ_CHUNK: usize = 64 * 1024;
 
 /// Sends the first bytes of `data` with `fd` beside them; returns how many bytes went (at least one). The caller
 /// sends the rest as ordinary bytes.
@@ -62,28 +60,21 @@ pub async fn send_with_fd(
 }
 
 /// Appends the next received bytes to `buf` and the descriptors that came with them to `fds`; `Ok(0)` means the peer
-/// closed. A read whose descriptors did not all fit is an error: a frame would later miss its descriptor.
+/// closed. `scratch` is where `recvmsg` writes (it takes initialised bytes, and zeroing the room of `buf` before every
+/// read cost more than the small frames of the shared-memory path themselves); its length bounds one read. A read
+/// whose descriptors did not all fit is an error: a frame would later miss its descriptor.
 pub async fn recv_with_fds(
     stream: &UnixStream,
+    scratch: &mut [u8],
     buf: &mut BytesMut,
     fds: &mut VecDeque<OwnedFd>,
 ) -> io::Result<usize> {
-    // `recvmsg` takes initialised bytes: zero the room first, at most a socket buffer's worth (a memset that size is
-    // cheap next to the system call).
-    let start = buf.len();
-    if buf.capacity() == start {
-        buf.reserve(READ_CHUNK);
-    }
-    let room = (buf.capacity() - start).min(MAX_READ);
-    buf.resize(start + room, 0);
-    let result = loop {
-        if let Err(e) = stream.readable().await {
-            break Err(e);
-        }
+    loop {
+        stream.readable().await?;
         let got = stream.try_io(Interest::READABLE, || {
             let mut space = [MaybeUninit::uninit(); rustix::cmsg_space!(ScmRights(FDS_PER_READ))];
             let mut control = RecvAncillaryBuffer::new(&mut space);
-            let mut iov = [IoSliceMut::new(&mut buf[start..])];
+            let mut iov = [IoSliceMut::new(scratch)];
             let msg =
                 rustix::net::recvmsg(stream, &mut iov, &mut control, RecvFlags::CMSG_CLOEXEC)?;
             for message in control.drain() {
@@ -100,14 +91,14 @@ pub async fn recv_with_fds(
             Ok(msg.bytes)
         });
         match got {
-            Ok(n) => break Ok(n),
+            Ok(n) => {
+                buf.extend_from_slice(&scratch[..n]);
+                return Ok(n);
+            }
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => continue,
-            Err(e) => break Err(e),
+            Err(e) => return Err(e),
         }
-    };
-    let n = *result.as_ref().unwrap_or(&0);
-    buf.truncate(start + n);
-    result
+    }
 }
 
 #[cfg(test)]
@@ -127,8 +118,14 @@ mod tests {
         );
         let mut buf = BytesMut::with_capacity(16);
         let mut fds = VecDeque::new();
+        let mut scratch = vec![0u8; 4];
         while buf.len() < 6 {
-            assert!(recv_with_fds(&b, &mut buf, &mut fds).await.expect("recv") > 0);
+            assert!(
+                recv_with_fds(&b, &mut scratch, &mut buf, &mut fds)
+                    .await
+                    .expect("recv")
+                    > 0
+            );
         }
         assert_eq!(&buf[..], b"onetwo");
         assert_eq!(fds.len(), 2);

@@ -50,7 +50,8 @@ impl UnixTransport {
 #[derive(Debug)]
 pub struct UnixReader {
     half: StreamReader<OwnedReadHalf>,
-    fds: Option<VecDeque<OwnedFd>>,
+    /// The descriptors received and not taken yet, with the scratch `recvmsg` reads into; `None` on the hub's side.
+    fds: Option<(VecDeque<OwnedFd>, Vec<u8>)>,
 }
 
 /// Writing half: vectored writes, and `sendmsg` for a frame with a descriptor.
@@ -71,7 +72,9 @@ impl Transport for UnixTransport {
 
     fn split(self) -> (Self::Reader, Self::Writer) {
         let (r, w) = self.stream.into_split();
-        let fds = self.take_fds.then(VecDeque::new);
+        let fds = self
+            .take_fds
+            .then(|| (VecDeque::new(), vec![0; fdpass::READ_CHUNK]));
         (
             UnixReader {
                 half: StreamReader(r),
@@ -85,13 +88,15 @@ impl Transport for UnixTransport {
 impl TransportRead for UnixReader {
     async fn read_into(&mut self, buf: &mut BytesMut) -> io::Result<usize> {
         match &mut self.fds {
-            Some(fds) => fdpass::recv_with_fds(self.half.0.as_ref(), buf, fds).await,
+            Some((fds, scratch)) => {
+                fdpass::recv_with_fds(self.half.0.as_ref(), scratch, buf, fds).await
+            }
             None => self.half.read_into(buf).await,
         }
     }
 
     fn take_fd(&mut self) -> Option<OwnedFd> {
-        self.fds.as_mut()?.pop_front()
+        self.fds.as_mut()?.0.pop_front()
     }
 }
 
