@@ -823,6 +823,8 @@ async fn a_publisher_whose_slots_are_all_held_sends_inline_counted_and_never_wai
 struct RawUnix {
     stream: tokio::net::UnixStream,
     buf: BytesMut,
+    /// Where `recvmsg` writes before the bytes join `buf`.
+    scratch: Vec<u8>,
     fds: VecDeque<OwnedFd>,
     next_req: u32,
 }
@@ -835,6 +837,7 @@ impl RawUnix {
         Ok(RawUnix {
             stream,
             buf: BytesMut::new(),
+            scratch: vec![0; 64 * 1024],
             fds: VecDeque::new(),
             next_req: 1,
         })
@@ -877,7 +880,12 @@ impl RawUnix {
             }
             let read = tokio::time::timeout(
                 SETTLE,
-                recv_with_fds(&self.stream, &mut self.buf, &mut self.fds),
+                recv_with_fds(
+                    &self.stream,
+                    &mut self.scratch,
+                    &mut self.buf,
+                    &mut self.fds,
+                ),
             )
             .await
             .context("nothing came from the hub in time")?;

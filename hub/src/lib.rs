@@ -26,6 +26,6 @@ pub use server::{Application, RunningServer, start};
 pub use shared::Shared;
 
 #[cfg(test)]
-mod shutdown_tests;
-#[cfg(test)]
 mod shm_tests;
+#[cfg(test)]
+mod shutdown_tests;
