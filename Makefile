@@ -39,7 +39,7 @@ test: deps build-debug model model-base model-face model-voice model-llm llm-ser
 	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
 	scripts/phase.sh no-std $(CARGO) build -p flow-lite --lib --target thumbv7em-none-eabihf
 	scripts/phase.sh node-test node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
-	scripts/phase.sh cargo-test $(CARGO) test --workspace --no-fail-fast
+	scripts/phase.sh cargo-test scripts/test-digest.sh $(CARGO) test --workspace --no-fail-fast
 	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
 
 ## Benchmarks against their baselines, side by side (not part of the tests): every one is a binary of one crate,

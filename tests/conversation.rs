@@ -476,21 +476,26 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
     let speech = watcher.subscribe(ch::SPEECH.name).await?;
     let avatar = watcher.subscribe(ch::AVATAR.name).await?;
     let _satellite = Satellite::start(&agent, "barge-in-asr").await?;
-    let play = |name: &str, samples: &[i16]| -> anyhow::Result<tokio::task::JoinHandle<_>> {
-        let wav = dir.path().join(name);
-        spoken::write_wav(&wav, samples)?;
-        let mut publish = agent.flowctl()?;
-        publish
-            .arg("pub-wav")
-            .arg(ch::AUDIO.name)
-            .arg(&wav)
-            .arg("--realtime")
-            .arg("--tail-ms")
-            .arg("2000");
-        Ok(tokio::spawn(run(publish, b"", PATIENCE)))
-    };
+    // Each clip ends in `tail_ms` of silence, so that the utterance ends and its transcript comes.
+    let play =
+        |name: &str, samples: &[i16], tail_ms: u32| -> anyhow::Result<tokio::task::JoinHandle<_>> {
+            let wav = dir.path().join(name);
+            spoken::write_wav(&wav, samples)?;
+            let mut publish = agent.flowctl()?;
+            publish
+                .arg("pub-wav")
+                .arg(ch::AUDIO.name)
+                .arg(&wav)
+                .arg("--realtime")
+                .arg("--tail-ms")
+                .arg(tail_ms.to_string());
+            Ok(tokio::spawn(run(publish, b"", PATIENCE)))
+        };
 
-    // The request: the program does not know it, so the agent explains at length what it can do.
+    // The request: the program does not know it, so the agent apologises and says what it can do (no language
+    // model serves here). The reply lasts about four seconds and all that follows must happen inside it, so the
+    // request's tail of silence is only as long as ending the utterance needs (the hangover, and the wait for the
+    // end-of-turn verdict at most): a longer one, or a slow start of the next clip, would eat into the reply.
     let request = play(
         "request.wav",
         &[
@@ -498,8 +503,9 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
             spoken::say("Tell me something.", dir.path())?,
         ]
         .concat(),
+        1200,
     )?;
-    tokio::time::timeout(PATIENCE, speech.recv())
+    let reply = tokio::time::timeout(PATIENCE, speech.recv())
         .await
         .context("the agent never answered the request")?
         .context("Agent.speech ended")?;
@@ -517,17 +523,20 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
     let over = play(
         "over.wav",
         &[
-            spoken::silence(200),
+            spoken::silence(100),
             burst,
-            spoken::silence(1000),
+            // Longer than the hangover: the burst and the words are not one utterance.
+            spoken::silence(700),
             spoken::say("Wait, wait a moment please.", dir.path())?,
         ]
         .concat(),
+        2000,
     )?;
     let mut starts = Vec::new();
     let mut stop = None;
     let mut heard = None;
     let mut interrupted = None;
+    let mut last_speech_us = reply.ts_us;
     let waited = tokio::time::timeout(PATIENCE, async {
         while heard.is_none() || interrupted.is_none() || stop.is_none() {
             tokio::select! {
@@ -552,14 +561,18 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
                         interrupted = Some(v);
                     }
                 }
-                p = next_payload(&speech) => { p?; }
+                d = speech.recv() => {
+                    last_speech_us = d.context("Agent.speech ended")?.ts_us;
+                }
             }
         }
         anyhow::Ok(())
     })
     .await;
     println!(
-        "vad starts {starts:#?}\nstop {stop:#?}\nheard {heard:#?}\ninterrupted {interrupted:#?}"
+        "reply began at {} us, its last chunk seen at {last_speech_us} us\nvad starts {starts:#?}\nstop {stop:#?}\n\
+         heard {heard:#?}\ninterrupted {interrupted:#?}",
+        reply.ts_us
     );
     waited.context("the barge-in never completed")??;
     over.await??.ok()?;
@@ -574,6 +587,10 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
         "{start} {stop} {heard}"
     );
     let onset_ms = start["at_ms"].as_u64().unwrap_or(0);
+    println!(
+        "barge-in: the user's voice began {} ms into the reply",
+        onset_ms.saturating_sub(reply.ts_us / 1000)
+    );
     println!(
         "barge-in: speech_stop reached the hub {} ms after the user's voice onset",
         (stop_ts / 1000).saturating_sub(onset_ms)
@@ -737,41 +754,50 @@ where
     let mut playing = tokio::spawn(run(publish, b"", PATIENCE));
     let mut scene = Scene::default();
     let mut quiet_from = None;
-    loop {
-        let quiet = async {
-            match quiet_from {
-                Some(at) => tokio::time::sleep_until(at).await,
-                None => std::future::pending().await,
-            }
-        };
-        tokio::select! {
-            done = &mut playing, if quiet_from.is_none() => {
-                done??.ok()?;
-                quiet_from = Some(tokio::time::Instant::now() + Duration::from_secs(3));
-            }
-            // Speech that started is waited for until its transcript is in, however long whisper takes.
-            () = quiet, if scene.vad_starts == 0 || !scene.finals.is_empty() => break,
-            p = next_payload(transcript) => {
-                if let Some(v) = json_message(&p?) {
-                    if v["vad"] == "start" {
-                        scene.vad_starts += 1;
-                    } else if v["final"] == true {
-                        scene.finals.push(v);
+    // A voice start whose transcript never comes is judged by the caller on what was seen, not waited for forever.
+    let gathered = tokio::time::timeout(PATIENCE, async {
+        loop {
+            let quiet = async {
+                match quiet_from {
+                    Some(at) => tokio::time::sleep_until(at).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                done = &mut playing, if quiet_from.is_none() => {
+                    done??.ok()?;
+                    quiet_from = Some(tokio::time::Instant::now() + Duration::from_secs(3));
+                }
+                // Speech that started is waited for until its transcript is in, however long whisper takes.
+                () = quiet, if scene.vad_starts == 0 || !scene.finals.is_empty() => break,
+                p = next_payload(transcript) => {
+                    if let Some(v) = json_message(&p?) {
+                        if v["vad"] == "start" {
+                            scene.vad_starts += 1;
+                        } else if v["final"] == true {
+                            scene.finals.push(v);
+                        }
                     }
                 }
-            }
-            p = next_payload(avatar) => {
-                if let Some(v) = json_message(&p?) && v["cmd"] == "speech_stop" && v["barge_in"] == true {
-                    scene.barge_ins += 1;
+                p = next_payload(avatar) => {
+                    if let Some(v) = json_message(&p?) && v["cmd"] == "speech_stop" && v["barge_in"] == true {
+                        scene.barge_ins += 1;
+                    }
                 }
-            }
-            p = next_payload(rules) => {
-                if let Some(v) = json_message(&p?) && caused_by_hearing(&v) {
-                    scene.heard_rules += 1;
+                p = next_payload(rules) => {
+                    if let Some(v) = json_message(&p?) && caused_by_hearing(&v) {
+                        scene.heard_rules += 1;
+                    }
                 }
+                p = next_payload(speech) => { p?; }
             }
-            p = next_payload(speech) => { p?; }
         }
+        anyhow::Ok(())
+    })
+    .await;
+    match gathered {
+        Ok(result) => result?,
+        Err(_) => println!("a voice start without its transcript after {PATIENCE:?}: {scene:#?}"),
     }
     // Whatever is still playing of the reply ends before the next scene.
     let body = serde_json::json!({ "cancel": "all" }).to_string();
