@@ -414,6 +414,61 @@ async fn the_prompt_holds_what_the_agent_sees_and_a_code_stays_quoted() -> anyho
     Ok(())
 }
 
+/// A follow-up question costs the model only its own words: the agent keeps each past question with the facts it was
+/// asked with and each reply heard whole as the model wrote it, so the next prompt opens with the last one unchanged
+/// and llm-sat's cache covers all of it (a history rebuilt from spoken text would share only the system prompt).
+/// When the memory is full and its oldest turns are dropped, llm-sat finds the rest further on in its cache and moves
+/// it down instead of reading the whole conversation again: that turn too costs less than the first one did.
+#[tokio::test]
+async fn a_follow_up_question_finds_the_last_turn_in_the_models_cache() -> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    // Two turns of memory: the fourth question's prompt has lost the first two.
+    let rig = Rig::start_with("en", "chat_memory_turns = 2").await?;
+    let _llm = LlmSat::start(&rig.agent, &["--max-sentences", "2"]).await?;
+    let mut ends = Vec::new();
+    for question in [
+        "Why is the sky blue?",
+        "And why are sunsets red?",
+        "What is a rainbow?",
+        "Why do stars twinkle?",
+    ] {
+        rig.hear(question).await?;
+        let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+        let turn = prompt["turn"].clone();
+        let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+        println!("{question:?}: {}", end["stats"]);
+        ends.push(end);
+        // The reply plays out before the next question: one asked over it would cut it, and a cut reply is kept as
+        // heard (its spoken words, not the model's).
+        tokio::time::timeout(PATIENCE, async {
+            while tokio::time::timeout(Duration::from_secs(3), rig.speech.recv())
+                .await
+                .is_ok()
+            {}
+        })
+        .await
+        .context("the reply never stopped")?;
+        tokio::time::sleep(Duration::from_secs(4)).await;
+    }
+    let stat = |end: &Value, key: &str| end["stats"][key].as_u64().unwrap_or(0);
+    let first_prompt = stat(&ends[0], "prompt_tokens");
+    assert!(first_prompt > 0, "{}", ends[0]);
+    let cached = stat(&ends[1], "cached_tokens");
+    assert!(
+        cached >= first_prompt,
+        "the follow-up found {cached} tokens in the cache, not the {first_prompt} of the first prompt: {} then {}",
+        ends[0],
+        ends[1]
+    );
+    let trimmed = stat(&ends[3], "prompt_tokens").saturating_sub(stat(&ends[3], "cached_tokens"));
+    assert!(
+        trimmed < first_prompt,
+        "after the trim the model read {trimmed} new tokens, more than the whole first prompt ({first_prompt}): {}",
+        ends[3]
+    );
+    Ok(())
+}
+
 #[tokio::test]
 async fn a_killed_model_satellite_costs_one_apology_and_a_restarted_one_answers()
 -> anyhow::Result<()> {

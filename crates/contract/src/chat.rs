@@ -42,7 +42,7 @@ pub struct ChatRequest {
 
 /// What the agent perceives when the turn starts. Texts read from the world (a code) are quoted as data in the
 /// prompt, never given to the model as instructions.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Facts {
     /// Faces in view.
@@ -81,6 +81,13 @@ pub struct ChatMessage {
     /// The user talked over this reply (or stopped it): `text` is what they heard of it.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub interrupted: bool,
+    /// A question: what the agent perceived when it was asked. The prompt gives a past question with its facts, as
+    /// that turn did, so that the model's cache of that turn still holds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub facts: Option<Facts>,
+    /// A reply heard whole: the text as the model wrote it (`text` is its spoken form), for the same reason.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generated: Option<String>,
 }
 
 /// A service the model may call: its arguments are text fields, each limited to the listed values.
@@ -140,6 +147,9 @@ pub struct ChatAnswer {
     pub turn: u64,
     /// The sentences published, joined.
     pub reply: String,
+    /// The text as the model wrote it (before the spoken form), up to where it stopped.
+    #[serde(default)]
+    pub generated: String,
     pub sentences: u32,
     pub finish: Finish,
     #[serde(default, skip_serializing_if = "Option::is_none")]

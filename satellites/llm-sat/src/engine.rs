@@ -1,6 +1,7 @@
 //! The local generator: llama.cpp in-process (crate `llama-cpp-2`) on any GGUF file. It keeps the tokens whose keys
 //! and values are in its cache, so a prompt that starts like the previous one (the system prompt, the conversation
-//! so far) decodes only what is new.
+//! so far) decodes only what is new; a conversation whose oldest turns were dropped is found further on in the cache
+//! and moved down rather than read again.
 
 use std::num::NonZeroU32;
 use std::path::Path;
@@ -139,12 +140,24 @@ impl Engine {
         prompt: &[LlamaToken],
         cancel: &AtomicBool,
     ) -> Result<Option<usize>, GenerateError> {
-        let mut keep = self
-            .cached
-            .iter()
-            .zip(prompt)
-            .take_while(|(a, b)| a == b)
-            .count();
+        let mut keep = common_prefix(&self.cached, prompt);
+        // A conversation trimmed at its start (the brain drops its oldest turns when the memory is full) continues
+        // further on in the cache: the turns dropped are removed from the cache and the rest moved down to follow
+        // the kept prefix (llama.cpp re-rotates their keys), instead of decoding the whole conversation again.
+        if let Some(from) = continues_after(&self.cached, prompt, keep) {
+            let moved = self
+                .context
+                .kv_cache_seq_rm(0, Some(keep as u32), Some(from as u32))
+                .is_ok()
+                && self
+                    .context
+                    .kv_cache_seq_add(0, Some(from as u32), None, -((from - keep) as i32))
+                    .is_ok();
+            if moved {
+                self.cached.drain(keep..from);
+                keep = common_prefix(&self.cached, prompt);
+            }
+        }
         // The last prompt token is always decoded again: its logits give the first reply token.
         keep = keep.min(prompt.len().saturating_sub(1));
         if self
@@ -293,6 +306,29 @@ impl Generator for Engine {
     }
 }
 
+/// How many leading tokens `a` and `b` share.
+fn common_prefix<T: PartialEq>(a: &[T], b: &[T]) -> usize {
+    a.iter().zip(b).take_while(|(x, y)| x == y).count()
+}
+
+/// Fewest tokens a cut-out part of the cache must give back to be worth moving the rest of the cache for.
+const MIN_CONTINUED: usize = 32;
+
+/// Where in `cached`, past the shared prefix `keep`, the rest of `prompt` continues: the start of the longest run
+/// (at least [`MIN_CONTINUED`] tokens) equal to `prompt[keep..]`'s beginning. `None` when no such run exists.
+fn continues_after<T: PartialEq>(cached: &[T], prompt: &[T], keep: usize) -> Option<usize> {
+    let rest = prompt.get(keep..)?;
+    if rest.len() < MIN_CONTINUED {
+        return None;
+    }
+    (keep + 1..cached.len().saturating_sub(MIN_CONTINUED - 1))
+        .filter(|&from| cached[from] == rest[0])
+        .map(|from| (from, common_prefix(&cached[from..], rest)))
+        .filter(|&(_, run)| run >= MIN_CONTINUED)
+        .max_by_key(|&(from, run)| (run, std::cmp::Reverse(from)))
+        .map(|(from, _)| from)
+}
+
 /// How many leading bytes of `bytes` are whole UTF-8 characters (a token may end inside a character).
 fn complete_utf8(bytes: &[u8]) -> usize {
     match std::str::from_utf8(bytes) {
@@ -306,6 +342,35 @@ fn complete_utf8(bytes: &[u8]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_conversation_trimmed_at_its_start_is_found_further_on_in_the_cache() {
+        // system prompt (0..10), turns 1..4 of 40 tokens each; the trimmed prompt keeps turns 3 and 4 and adds one.
+        let system: Vec<u32> = (0..10).collect();
+        let turn = |n: u32| -> Vec<u32> { (0..40).map(|i| 1000 * n + i).collect() };
+        let cached = [system.clone(), turn(1), turn(2), turn(3), turn(4)].concat();
+        let prompt = [system.clone(), turn(3), turn(4), turn(5)].concat();
+        let keep = common_prefix(&cached, &prompt);
+        assert_eq!(keep, 10);
+        let from = continues_after(&cached, &prompt, keep).expect("turns 3 and 4 are cached");
+        assert_eq!(from, 10 + 80);
+        let mut moved = cached.clone();
+        moved.drain(keep..from);
+        assert_eq!(common_prefix(&moved, &prompt), 10 + 80);
+    }
+
+    #[test]
+    fn a_short_or_absent_continuation_moves_nothing() {
+        let cached: Vec<u32> = (0..200).collect();
+        // Nothing of the rest is cached.
+        let other: Vec<u32> = (0..10).chain(5000..5100).collect();
+        assert_eq!(continues_after(&cached, &other, 10), None);
+        // Only a few tokens of it are: not worth moving the cache.
+        let few: Vec<u32> = (0..10).chain(50..60).chain(7000..7100).collect();
+        assert_eq!(continues_after(&cached, &few, 10), None);
+        // The prompt is the cache's own beginning: nothing after it to find.
+        assert_eq!(continues_after(&cached, &cached[..150], 150), None);
+    }
 
     #[test]
     fn a_character_cut_between_tokens_waits_for_its_end() {

@@ -85,12 +85,25 @@ pub fn chat(request: &ChatRequest, offer_tools: bool) -> Vec<Message> {
     }];
     for line in &request.history {
         let (speaker, content) = match line.role {
-            Role::User => (Speaker::User, line.text.clone()),
+            Role::User => {
+                // As the turn was asked: its facts, then the words.
+                if let Some(then) = &line.facts {
+                    chat.push(Message {
+                        speaker: Speaker::System,
+                        content: facts(then, w),
+                    });
+                }
+                (Speaker::User, line.text.clone())
+            }
             Role::Assistant if line.interrupted => (
                 Speaker::Assistant,
                 format!("{} {}", line.text, w.interrupted),
             ),
-            Role::Assistant => (Speaker::Assistant, line.text.clone()),
+            // A reply heard whole, as the model wrote it.
+            Role::Assistant => (
+                Speaker::Assistant,
+                line.generated.clone().unwrap_or_else(|| line.text.clone()),
+            ),
         };
         chat.push(Message { speaker, content });
     }
@@ -224,11 +237,15 @@ mod tests {
                 role: Role::User,
                 text: "hello".into(),
                 interrupted: false,
+                facts: None,
+                generated: None,
             },
             ChatMessage {
                 role: Role::Assistant,
                 text: "Hi there".into(),
                 interrupted: true,
+                facts: None,
+                generated: None,
             },
         ];
         let b = chat(&later, true);
@@ -237,6 +254,35 @@ mod tests {
         assert!(b[2].content.ends_with("(the person interrupted me here)"));
         assert!(b[3].content.contains("nobody in view"));
         assert_eq!(b[4].content, "tell me a joke");
+    }
+
+    #[test]
+    fn a_past_question_comes_with_its_facts_and_a_whole_reply_as_it_was_written() {
+        let first = request("hello");
+        let asked = chat(&first, false);
+        let mut later = request("and then?");
+        later.facts.faces = 0;
+        later.history = vec![
+            ChatMessage {
+                role: Role::User,
+                text: "hello".into(),
+                interrupted: false,
+                facts: Some(first.facts.clone()),
+                generated: None,
+            },
+            ChatMessage {
+                role: Role::Assistant,
+                text: "Hi there, two of you.".into(),
+                interrupted: false,
+                facts: None,
+                generated: Some("Hi there, **two** of you.".into()),
+            },
+        ];
+        let next = chat(&later, false);
+        // The earlier turn's messages open the next prompt unchanged: the model's cache of them still holds.
+        assert_eq!(next[..asked.len()], asked[..]);
+        assert_eq!(next[asked.len()].content, "Hi there, **two** of you.");
+        assert!(next[asked.len() + 1].content.contains("nobody in view"));
     }
 
     #[test]

@@ -214,6 +214,7 @@ impl Hub {
             let answer = ChatAnswer {
                 turn: old.turn,
                 reply: String::new(),
+                generated: String::new(),
                 sentences: old.published,
                 finish: Finish::Cancelled,
                 call: None,
@@ -299,6 +300,7 @@ impl Hub {
                 let answer = ChatAnswer {
                     turn: running.turn,
                     reply: outcome.sentences.join(" "),
+                    generated: outcome.generated,
                     sentences: outcome.sentences.len() as u32,
                     finish: outcome.finish,
                     call: outcome.call,

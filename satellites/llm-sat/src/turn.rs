@@ -35,6 +35,8 @@ pub enum Step {
 pub struct Outcome {
     pub finish: Finish,
     pub sentences: Vec<String>,
+    /// The text as the model wrote it.
+    pub generated: String,
     pub call: Option<ToolCall>,
     pub stats: ChatStats,
 }
@@ -143,6 +145,7 @@ pub fn run(
     Ok(Outcome {
         finish,
         sentences: spoken,
+        generated: text,
         call,
         stats: ChatStats {
             prompt_tokens: generated.prompt_tokens,

@@ -80,6 +80,8 @@ struct Said {
 struct Turn {
     turn: u64,
     text: String,
+    /// What the agent perceived when it was asked (kept with the question in the memory).
+    facts: Facts,
     said: Vec<Said>,
     /// Set when the user interrupted it: what they heard of the reply.
     interrupted: Option<Vec<String>>,
@@ -183,7 +185,7 @@ impl Chats {
         self.interrupt(Instant::now());
         if let Some(old) = self.current.take() {
             let heard = old.interrupted.unwrap_or_default().join(" ");
-            self.remember(old.text, heard, true);
+            self.remember(old.text, old.facts, heard, None, true);
         }
         if self.stale(&self.memory) && !self.memory.lines.is_empty() {
             self.memory = Memory::default();
@@ -194,7 +196,7 @@ impl Chats {
             turn,
             text: text.to_owned(),
             language: language.to_owned(),
-            facts,
+            facts: facts.clone(),
             history: self.memory.lines.clone(),
             tools,
             force_tool,
@@ -205,6 +207,7 @@ impl Chats {
         self.current = Some(Turn {
             turn,
             text: text.to_owned(),
+            facts,
             said: Vec::new(),
             interrupted: None,
             ended: false,
@@ -297,6 +300,7 @@ impl Chats {
             {
                 last.text = heard.join(" ");
                 last.interrupted = true;
+                last.generated = None;
                 self.save();
             }
             return None;
@@ -375,7 +379,13 @@ impl Chats {
                 false,
             ),
         };
-        let called = current.answer.and_then(|a| a.call);
+        let (called, generated) = match current.answer {
+            Some(answer) => (
+                answer.call,
+                Some(answer.generated).filter(|g| !g.is_empty()),
+            ),
+            None => (None, None),
+        };
         let reply = match (called, reply.is_empty()) {
             (Some(call), true) => format!("(called {})", call.service),
             _ => reply,
@@ -383,20 +393,32 @@ impl Chats {
         if !interrupted {
             self.finished = current.said;
         }
-        self.remember(current.text, reply, interrupted);
+        let generated = generated.filter(|_| !interrupted);
+        self.remember(current.text, current.facts, reply, generated, interrupted);
     }
 
-    fn remember(&mut self, question: String, reply: String, interrupted: bool) {
+    fn remember(
+        &mut self,
+        question: String,
+        facts: Facts,
+        reply: String,
+        generated: Option<String>,
+        interrupted: bool,
+    ) {
         let lines = &mut self.memory.lines;
         lines.push(ChatMessage {
             role: Role::User,
             text: question,
             interrupted: false,
+            facts: Some(facts),
+            generated: None,
         });
         lines.push(ChatMessage {
             role: Role::Assistant,
             text: reply,
             interrupted,
+            facts: None,
+            generated,
         });
         // Trimmed by half when full, not by one turn each time: the model's cache holds the prompt's prefix, and a
         // conversation that lost its oldest turn on every question would be evaluated again whole every time.
