@@ -140,13 +140,7 @@ fn now_us() -> u64 {
 
 /// Streams a WAV file in real time onto `Agent.audio`, with a second of silence after it.
 async fn pub_wav(agent: &Agent, wav: &Path) -> anyhow::Result<()> {
-    let mut cmd = agent.flowctl()?;
-    cmd.arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(wav)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1000");
+    let cmd = agent.microphone(wav, 1000)?;
     run(cmd, b"", TRANSCRIPT_PATIENCE).await?.ok()?;
     Ok(())
 }
@@ -436,13 +430,7 @@ async fn kill_the_first_claim_holder(
     let watcher = agent.client("asr-test-claims").await?;
     let mut events = watcher.events();
     let publishing = {
-        let mut cmd = agent.flowctl()?;
-        cmd.arg("pub-wav")
-            .arg(ch::AUDIO.name)
-            .arg(wav)
-            .arg("--realtime")
-            .arg("--tail-ms")
-            .arg("1000");
+        let cmd = agent.microphone(wav, 1000)?;
         tokio::spawn(run(cmd, b"", TRANSCRIPT_PATIENCE))
     };
     // The claim names the utterance and, through the channel's owner, the satellite working on it.
@@ -761,13 +749,7 @@ async fn switching_recognition_off_mid_utterance_abandons_it_and_on_again_hears_
     // post-roll: by the time recognition is switched off the satellite may hold a speculative claim on it, or know
     // it only as paused. Either way it must be given up: no transcript, and no claim left unfinished.
     let publishing = {
-        let mut cmd = agent.flowctl()?;
-        cmd.arg("pub-wav")
-            .arg(ch::AUDIO.name)
-            .arg(fixture("audio/LJ001-0001.wav")?)
-            .arg("--realtime")
-            .arg("--tail-ms")
-            .arg("1000");
+        let cmd = agent.microphone(fixture("audio/LJ001-0001.wav")?, 1000)?;
         tokio::spawn(run(cmd, b"", TRANSCRIPT_PATIENCE))
     };
     tokio::time::timeout(TRANSCRIPT_PATIENCE, async {

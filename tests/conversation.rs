@@ -93,14 +93,7 @@ async fn a_spoken_question_gets_a_spoken_answer() -> anyhow::Result<()> {
     let _satellite = Satellite::start(&agent, "conversation-asr").await?;
 
     // A real human recording, 20 ms chunks paced in real time, then silence so the utterance ends.
-    let mut publish = agent.flowctl()?;
-    publish
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(fixture("audio/LJ001-0002.wav")?)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1500");
+    let publish = agent.microphone(fixture("audio/LJ001-0002.wav")?, 1500)?;
     let publishing = tokio::spawn(run(publish, b"", PATIENCE));
 
     let mut seen = Seen::default();
@@ -285,14 +278,7 @@ async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> an
         ]
         .concat();
         spoken::write_wav(&wav, &sentence)?;
-        let mut publish = agent.flowctl()?;
-        publish
-            .arg("pub-wav")
-            .arg(ch::AUDIO.name)
-            .arg(&wav)
-            .arg("--realtime")
-            .arg("--tail-ms")
-            .arg("2500");
+        let publish = agent.microphone(&wav, 2500)?;
         // Everything this sentence caused arrives while it plays and in its tail of silence.
         let publishing = tokio::spawn(run(publish, b"", PATIENCE));
         let mut finals = Vec::new();
@@ -348,14 +334,7 @@ async fn a_pause_inside_a_sentence_gets_one_answer_to_the_whole_sentence() -> an
     ]
     .concat();
     spoken::write_wav(&wav, &sentence)?;
-    let mut publish = agent.flowctl()?;
-    publish
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(&wav)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("2500");
+    let publish = agent.microphone(&wav, 2500)?;
     let publishing = tokio::spawn(run(publish, b"", PATIENCE));
     let (mut finals, mut answers) = (Vec::new(), Vec::new());
     tokio::select! {
@@ -389,14 +368,7 @@ async fn an_unpunctuated_command_ends_the_turn_as_complete() -> anyhow::Result<(
     let wav = dir.path().join("turn-left.wav");
     let command = [spoken::silence(400), spoken::say("Turn left", dir.path())?].concat();
     spoken::write_wav(&wav, &command)?;
-    let mut publish = agent.flowctl()?;
-    publish
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(&wav)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1500");
+    let publish = agent.microphone(&wav, 1500)?;
     let publishing = tokio::spawn(run(publish, b"", PATIENCE));
     let (mut finals, mut answers) = (Vec::new(), Vec::new());
     tokio::select! {
@@ -481,14 +453,7 @@ async fn talking_over_the_agent_stops_it_and_a_cough_does_not() -> anyhow::Resul
         |name: &str, samples: &[i16], tail_ms: u32| -> anyhow::Result<tokio::task::JoinHandle<_>> {
             let wav = dir.path().join(name);
             spoken::write_wav(&wav, samples)?;
-            let mut publish = agent.flowctl()?;
-            publish
-                .arg("pub-wav")
-                .arg(ch::AUDIO.name)
-                .arg(&wav)
-                .arg("--realtime")
-                .arg("--tail-ms")
-                .arg(tail_ms.to_string());
+            let publish = agent.microphone(&wav, tail_ms)?;
             Ok(tokio::spawn(run(publish, b"", PATIENCE)))
         };
 
@@ -743,14 +708,7 @@ where
         .context("Agent.speech ended")?;
     let wav = dir.join("microphone.wav");
     spoken::write_wav(&wav, mic)?;
-    let mut publish = agent.flowctl()?;
-    publish
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(&wav)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1500");
+    let publish = agent.microphone(&wav, 1500)?;
     let mut playing = tokio::spawn(run(publish, b"", PATIENCE));
     let mut scene = Scene::default();
     let mut quiet_from = None;

@@ -154,13 +154,7 @@ async fn a_satellite_on_another_hub_shares_the_work_and_its_killed_claim_is_tran
     let mut events = on_a.events();
     let mut killed: Option<(u64, u64)> = None;
     for clip in CLIPS {
-        let mut cmd = a.flowctl()?;
-        cmd.arg("pub-wav")
-            .arg(ch::AUDIO.name)
-            .arg(fixture(&format!("audio/{clip}.wav"))?)
-            .arg("--realtime")
-            .arg("--tail-ms")
-            .arg("1500");
+        let cmd = a.microphone(fixture(&format!("audio/{clip}.wav"))?, 1500)?;
         let publishing = tokio::spawn(run(cmd, b"", TRANSCRIPT_PATIENCE));
         if killed.is_none() {
             // Watch the claims that reach A while the clip plays: one made on B names B's satellite. It counts once

@@ -80,14 +80,7 @@ async fn italian_speech_gets_an_italian_transcript_and_a_spoken_italian_reply() 
     )
     .await?;
 
-    let mut publish = agent.flowctl()?;
-    publish
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(&greeting)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1500");
+    let publish = agent.microphone(&greeting, 1500)?;
     let publishing = tokio::spawn(run(publish, b"", PATIENCE));
 
     let (mut heard, mut rule, mut caption) = (None, None, None);

@@ -101,14 +101,7 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
         &wav,
         &[silence(500), say(QUESTION, dir.path())?, silence(500)].concat(),
     )?;
-    let mut publish = agent.flowctl()?;
-    publish
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(&wav)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1500");
+    let publish = agent.microphone(&wav, 1500)?;
     let publishing = tokio::spawn(run(publish, b"", PATIENCE));
 
     // Everything in the order it was taken. The polling is biased towards the model's events over speech, so that

@@ -221,14 +221,7 @@ async fn a_recorded_session_replays_into_a_fresh_agent_with_the_same_words_and_r
         .arg("--repeat")
         .arg(FRAMES.to_string());
     let camera = tokio::spawn(run(camera, b"", PATIENCE));
-    let mut microphone = live.flowctl()?;
-    microphone
-        .arg("pub-wav")
-        .arg(ch::AUDIO.name)
-        .arg(&speech)
-        .arg("--realtime")
-        .arg("--tail-ms")
-        .arg("1500");
+    let microphone = live.microphone(&speech, 1500)?;
     let microphone = tokio::spawn(run(microphone, b"", PATIENCE));
 
     let seen = session.watch(Heard::answered).await?;

@@ -372,6 +372,19 @@ impl Agent {
         self.flowctl_at(&self.tcp().to_string())
     }
 
+    /// A microphone stand-in: `flowctl pub-wav Agent.audio WAV --realtime --tail-ms TAIL`, the file streamed in 20 ms
+    /// chunks paced in real time, then `tail_ms` of silence so that its last utterance ends.
+    pub fn microphone(&self, wav: impl AsRef<Path>, tail_ms: u32) -> anyhow::Result<Command> {
+        let mut cmd = self.flowctl()?;
+        cmd.arg("pub-wav")
+            .arg(agent_contract::channels::AUDIO.name)
+            .arg(wav.as_ref())
+            .arg("--realtime")
+            .arg("--tail-ms")
+            .arg(tail_ms.to_string());
+        Ok(cmd)
+    }
+
     /// `flowctl --addr ADDR` with this server's data directory.
     pub fn flowctl_at(&self, addr: &str) -> anyhow::Result<Command> {
         let mut cmd = crate::binaries::command("flowctl")?;
