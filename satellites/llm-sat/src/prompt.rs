@@ -227,25 +227,27 @@ mod tests {
         assert_eq!(turn.content, "what do you see");
     }
 
+    /// A line of the conversation, heard whole, without facts or the model's own text.
+    fn line(role: Role, text: &str) -> ChatMessage {
+        ChatMessage {
+            role,
+            text: text.into(),
+            interrupted: false,
+            facts: None,
+            generated: None,
+        }
+    }
+
     #[test]
     fn the_system_prompt_does_not_change_with_the_turn() {
         let a = chat(&request("hello"), true);
         let mut later = request("tell me a joke");
         later.facts.faces = 0;
         later.history = vec![
+            line(Role::User, "hello"),
             ChatMessage {
-                role: Role::User,
-                text: "hello".into(),
-                interrupted: false,
-                facts: None,
-                generated: None,
-            },
-            ChatMessage {
-                role: Role::Assistant,
-                text: "Hi there".into(),
                 interrupted: true,
-                facts: None,
-                generated: None,
+                ..line(Role::Assistant, "Hi there")
             },
         ];
         let b = chat(&later, true);
@@ -264,18 +266,12 @@ mod tests {
         later.facts.faces = 0;
         later.history = vec![
             ChatMessage {
-                role: Role::User,
-                text: "hello".into(),
-                interrupted: false,
                 facts: Some(first.facts.clone()),
-                generated: None,
+                ..line(Role::User, "hello")
             },
             ChatMessage {
-                role: Role::Assistant,
-                text: "Hi there, two of you.".into(),
-                interrupted: false,
-                facts: None,
                 generated: Some("Hi there, **two** of you.".into()),
+                ..line(Role::Assistant, "Hi there, two of you.")
             },
         ];
         let next = chat(&later, false);
