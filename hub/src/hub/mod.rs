@@ -167,6 +167,9 @@ pub struct Hub {
     state: Arc<Mutex<State>>,
     limits: HubLimits,
     timer: deadlines::CallTimer,
+    /// The same registry as the state's, reachable without the state's lock: a message published by reference
+    /// leases its slot here before it takes the lock once, to publish.
+    segments: Arc<Segments>,
 }
 
 impl Drop for Hub {
@@ -195,15 +198,17 @@ impl Hub {
 
     /// A hub whose shared-memory path has `shm`'s settings.
     pub fn with_shm(limits: HubLimits, shm: ShmSettings) -> Self {
+        let segments = Arc::new(Segments::new(shm));
         Hub {
             state: Arc::new(Mutex::new(State {
                 next_conn: 1,
                 next_call: 1,
-                segments: Arc::new(Segments::new(shm)),
+                segments: segments.clone(),
                 ..State::default()
             })),
             limits,
             timer: deadlines::CallTimer::default(),
+            segments,
         }
     }
 
@@ -500,7 +505,7 @@ impl Hub {
 
     /// The shared-memory segments (their settings, figures, and the slots payloads lie in).
     pub fn segments(&self) -> Arc<Segments> {
-        self.lock().segments.clone()
+        self.segments.clone()
     }
 
     /// A shared-memory segment for `conn`'s stream `id`, with slots of at least `slot_size` bytes.
@@ -513,9 +518,8 @@ impl Hub {
                 format!("{} is a service channel", ch.name),
             );
         }
-        let segments = st.segments.clone();
         drop(st);
-        segments
+        self.segments
             .open(conn, id, slot_size)
             .or_else(|e| err(ErrorCode::Limit, e))
     }
@@ -523,8 +527,7 @@ impl Hub {
     /// Publishes the message `conn` wrote into a slot of its segment on `id`, like [`Hub::publish`]; the slot is
     /// freed once nobody holds the message.
     pub fn publish_ref(&self, conn: ConnId, id: ChanId, slot: SlotRef) -> Result<(), LeaseError> {
-        let segments = self.lock().segments.clone();
-        let payload = segments.lease(conn, id, slot)?;
+        let payload = self.segments.lease(conn, id, slot)?;
         self.publish(conn, id, payload)
             .map_err(|e| LeaseError::Unknown(e.message))
     }
