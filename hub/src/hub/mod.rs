@@ -478,13 +478,7 @@ impl Hub {
     /// blocks: a subscriber that fell behind loses its oldest queued message.
     pub fn publish(&self, conn: ConnId, id: ChanId, payload: Bytes) -> HubResult<()> {
         let mut st = self.lock();
-        let ch = owned_channel(&mut st, conn, id)?;
-        if ch.kind != ChannelKind::Stream {
-            return err(
-                ErrorCode::WrongKind,
-                format!("{} is a service channel", ch.name),
-            );
-        }
+        let ch = owned_stream(&mut st, conn, id)?;
         ch.seq += 1;
         ch.msgs += 1;
         let len = payload.len();
@@ -511,13 +505,7 @@ impl Hub {
     /// A shared-memory segment for `conn`'s stream `id`, with slots of at least `slot_size` bytes.
     pub fn shm_open(&self, conn: ConnId, id: ChanId, slot_size: u32) -> HubResult<SegmentInfo> {
         let mut st = self.lock();
-        let ch = owned_channel(&mut st, conn, id)?;
-        if ch.kind != ChannelKind::Stream {
-            return err(
-                ErrorCode::WrongKind,
-                format!("{} is a service channel", ch.name),
-            );
-        }
+        owned_stream(&mut st, conn, id)?;
         drop(st);
         self.segments
             .open(conn, id, slot_size)
@@ -744,6 +732,18 @@ fn owned_channel(st: &mut State, conn: ConnId, id: ChanId) -> HubResult<&mut Cha
         return err(
             ErrorCode::NotOwner,
             format!("channel {} belongs to {}", ch.name, ch.owner_label),
+        );
+    }
+    Ok(ch)
+}
+
+/// [`owned_channel`], which must be a stream: what a publisher may write to.
+fn owned_stream(st: &mut State, conn: ConnId, id: ChanId) -> HubResult<&mut Channel> {
+    let ch = owned_channel(st, conn, id)?;
+    if ch.kind != ChannelKind::Stream {
+        return err(
+            ErrorCode::WrongKind,
+            format!("{} is a service channel", ch.name),
         );
     }
     Ok(ch)

@@ -44,7 +44,16 @@ impl ShmWriter {
             } if self.peer.accepted()
                 && payload.len() >= self.segments.settings().threshold as usize =>
             {
-                let Some((segment, slot)) = self.segments.locate(&payload) else {
+                // A subscriber that keeps many messages (a ring of recent frames) gets the rest as bytes (counted):
+                // its writer never waits on it, so its other channels and its queue go on as for any subscriber.
+                let by_reference = self.segments.locate(&payload).filter(|_| {
+                    let room = self.peer.held() < self.peer.max_held();
+                    if !room {
+                        self.segments.stats().count_inline();
+                    }
+                    room
+                });
+                let Some((segment, slot)) = by_reference else {
                     writer.queue_event(&Event::Data {
                         chan,
                         seq,
@@ -59,18 +68,6 @@ impl ShmWriter {
                         .send_event_with_fd(&Event::Segment(segment.info), fd.as_fd())
                         .await?;
                     self.known.insert(slot.segment);
-                }
-                // A subscriber that keeps many messages (a ring of recent frames) gets the rest as bytes: its writer
-                // never waits on it, so its other channels and its queue go on as for any subscriber.
-                if self.peer.held() >= self.peer.max_held() {
-                    self.segments.stats().count_inline();
-                    writer.queue_event(&Event::Data {
-                        chan,
-                        seq,
-                        ts_us,
-                        payload,
-                    });
-                    return Ok(());
                 }
                 self.peer.hold(slot, payload);
                 writer.queue_event(&Event::DataRef {

@@ -124,6 +124,32 @@ class Output:
         )
 
 
+def start_hub_process(cmd: list[str], env: dict, cwd: Optional[Path] = None) -> tuple[subprocess.Popen, Output]:
+    """Starts a process that serves a hub (robot-agent, flow-hub) and waits until it listens on its Unix socket."""
+    name = Path(cmd[0]).name
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            env=env, cwd=cwd)
+    output = Output(proc.stdout)
+    wait_until(
+        f"{name} to listen:\n{output.text()}",
+        lambda: proc.poll() is not None or any("flow hub: unix:" in l for l in output.snapshot()),
+    )
+    if proc.poll() is not None:
+        pytest.fail(f"{name} exited at start ({proc.returncode}):\n{output.text()}")
+    return proc, output
+
+
+def stop_process(proc: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL if it has not ended within PATIENCE."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=PATIENCE)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 class Agent:
     """A running robot-agent: its addresses, data directory and output."""
 
@@ -157,15 +183,7 @@ class Agent:
             cmd += ["--config", str(path)]
         env = dict(os.environ, RUST_LOG=os.environ.get("AGENT_TEST_LOG", "info"), NO_COLOR="1")
         # From the repository root, as `make run` starts it: the default brain program is config/brain.tr.
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, env=env, cwd=REPO)
-        self.output = Output(self.proc.stdout)
-        wait_until(
-            f"robot-agent to listen:\n{self.output.text()}",
-            lambda: self.proc.poll() is not None or any("flow hub: unix:" in l for l in self.output.snapshot()),
-        )
-        if self.proc.poll() is not None:
-            pytest.fail(f"robot-agent exited at start ({self.proc.returncode}):\n{self.output.text()}")
+        self.proc, self.output = start_hub_process(cmd, env, cwd=REPO)
         return self
 
     def kill(self) -> None:
@@ -175,13 +193,8 @@ class Agent:
             self.proc.wait(timeout=PATIENCE)
 
     def stop(self) -> None:
-        if self.proc and self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=PATIENCE)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        if self.proc:
+            stop_process(self.proc)
 
     def flowctl(self, *args: str, **popen) -> subprocess.Popen:
         """`flowctl --addr ... --data-dir ... ARGS` started in the background, output piped."""

@@ -5,14 +5,12 @@ subscriber of the same channel gets the same bytes by copy."""
 from __future__ import annotations
 
 import os
-import signal
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import PATIENCE, Output, binary, wait_subscribers, wait_until
+from conftest import PATIENCE, binary, start_hub_process, stop_process, wait_subscribers
 from flow import Client
 
 #: The hub's default hub.shm_threshold: payloads of this size and more travel by reference.
@@ -28,18 +26,11 @@ class Hub:
         self.data_dir = data_dir
         env = {k: v for k, v in os.environ.items() if k != "FLOW_SHM"}
         env.update(RUST_LOG=os.environ.get("AGENT_TEST_LOG", "info"), NO_COLOR="1")
-        self.proc = subprocess.Popen(
+        self.proc, self.output = start_hub_process(
             [str(binary("flow-hub")), "--http", "127.0.0.1:0", "--flow-tcp", "127.0.0.1:0", "--flow-unix",
              "flow.sock", "--data-dir", str(data_dir)],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env,
+            env,
         )
-        self.output = Output(self.proc.stdout)
-        wait_until(
-            f"flow-hub to listen:\n{self.output.text()}",
-            lambda: self.proc.poll() is not None or any("flow hub: unix:" in l for l in self.output.snapshot()),
-        )
-        if self.proc.poll() is not None:
-            pytest.fail(f"flow-hub exited at start ({self.proc.returncode}):\n{self.output.text()}")
         lines = self.output.snapshot()
         self.tcp = next(l.split()[2] for l in lines if l.startswith("flow hub: tcp://"))
         self.unix = next(l.split()[2] for l in lines if l.startswith("flow hub: unix:"))
@@ -48,13 +39,7 @@ class Hub:
         return Client.connect(addr, data_dir=str(self.data_dir), name=name, queue=16, reconnect=False)
 
     def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout=PATIENCE)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc)
 
 
 @pytest.fixture
