@@ -9,8 +9,8 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use futures_util::StreamExt;
-use tokio::io::{AsyncReadExt, AsyncWriteExt, BufReader, BufWriter};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::io::{AsyncWriteExt, BufWriter};
+use tokio::net::TcpStream;
 use tokio::task::JoinHandle;
 
 use crate::servers;
@@ -250,31 +250,7 @@ async fn redis_pubsub(
 }
 
 async fn raw_tcp(n: usize, tally: Arc<Tally>) -> anyhow::Result<Rig> {
-    let listener = TcpListener::bind(servers::loopback_any()).await?;
-    let addr = listener.local_addr()?;
-    let mut sockets = Vec::new();
-    let mut subscribers = Vec::new();
-    for i in 0..n {
-        let reader = TcpStream::connect(addr).await?;
-        let (writer, _) = listener.accept().await?;
-        // As on the hub's sockets: frames are written whole, so Nagle only adds delay.
-        writer.set_nodelay(true)?;
-        reader.set_nodelay(true)?;
-        sockets.push(BufWriter::with_capacity(64 * 1024, writer));
-        let tally = tally.clone();
-        subscribers.push(tokio::spawn(async move {
-            let mut reader = BufReader::with_capacity(64 * 1024, reader);
-            let mut payload = Vec::new();
-            while let Ok(len) = reader.read_u32_le().await {
-                payload.resize(len as usize, 0);
-                if reader.read_exact(&mut payload).await.is_err() {
-                    break;
-                }
-                tally.record(i, &payload);
-            }
-            tally.end(i);
-        }));
-    }
+    let (sockets, subscribers) = agent_bench::raw_tcp::connect(n, tally.clone()).await?;
     Ok(Rig {
         sender: Sender::RawTcp { sockets },
         subscribers,

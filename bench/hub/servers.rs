@@ -3,7 +3,6 @@
 //! are killed when their handle is dropped.
 
 use flow::token::{TokenKind, resolve_token};
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::Duration;
@@ -48,21 +47,8 @@ impl Server {
     }
 }
 
-/// CPU nanoseconds used by all threads of `pid`, living ones only: threads
-/// that ended meanwhile drop out, which a server's worker threads never do.
-pub fn cpu_ns(pid: u32) -> Option<u64> {
-    let mut total = 0;
-    for task in std::fs::read_dir(format!("/proc/{pid}/task")).ok()? {
-        let path = task.ok()?.path().join("schedstat");
-        let text = std::fs::read_to_string(path).unwrap_or_default();
-        total += text
-            .split_whitespace()
-            .next()
-            .and_then(|ns| ns.parse::<u64>().ok())
-            .unwrap_or(0);
-    }
-    Some(total)
-}
+/// CPU nanoseconds of `pid`'s threads (the benches' shared reading of `/proc`).
+pub use agent_bench::cpu_ns;
 
 fn proc_status_kb(pid: u32, key: &str) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
@@ -216,9 +202,4 @@ pub fn default_agent_bin() -> PathBuf {
         .ok()
         .and_then(|exe| exe.parent().map(|dir| dir.join("robot-agent")))
         .unwrap_or_else(|| PathBuf::from("robot-agent"))
-}
-
-/// Loopback address for the raw-TCP ceiling's listener.
-pub fn loopback_any() -> SocketAddr {
-    SocketAddr::from(([127, 0, 0, 1], 0))
 }

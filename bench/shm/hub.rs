@@ -108,18 +108,5 @@ impl Hub {
     }
 }
 
-/// CPU nanoseconds used by the living threads of `pid` (`/proc/PID/task/*/schedstat`): the hub's threads live as
-/// long as it does, so nothing drops out between two readings.
-pub fn cpu_ns(pid: u32) -> Option<u64> {
-    let mut total = 0;
-    for task in std::fs::read_dir(format!("/proc/{pid}/task")).ok()? {
-        let path = task.ok()?.path().join("schedstat");
-        let text = std::fs::read_to_string(path).unwrap_or_default();
-        total += text
-            .split_whitespace()
-            .next()
-            .and_then(|ns| ns.parse::<u64>().ok())
-            .unwrap_or(0);
-    }
-    Some(total)
-}
+/// CPU nanoseconds of `pid`'s threads (the benches' shared reading of `/proc`).
+pub use agent_bench::cpu_ns;

@@ -4,8 +4,8 @@
 
 use std::sync::Arc;
 
-use tokio::io::{AsyncReadExt, AsyncWriteExt, BufReader, BufWriter};
-use tokio::net::{TcpListener, TcpStream};
+use tokio::io::{AsyncWriteExt, BufWriter};
+use tokio::net::TcpStream;
 use tokio::task::JoinHandle;
 
 use crate::stamp;
@@ -21,31 +21,7 @@ pub struct RawRig {
 
 /// Connects `n` loopback socket pairs and starts a reader on each.
 pub async fn connect(n: usize, tally: Arc<Tally>) -> anyhow::Result<RawRig> {
-    let listener = TcpListener::bind(("127.0.0.1", 0)).await?;
-    let addr = listener.local_addr()?;
-    let mut sockets = Vec::new();
-    let mut readers = Vec::new();
-    for i in 0..n {
-        let reader = TcpStream::connect(addr).await?;
-        let (writer, _) = listener.accept().await?;
-        // As on the hub's sockets: frames are written whole, so Nagle only adds delay.
-        writer.set_nodelay(true)?;
-        reader.set_nodelay(true)?;
-        sockets.push(BufWriter::with_capacity(64 * 1024, writer));
-        let tally = tally.clone();
-        readers.push(tokio::spawn(async move {
-            let mut reader = BufReader::with_capacity(64 * 1024, reader);
-            let mut payload = Vec::new();
-            while let Ok(len) = reader.read_u32_le().await {
-                payload.resize(len as usize, 0);
-                if reader.read_exact(&mut payload).await.is_err() {
-                    break;
-                }
-                tally.record(i, &payload);
-            }
-            tally.end(i);
-        }));
-    }
+    let (sockets, readers) = agent_bench::raw_tcp::connect(n, tally).await?;
     Ok(RawRig {
         sockets,
         readers,

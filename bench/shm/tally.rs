@@ -166,6 +166,16 @@ impl Tally {
     }
 }
 
+impl agent_bench::raw_tcp::Receiver for Tally {
+    fn record(&self, sub: usize, payload: &[u8]) {
+        Tally::record(self, sub, payload);
+    }
+
+    fn end(&self, sub: usize) {
+        Tally::end(self, sub);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,6 +1,8 @@
-//! Shared benchmark plumbing: a process's CPU time from /proc, percentiles of samples, and the [`summary`] blocks
-//! of docs/benchmarks.md that `bench-summary` rewrites from the benches' output.
+//! Shared benchmark plumbing: a process's CPU time from /proc, percentiles of samples, the raw-TCP baseline's
+//! sockets ([`raw_tcp`]), and the [`summary`] blocks of docs/benchmarks.md that `bench-summary` rewrites from the
+//! benches' output.
 
+pub mod raw_tcp;
 pub mod summary;
 
 use anyhow::Context;
@@ -16,6 +18,22 @@ pub fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
     let f: Vec<&str> = rest.split_whitespace().collect();
     // After ')': state is field 3, so utime (14) and stime (15) are at indices 11 and 12.
     Ok(f.get(11).context("utime")?.parse::<u64>()? + f.get(12).context("stime")?.parse::<u64>()?)
+}
+
+/// CPU nanoseconds used by the living threads of `pid` (`/proc/PID/task/*/schedstat`, finer than [`cpu_ticks`]):
+/// threads that ended meanwhile drop out, which a server's threads never do.
+pub fn cpu_ns(pid: u32) -> Option<u64> {
+    let mut total = 0;
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).ok()? {
+        let path = task.ok()?.path().join("schedstat");
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        total += text
+            .split_whitespace()
+            .next()
+            .and_then(|ns| ns.parse::<u64>().ok())
+            .unwrap_or(0);
+    }
+    Some(total)
 }
 
 /// Seconds per clock tick of [`cpu_ticks`].
