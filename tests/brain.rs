@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use agent_tests::{Agent, DataDir, PATIENCE};
 use anyhow::{Context, bail};
-use flow::{Client, Publisher, Subscription};
+use flow::{Client, Publisher, Service, ServiceCall, Subscription};
 use serde_json::{Value, json};
 
 /// The default program, as shipped.
@@ -128,6 +128,18 @@ impl Rig {
         next_matching(&self.avatar, |command| command["cmd"] == cmd).await
     }
 
+    /// A robot body satellite offering motion commands (its client is kept with the service).
+    async fn body(&self) -> anyhow::Result<(Client, Service)> {
+        let body = self.agent.client("robot-body").await?;
+        let service = body
+            .serve(
+                "Robot.command",
+                r#"{"takes":{"action":"turn","direction":"left|right"}}"#,
+            )
+            .await?;
+        Ok((body, service))
+    }
+
     /// The next rule change whose path is `rule` (as `main.converse > answer.time`).
     async fn next_rule(&self, rule: &str) -> anyhow::Result<Value> {
         next_matching(&self.rules, |trace| trace["rule"] == rule).await
@@ -153,6 +165,21 @@ async fn next_matching(
     tokio::time::timeout(PATIENCE, search)
         .await
         .with_context(|| format!("the expected message on {} did not come", sub.name()))?
+}
+
+/// The next call of the body's service, within [`PATIENCE`].
+async fn body_call(service: &mut Service, what: &str) -> anyhow::Result<ServiceCall> {
+    tokio::time::timeout(PATIENCE, service.next())
+        .await
+        .with_context(|| format!("the body was not called: {what}"))?
+        .context("the body's service closed")
+}
+
+/// Answers a body call with the text the brain speaks.
+async fn answer_body_call(call: ServiceCall, text: &str) -> anyhow::Result<()> {
+    call.respond(Ok(json!({ "text": text }).to_string().into_bytes().into()))
+        .await?;
+    Ok(())
 }
 
 #[tokio::test]
@@ -259,25 +286,12 @@ async fn a_person_who_appears_is_greeted_once() -> anyhow::Result<()> {
 #[tokio::test]
 async fn a_remote_satellite_service_is_called_and_its_answer_spoken() -> anyhow::Result<()> {
     let rig = Rig::start(&default_program()?).await?;
-    // A robot body satellite offering motion commands.
-    let body = rig.agent.client("robot-body").await?;
-    let mut service = body
-        .serve(
-            "Robot.command",
-            r#"{"takes":{"action":"turn","direction":"left|right"}}"#,
-        )
-        .await?;
+    let (_body, mut service) = rig.body().await?;
     rig.hear("Turn left, please.").await?;
-    let call = tokio::time::timeout(PATIENCE, service.next())
-        .await?
-        .context("service closed")?;
+    let call = body_call(&mut service, "turn left").await?;
     let request: Value = serde_json::from_slice(&call.payload)?;
     assert_eq!(request, json!({ "action": "turn", "direction": "left" }));
-    call.respond(Ok(json!({ "text": "Turning left now." })
-        .to_string()
-        .into_bytes()
-        .into()))
-        .await?;
+    answer_body_call(call, "Turning left now.").await?;
     assert_eq!(rig.next_caption().await?, "Turning left now.");
     Ok(())
 }
@@ -362,5 +376,88 @@ async fn malformed_transcripts_are_logged_and_skipped() -> anyhow::Result<()> {
         .await?;
     rig.hear("thanks").await?;
     assert_eq!(rig.next_caption().await?, "You're welcome.");
+    Ok(())
+}
+
+/// The lost tool call of issue 46, forced: the chat call's answer travels on the hub's control lane and may overtake
+/// the `call` event of its own turn on `Agent.chat.reply`. Here the model satellite's part is played in that worst
+/// order on purpose (the answer carrying the call first, the event only after the body was called), so the brain
+/// must perform the call from the answer; the late event must not perform it again.
+#[tokio::test]
+async fn a_tool_call_whose_answer_overtakes_its_event_is_performed_once() -> anyhow::Result<()> {
+    use agent_contract::chat::{ChatAnswer, ChatEvent, ChatRequest, ChatStats, Finish, ToolCall};
+
+    let rig = Rig::start(&default_program()?).await?;
+    let model = rig.agent.client("model-in-the-worst-order").await?;
+    let mut chat = model.serve(ch::CHAT.name, ch::headers::CHAT).await?;
+    let reply = model
+        .publisher(ch::CHAT_REPLY.name, ch::headers::CHAT_REPLY)
+        .await?;
+    let (_body, mut service) = rig.body().await?;
+
+    // "Face the window" is no exact command: the `move` rule hands it to the model, forcing a Robot.command call.
+    rig.hear("Please face the window.").await?;
+    let asked = tokio::time::timeout(PATIENCE, chat.next())
+        .await
+        .context("the brain did not ask the model")?
+        .context("the chat service closed")?;
+    let request: ChatRequest = serde_json::from_slice(&asked.payload)?;
+    assert_eq!(request.force_tool.as_deref(), Some("Robot.command"));
+    let call = ToolCall {
+        service: "Robot.command".into(),
+        payload: json!({ "action": "turn", "direction": "left" }),
+    };
+    let answer = ChatAnswer {
+        turn: request.turn,
+        reply: String::new(),
+        generated: String::new(),
+        sentences: 0,
+        finish: Finish::Call,
+        call: Some(call.clone()),
+        stats: ChatStats::default(),
+    };
+    asked
+        .respond(Ok(serde_json::to_vec(&answer)?.into()))
+        .await?;
+
+    // The body is called although no `call` event has come yet.
+    let performed = body_call(&mut service, "the model's call (lost if it never comes)").await?;
+    assert_eq!(
+        serde_json::from_slice::<Value>(&performed.payload)?,
+        json!({ "action": "turn", "direction": "left" })
+    );
+    answer_body_call(performed, "Turning left now.").await?;
+    assert_eq!(rig.next_caption().await?, "Turning left now.");
+
+    // The turn's events, late: the call event must not call the body a second time.
+    let turn = request.turn;
+    for event in [
+        ChatEvent::Call { turn, call },
+        ChatEvent::End {
+            turn,
+            finish: Finish::Call,
+            stats: ChatStats::default(),
+        },
+    ] {
+        reply.publish(serde_json::to_vec(&event)?).await?;
+    }
+    // The next call the body gets is the one asked for now; a second "left" would come first if the late event had
+    // been performed.
+    rig.hear("Turn right, please.").await?;
+    let next = body_call(&mut service, "turn right").await?;
+    assert_eq!(
+        serde_json::from_slice::<Value>(&next.payload)?,
+        json!({ "action": "turn", "direction": "right" })
+    );
+    answer_body_call(next, "Turning right now.").await?;
+    assert_eq!(rig.next_caption().await?, "Turning right now.");
+    // By now the late events have long been read; a duplicate would be waiting here.
+    if let Ok(Some(extra)) = tokio::time::timeout(Duration::from_millis(500), service.next()).await
+    {
+        bail!(
+            "the body was called once more: {}",
+            String::from_utf8_lossy(&extra.payload)
+        );
+    }
     Ok(())
 }

@@ -13,6 +13,7 @@ use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
 use super::speech::Speech;
+use super::turn::{Outcome, Said, Turn};
 
 /// The limits of a reply, from the configuration.
 #[derive(Debug, Clone, Copy)]
@@ -40,7 +41,6 @@ pub struct Done {
 /// What the loop must do after a chat event or the end of a call.
 #[derive(Debug, PartialEq)]
 pub enum Next {
-    Nothing,
     /// Put a step in the rule trace.
     Trace {
         turn: u64,
@@ -54,10 +54,7 @@ pub enum Next {
         payload: serde_json::Value,
     },
     /// The turn failed: assert `failed("chat", reason)`.
-    Failed {
-        turn: u64,
-        reason: String,
-    },
+    Failed { turn: u64, reason: String },
 }
 
 /// The conversation as the pair database keeps it.
@@ -66,30 +63,6 @@ struct Memory {
     /// When the last turn ended (ms since the Unix epoch).
     updated_ms: i64,
     lines: Vec<ChatMessage>,
-}
-
-/// A sentence sent to the TTS module, and when its audio should start.
-#[derive(Debug)]
-struct Said {
-    text: String,
-    starts: Instant,
-}
-
-/// The turn in progress.
-#[derive(Debug)]
-struct Turn {
-    turn: u64,
-    text: String,
-    /// What the agent perceived when it was asked (kept with the question in the memory).
-    facts: Facts,
-    said: Vec<Said>,
-    /// Set when the user interrupted it: what they heard of the reply.
-    interrupted: Option<Vec<String>>,
-    /// The `end` event came (on `Agent.chat.reply`, after every sentence).
-    ended: bool,
-    /// The call's answer came. It travels on the hub's control lane and may overtake the last sentences on the
-    /// stream's, so the turn is settled only once both are in (or every sentence the answer counts).
-    answer: Option<ChatAnswer>,
 }
 
 /// The brain's side of chat turns.
@@ -184,8 +157,10 @@ impl Chats {
         // A turn still running (or waiting for its answer) is cut off here: the memory keeps what was heard of it.
         self.interrupt(Instant::now());
         if let Some(old) = self.current.take() {
-            let heard = old.interrupted.unwrap_or_default().join(" ");
-            self.remember(old.text, old.facts, heard, None, true);
+            let mut outcome = old.outcome();
+            outcome.interrupted = true;
+            outcome.generated = None;
+            self.remember(outcome);
         }
         if self.stale(&self.memory) && !self.memory.lines.is_empty() {
             self.memory = Memory::default();
@@ -204,15 +179,7 @@ impl Chats {
             max_sentences: Some(self.max_sentences),
             timeout_ms: Some(self.reply_timeout.as_millis() as u64),
         };
-        self.current = Some(Turn {
-            turn,
-            text: text.to_owned(),
-            facts,
-            said: Vec::new(),
-            interrupted: None,
-            ended: false,
-            answer: None,
-        });
+        self.current = Some(Turn::new(turn, text, facts));
         let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);
         let body = serde_json::to_vec(&request).unwrap_or_default();
         tokio::spawn(async move {
@@ -228,46 +195,50 @@ impl Chats {
     }
 
     /// An event of `Agent.chat.reply`. `playout_end` is when the speech already queued ends.
-    pub async fn event(&mut self, event: ChatEvent, playout_end: Option<Instant>) -> Next {
+    pub async fn event(&mut self, event: ChatEvent, playout_end: Option<Instant>) -> Vec<Next> {
         let Some(current) = self
             .current
             .as_mut()
             .filter(|t| t.turn == event.turn() && t.interrupted.is_none())
         else {
-            return Next::Nothing;
+            return Vec::new();
         };
         match event {
-            ChatEvent::Prompt { turn, prompt, .. } => Next::Trace {
+            ChatEvent::Prompt { turn, prompt, .. } => vec![Next::Trace {
                 turn,
                 step: "prompt",
                 text: prompt,
-            },
+            }],
             ChatEvent::Sentence { turn, text, .. } => {
                 // Queued in order on the speech task, behind anything the rules said before.
                 self.speech.say(&text, false).await;
-                current.said.push(Said {
-                    text: text.clone(),
-                    starts: playout_end.unwrap_or_else(Instant::now),
-                });
-                Next::Trace {
+                current.said(text.clone(), playout_end.unwrap_or_else(Instant::now));
+                let mut next = vec![Next::Trace {
                     turn,
                     step: "sentence",
                     text,
-                }
+                }];
+                next.extend(self.settle());
+                next
             }
-            ChatEvent::Call { turn, call } => Next::Call {
-                turn,
-                service: call.service,
-                payload: call.payload,
-            },
+            // Performed unless the answer overtook the event and brought the call already.
+            ChatEvent::Call { turn, call } => current
+                .call_event(call)
+                .map(|call| Next::Call {
+                    turn,
+                    service: call.service,
+                    payload: call.payload,
+                })
+                .into_iter()
+                .collect(),
             ChatEvent::End {
                 turn,
                 finish,
                 stats,
             } => {
-                current.ended = true;
-                self.settle();
-                Next::Trace {
+                current.end_event();
+                let settled = self.settle();
+                let mut next = vec![Next::Trace {
                     turn,
                     step: "end",
                     text: format!(
@@ -280,7 +251,9 @@ impl Chats {
                         stats.first_token_ms,
                         if stats.speculated { ", speculated" } else { "" }
                     ),
-                }
+                }];
+                next.extend(settled);
+                next
             }
         }
     }
@@ -327,98 +300,81 @@ impl Chats {
         Some((turn, heard.join(" ")))
     }
 
-    /// A turn's call ended.
-    pub fn done(&mut self, done: Done) -> Next {
+    /// A turn's call ended. The answer may come before any event of its turn (it travels on the hub's control
+    /// lane): a tool call it carries is performed from it then, and the late event adds nothing.
+    pub fn done(&mut self, done: Done) -> Vec<Next> {
         let Some(current) = self.current.as_mut().filter(|t| t.turn == done.turn) else {
-            return Next::Nothing;
+            return Vec::new();
         };
         match done.result {
             Ok(answer) => {
-                current.answer = Some(answer);
-                self.settle();
-                Next::Nothing
+                let call = current.answered(answer).map(|call| Next::Call {
+                    turn: done.turn,
+                    service: call.service,
+                    payload: call.payload,
+                });
+                let mut next: Vec<Next> = call.into_iter().collect();
+                next.extend(self.settle());
+                next
             }
             Err(reason) => {
                 let interrupted = current.interrupted.is_some();
                 self.current = None;
                 // A turn the user interrupted may end with the satellite's error: nothing to apologise for.
                 if interrupted {
-                    Next::Nothing
+                    Vec::new()
                 } else {
-                    Next::Failed {
+                    vec![Next::Failed {
                         turn: done.turn,
                         reason,
-                    }
+                    }]
                 }
             }
         }
     }
 
-    /// Ends the running turn once its answer and its last sentence are both in: the memory keeps it.
-    fn settle(&mut self) {
-        let settled = self.current.as_ref().is_some_and(|t| {
-            t.answer.as_ref().is_some_and(|answer| {
-                t.ended || t.interrupted.is_some() || t.said.len() as u32 >= answer.sentences
-            })
-        });
-        if !settled {
-            return;
+    /// Ends the running turn once its answer and its last sentence are both in: the memory keeps it. A turn that
+    /// said nothing and called nothing, uninterrupted, fails rather than end in silence.
+    fn settle(&mut self) -> Option<Next> {
+        if !self.current.as_ref().is_some_and(Turn::settled) {
+            return None;
         }
-        let Some(current) = self.current.take() else {
-            return;
-        };
-        let (reply, interrupted) = match current.interrupted {
-            Some(heard) => (heard.join(" "), true),
-            None => (
-                current
-                    .said
-                    .iter()
-                    .map(|s| s.text.as_str())
-                    .collect::<Vec<_>>()
-                    .join(" "),
-                false,
-            ),
-        };
-        let (called, generated) = match current.answer {
-            Some(answer) => (
-                answer.call,
-                Some(answer.generated).filter(|g| !g.is_empty()),
-            ),
-            None => (None, None),
-        };
-        let reply = match (called, reply.is_empty()) {
-            (Some(call), true) => format!("(called {})", call.service),
-            _ => reply,
-        };
-        if !interrupted {
-            self.finished = current.said;
+        let current = self.current.take()?;
+        let turn = current.turn;
+        let said = current.said.clone();
+        let outcome = current.outcome();
+        if !outcome.interrupted {
+            self.finished = said;
         }
-        let generated = generated.filter(|_| !interrupted);
-        self.remember(current.text, current.facts, reply, generated, interrupted);
+        let silent = outcome.silent;
+        self.remember(outcome);
+        silent.then(|| {
+            warn!(
+                turn,
+                "brain: the chat turn ended with nothing said and nothing called"
+            );
+            Next::Failed {
+                turn,
+                reason: "the model gave no answer".into(),
+            }
+        })
     }
 
-    fn remember(
-        &mut self,
-        question: String,
-        facts: Facts,
-        reply: String,
-        generated: Option<String>,
-        interrupted: bool,
-    ) {
+    fn remember(&mut self, outcome: Outcome) {
         let lines = &mut self.memory.lines;
         lines.push(ChatMessage {
             role: Role::User,
-            text: question,
+            text: outcome.question,
             interrupted: false,
-            facts: Some(facts),
+            facts: Some(outcome.facts),
             generated: None,
         });
         lines.push(ChatMessage {
             role: Role::Assistant,
-            text: reply,
-            interrupted,
+            text: outcome.reply,
+            interrupted: outcome.interrupted,
             facts: None,
-            generated,
+            generated: outcome.generated,
         });
         // Trimmed by half when full, not by one turn each time: the model's cache holds the prompt's prefix, and a
         // conversation that lost its oldest turn on every question would be evaluated again whole every time.

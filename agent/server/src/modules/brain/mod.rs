@@ -8,6 +8,7 @@ mod params;
 mod percepts;
 mod program_file;
 mod speech;
+mod turn;
 mod wire;
 
 use std::collections::BTreeMap;
@@ -178,8 +179,9 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
                 None => break,
             },
             Some(done) = chat_done.recv() => {
-                let next = mind.chats.done(done);
-                mind.chat_next(next).await;
+                for next in mind.chats.done(done) {
+                    mind.chat_next(next).await;
+                }
             }
             Some(outcome) = outcomes.recv() => mind.outcome(outcome),
             tick = ticks.recv() => {
@@ -349,13 +351,13 @@ impl Mind {
             self.saying = Some(text.clone());
         }
         let playout_end = self.playout.speaking_until(Instant::now());
-        let next = self.chats.event(event, playout_end).await;
-        self.chat_next(next).await;
+        for next in self.chats.event(event, playout_end).await {
+            self.chat_next(next).await;
+        }
     }
 
     async fn chat_next(&mut self, next: Next) {
         match next {
-            Next::Nothing => {}
             Next::Trace { turn, step, text } => self.chat_trace(turn, step, text),
             Next::Call {
                 turn,
@@ -374,7 +376,10 @@ impl Mind {
                         service,
                         "brain: the model called a service the program does not list"
                     );
-                    self.chat_trace(turn, "failed", format!("{service} is not a tool: {text}"));
+                    let reason = format!("{service} is not a tool: {text}");
+                    self.chat_trace(turn, "failed", reason.clone());
+                    // Reported like any failed call, so the program can say so: a call is never dropped silently.
+                    self.perceive("failed", vec![Value::Text(service), Value::Text(reason)]);
                     return;
                 }
                 self.chat_trace(turn, "call", format!("{service} {text}"));
