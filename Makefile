@@ -29,8 +29,9 @@ run: deps build model-release model-face model-voice model-llm
 	WHISPER_SAT_MODEL=$(MODEL) AGENT_LANGUAGE=$(LANGUAGE) scripts/run.sh $(TARGET_DIR)/release
 
 ## Install everything, then check formatting, types and lints and run every test: the page's JavaScript units (node's
-## test runner, no npm package needed), the workspace's Rust suites and the Python SDK's pytest suite against the debug
-## binaries. Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
+## test runner, no npm package needed), the workspace's Rust suites (cargo-nextest: a process per test and a ceiling per
+## test, .config/nextest.toml; then the doc tests, which nextest does not run) and the Python SDK's pytest suite
+## against the debug binaries (pytest-timeout's ceiling per test). Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
 ## model conversion runs that build's whisper-sat, and clippy's check pass is the only other compilation. Each phase
 ## prints its time (`phase NAME: N s`, scripts/phase.sh; docs/testing.md).
 test: deps build-debug model model-base model-face model-voice model-llm llm-server python
@@ -39,7 +40,8 @@ test: deps build-debug model model-base model-face model-voice model-llm llm-ser
 	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
 	scripts/phase.sh no-std $(CARGO) build -p flow-lite --lib --target thumbv7em-none-eabihf
 	scripts/phase.sh node-test node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
-	scripts/phase.sh cargo-test scripts/test-digest.sh $(CARGO) test --workspace --no-fail-fast
+	scripts/phase.sh cargo-test scripts/test-digest.sh $(CARGO) nextest run --workspace --no-fail-fast
+	scripts/phase.sh doc-test $(CARGO) test --workspace --doc
 	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
 
 ## Benchmarks against their baselines, side by side (not part of the tests): every one is a binary of one crate,

@@ -27,6 +27,13 @@ if command -v rustup >/dev/null && ! rustup target list --installed | grep -qx t
     rustup target add thumbv7em-none-eabihf
 fi
 
+# cargo-nextest runs the Rust suites in `make test`: a process per test, so a test that hangs is ended at its ceiling
+# (.config/nextest.toml) and the rest still run. The machines' image has it; a bare one builds it once from crates.io.
+if ! cargo nextest --version >/dev/null 2>&1; then
+    echo "deps: installing cargo-nextest"
+    cargo install --locked cargo-nextest --version '^0.9'
+fi
+
 missing=()
 for p in "${packages[@]}"; do
     if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed"; then

@@ -13,7 +13,7 @@ use agent_tests::browser_media::{
     TONE_HZ, best_loop_correlation, envelope, jpeg_shape, pcm_samples, prepare, read_wav,
     spectrum_peak, speech_fixture,
 };
-use agent_tests::{Agent, DataDir};
+use agent_tests::{Agent, DataDir, PATIENCE};
 use anyhow::{Context, bail, ensure};
 use serde_json::json;
 
@@ -612,7 +612,10 @@ async fn link_refuses_foreign_origins_and_closes_on_malformed_frames() -> anyhow
 
     // The real page's origin and session work; a malformed frame closes that socket with 1003 and a reason.
     let (mut ws, _) = connect(own_origin, Some(&token)).await??;
-    let welcome = ws.next().await.context("no welcome")??;
+    let welcome = tokio::time::timeout(PATIENCE, ws.next())
+        .await
+        .context("no welcome in time")?
+        .context("no welcome")??;
     let welcome: serde_json::Value = serde_json::from_str(welcome.to_text()?)?;
     assert_eq!(welcome["type"], "welcome");
     assert_eq!(welcome["audio"]["rate"], 22050);
@@ -637,7 +640,10 @@ async fn link_refuses_foreign_origins_and_closes_on_malformed_frames() -> anyhow
     }
     // The same session may reconnect (the socket closed), and the server still serves others.
     let (mut again, _) = connect(own_origin, Some(&token)).await??;
-    let msg = again.next().await.context("no welcome after reconnect")??;
+    let msg = tokio::time::timeout(PATIENCE, again.next())
+        .await
+        .context("no welcome after reconnect in time")?
+        .context("no welcome after reconnect")??;
     assert!(msg.to_text()?.contains("\"welcome\""));
     Ok(())
 }

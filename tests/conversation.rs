@@ -8,7 +8,7 @@
 use agent_contract::channels as ch;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, Satellite, fixture, json_message, next_payload, run};
+use agent_tests::{Agent, DataDir, Satellite, fixture, json_message, next_payload, run, until};
 use anyhow::Context;
 use flow::Subscription;
 use serde_json::Value;
@@ -614,13 +614,18 @@ async fn the_agent_does_not_hear_itself_but_hears_a_user_over_its_echo() -> anyh
     // The reply as the page receives it: espeak is deterministic, so the same text gives the same samples again.
     say().await?;
     let mut reply: Vec<i16> = Vec::new();
-    while let Ok(Some(d)) = tokio::time::timeout(Duration::from_millis(1500), speech.recv()).await {
-        reply.extend(
-            d.payload[8.min(d.payload.len())..]
-                .chunks_exact(2)
-                .map(|b| i16::from_le_bytes([b[0], b[1]])),
-        );
-    }
+    until("the reply's speech to end", PATIENCE, async {
+        while let Ok(Some(d)) =
+            tokio::time::timeout(Duration::from_millis(1500), speech.recv()).await
+        {
+            reply.extend(
+                d.payload[8.min(d.payload.len())..]
+                    .chunks_exact(2)
+                    .map(|b| i16::from_le_bytes([b[0], b[1]])),
+            );
+        }
+    })
+    .await?;
     assert!(
         reply.len() > spoken::RATE as usize * 3,
         "a short reply: {} samples",

@@ -7,7 +7,8 @@ use std::time::Duration;
 
 use agent_tests::netns::NetnsPair;
 use agent_tests::{
-    Agent, AgentOptions, DataDir, PATIENCE, free_port, recv, until_subscribed, until_unsubscribed,
+    Agent, AgentOptions, DataDir, PATIENCE, free_port, recv, recv_until, until_subscribed,
+    until_unsubscribed,
 };
 use anyhow::{Context, bail};
 use bytes::Bytes;
@@ -426,12 +427,10 @@ async fn three_hubs_survive_one_killed_with_sigkill_and_its_imports_come_back() 
     check_both(&joints, &sub_b, &sub_c, "after-restart").await?;
     // The stream between B and C outlived A's death and restart.
     local_b.publish("b alive").await?;
-    let got = loop {
-        let m = recv(&sub_local).await?;
-        if &m.payload[..] == b"b alive" {
-            break m;
-        }
-    };
+    let got = recv_until(&sub_local, "\"b alive\"", PATIENCE, |m| {
+        (&m.payload[..] == b"b alive").then(|| m.clone())
+    })
+    .await?;
     assert_eq!(&got.payload[..], b"b alive");
     Ok(())
 }

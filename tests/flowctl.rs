@@ -4,7 +4,7 @@
 //! Build the binaries first: `cargo build -p robot-agent -p flowctl`.
 
 use agent_tests::{
-    Agent, DataDir, PATIENCE, fixture, recv, run, until_subscribed, until_unsubscribed,
+    Agent, DataDir, PATIENCE, fixture, recv, run, until, until_subscribed, until_unsubscribed,
 };
 use anyhow::Context;
 use bytes::Bytes;
@@ -223,19 +223,24 @@ async fn pub_sends_stdin_lines_a_file_or_a_directory() -> anyhow::Result<()> {
 async fn collect_pcm(sub: &Subscription, samples: usize) -> anyhow::Result<(Vec<usize>, Vec<i16>)> {
     let mut sizes = Vec::new();
     let mut pcm = Vec::with_capacity(samples);
-    while pcm.len() < samples {
-        let chunk = recv(sub)
-            .await
-            .with_context(|| format!("after {} samples", pcm.len()))?;
-        assert_eq!(chunk.payload.len() % 2, 0, "odd chunk size");
-        sizes.push(chunk.payload.len());
-        pcm.extend(
-            chunk
-                .payload
-                .chunks_exact(2)
-                .map(|b| i16::from_le_bytes([b[0], b[1]])),
-        );
-    }
+    until(&format!("{samples} samples"), PATIENCE, async {
+        while pcm.len() < samples {
+            let chunk = recv(sub)
+                .await
+                .with_context(|| format!("after {} samples", pcm.len()))?;
+            assert_eq!(chunk.payload.len() % 2, 0, "odd chunk size");
+            sizes.push(chunk.payload.len());
+            pcm.extend(
+                chunk
+                    .payload
+                    .chunks_exact(2)
+                    .map(|b| i16::from_le_bytes([b[0], b[1]])),
+            );
+        }
+        anyhow::Ok(())
+    })
+    .await
+    .with_context(|| format!("after {} samples", pcm.len()))??;
     Ok((sizes, pcm))
 }
 

@@ -8,7 +8,7 @@
 use std::time::Duration;
 
 use agent_tests::{
-    Agent, AgentOptions, DataDir, PATIENCE, RawConn, command, fixture, http, recv, run,
+    Agent, AgentOptions, DataDir, PATIENCE, RawConn, command, fixture, http, recv, run, until,
     until_subscribed,
 };
 use anyhow::{Context, bail};
@@ -238,7 +238,11 @@ async fn calls_to_a_silent_or_vanished_service_fail_clearly() -> anyhow::Result<
         .expect_err("no answer");
     assert_eq!(timed_out.code(), Some(ErrorCode::Timeout), "{timed_out}");
     assert!(timed_out.to_string().contains("Silent.svc"), "{timed_out}");
-    let mut held = vec![arrived.recv().await.context("first request")?];
+    let first = tokio::time::timeout(PATIENCE, arrived.recv())
+        .await
+        .context("the first request never reached the owner")?
+        .context("service ended")?;
+    let mut held = vec![first];
 
     // A long call in flight when the owner disappears fails as "gone", not as a timeout.
     let pending = {
@@ -345,14 +349,22 @@ async fn a_subscriber_that_stops_reading_loses_old_data_while_another_gets_every
     );
     assert_eq!(fast.dropped(), 0);
     // The slow reader, reading at last, finds a gap (its oldest data was dropped) and the newest message.
-    let mut seqs = Vec::new();
-    while seqs.last() != Some(&total) {
-        match slow.next_event(PATIENCE).await? {
-            Some(Event::Data { seq, .. }) => seqs.push(seq),
-            Some(_) => {}
-            None => bail!("the hub closed the slow subscriber"),
-        }
-    }
+    let seqs = until(
+        "the newest message on the slow subscriber",
+        PATIENCE,
+        async {
+            let mut seqs = Vec::new();
+            while seqs.last() != Some(&total) {
+                match slow.next_event(PATIENCE).await? {
+                    Some(Event::Data { seq, .. }) => seqs.push(seq),
+                    Some(_) => {}
+                    None => bail!("the hub closed the slow subscriber"),
+                }
+            }
+            Ok(seqs)
+        },
+    )
+    .await??;
     assert!(seqs.windows(2).all(|w| w[0] < w[1]), "out of order");
     assert!(
         seqs.windows(2).any(|w| w[1] > w[0] + 1),
@@ -396,20 +408,24 @@ async fn a_publisher_that_leaves_loses_none_of_what_subscribers_have_queued() ->
     drop(publisher);
     producer.close_and_wait(PATIENCE).await;
     let mut seqs = Vec::new();
-    loop {
-        match sub.next_event(PATIENCE).await? {
-            Some(Event::Data { seq, payload, .. }) => {
-                assert_eq!(payload[..8], seq.to_le_bytes(), "message {seq} damaged");
-                seqs.push(seq);
+    until("the removal of Last.words", PATIENCE, async {
+        loop {
+            match sub.next_event(PATIENCE).await? {
+                Some(Event::Data { seq, payload, .. }) => {
+                    assert_eq!(payload[..8], seq.to_le_bytes(), "message {seq} damaged");
+                    seqs.push(seq);
+                }
+                Some(Event::ChannelRemoved { name, .. }) if name == "Last.words" => return Ok(()),
+                Some(_) => {}
+                None => bail!(
+                    "the hub closed the subscriber after {} messages",
+                    seqs.len()
+                ),
             }
-            Some(Event::ChannelRemoved { name, .. }) if name == "Last.words" => break,
-            Some(_) => {}
-            None => bail!(
-                "the hub closed the subscriber after {} messages",
-                seqs.len()
-            ),
         }
-    }
+    })
+    .await
+    .with_context(|| format!("{} messages before", seqs.len()))??;
     assert_eq!(
         seqs,
         (1..=total).collect::<Vec<_>>(),

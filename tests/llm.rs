@@ -14,7 +14,7 @@ use std::process::Stdio;
 use std::time::Duration;
 
 use agent_tests::satellite::wait_channel;
-use agent_tests::{Agent, DataDir, PATIENCE, command, free_port};
+use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, until};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
@@ -253,23 +253,27 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
             .context("speech ended")?;
         assert!(speech.payload.len() > 8);
         let mut sentences = 1;
-        let (end, end_ts) = loop {
-            let data = tokio::time::timeout(PATIENCE, rig.reply.recv())
-                .await?
-                .context("the reply stream ended")?;
-            let event: Value = serde_json::from_slice(&data.payload)?;
-            if event["turn"] != turn {
-                continue;
-            }
-            match event["event"].as_str() {
-                Some("sentence") => {
-                    assert_eq!(event["index"], sentences, "{event}");
-                    sentences += 1;
+        let (end, end_ts) = until("the end of the turn", PATIENCE * 2, async {
+            loop {
+                let data = tokio::time::timeout(PATIENCE, rig.reply.recv())
+                    .await?
+                    .context("the reply stream ended")?;
+                let event: Value = serde_json::from_slice(&data.payload)?;
+                if event["turn"] != turn {
+                    continue;
                 }
-                Some("end") => break (event, data.ts_us),
-                other => bail!("unexpected event {other:?}: {event}"),
+                match event["event"].as_str() {
+                    Some("sentence") => {
+                        assert_eq!(event["index"], sentences, "{event}");
+                        sentences += 1;
+                    }
+                    Some("end") => return anyhow::Ok((event, data.ts_us)),
+                    other => bail!("unexpected event {other:?}: {event}"),
+                }
             }
-        };
+        })
+        .await
+        .with_context(|| format!("{sentences} sentence(s) of turn {turn} so far"))??;
         // Three sentences at most; the first may come as its first clause and the rest of it.
         assert!(sentences <= 4, "the sentence cap was passed: {sentences}");
         assert!(

@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
-use agent_tests::{Agent, DataDir, PATIENCE, RawConn, run};
+use agent_tests::{Agent, DataDir, PATIENCE, RawConn, run, until};
 use anyhow::Context;
 use flow::protocol::{Command, ErrorCode, Reply};
 use flow::{Client, ClientEvent};
@@ -114,9 +114,13 @@ async fn writes_acknowledged_during_a_kill_are_all_kept() -> anyhow::Result<()> 
     }
     drop(first_acks_tx);
     // Kill once every writer has had writes acknowledged.
-    for _ in 0..40 {
-        first_acks.recv().await.context("writers stopped early")?;
-    }
+    until("40 acknowledged writes", PATIENCE, async {
+        for _ in 0..40 {
+            first_acks.recv().await.context("writers stopped early")?;
+        }
+        anyhow::Ok(())
+    })
+    .await??;
     agent.kill9().await?;
     for writer in writers {
         tokio::time::timeout(PATIENCE, writer)

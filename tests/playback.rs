@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use agent_tests::browser_chromium::{Chromium, Tab};
 use agent_tests::browser_media::prepare;
-use agent_tests::{Agent, DataDir, PATIENCE};
+use agent_tests::{Agent, DataDir, PATIENCE, until};
 use anyhow::{Context, ensure};
 use serde::Deserialize;
 use serde_json::{Value, json};
@@ -73,14 +73,19 @@ async fn speak_and_wait(
         )
         .await?;
     let mut last = u64::MAX;
-    loop {
-        tokio::time::sleep(Duration::from_millis(1000)).await;
-        let now: u64 = serde_json::from_value(browser.eval(tab, "agentDebug.speechChunks").await?)?;
-        if now == last {
-            return Ok(());
+    until("the page's speech to stop", PATIENCE * 2, async {
+        loop {
+            tokio::time::sleep(Duration::from_millis(1000)).await;
+            let now: u64 =
+                serde_json::from_value(browser.eval(tab, "agentDebug.speechChunks").await?)?;
+            if now == last {
+                return anyhow::Ok(());
+            }
+            last = now;
         }
-        last = now;
-    }
+    })
+    .await
+    .with_context(|| format!("{text:?}: the page's chunk count still grows ({last})"))?
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -12,7 +12,7 @@ use std::time::Duration;
 use agent_tests::browser_chromium::{Chromium, Devices};
 use agent_tests::browser_link::LINK_ONLY_CONFIG;
 use agent_tests::http::request;
-use agent_tests::{Agent, AgentOptions, DataDir, PATIENCE, RawConn};
+use agent_tests::{Agent, AgentOptions, DataDir, PATIENCE, RawConn, recv_until, until};
 use anyhow::{Context, bail, ensure};
 use serde_json::json;
 use tokio::io::AsyncWriteExt;
@@ -416,16 +416,20 @@ async fn a_recording_on_a_full_disk_says_so_and_leaves_a_readable_mcap() -> anyh
     }
     let failed = match failed {
         Some(s) => s,
-        None => loop {
-            let m = tokio::time::timeout(PATIENCE, state.recv())
-                .await
-                .context("Agent.recording never said the recording failed")?
-                .context("subscription ended")?;
-            let s: agent_contract::recording::RecordingState = serde_json::from_slice(&m.payload)?;
-            if !s.recording && s.error.is_some() {
-                break s;
-            }
-        },
+        None => recv_until(
+            &state,
+            "a failed recording",
+            PATIENCE,
+            |m| match serde_json::from_slice::<agent_contract::recording::RecordingState>(
+                &m.payload,
+            ) {
+                Ok(s) if !s.recording && s.error.is_some() => Some(Ok(s)),
+                Ok(_) => None,
+                Err(e) => Some(Err(e)),
+            },
+        )
+        .await
+        .context("Agent.recording never said the recording failed")??,
     };
     let error = failed.error.unwrap_or_default();
     ensure!(
@@ -531,8 +535,13 @@ async fn logs_go_to_stderr_and_a_clean_shutdown_is_quiet() -> anyhow::Result<()>
         .status()?;
     let status = tokio::time::timeout(PATIENCE, child.wait()).await??;
     ensure!(status.success(), "exit status {status}");
-    let out = out_task.await??;
-    let err = err_task.await??;
+    // Its output ends with it (unless something it started still holds the pipes): read within the bound.
+    let out = tokio::time::timeout(PATIENCE, out_task)
+        .await
+        .context("stdout did not end")???;
+    let err = tokio::time::timeout(PATIENCE, err_task)
+        .await
+        .context("stderr did not end")???;
     ensure!(out.contains("ready: open"), "stdout has the address: {out}");
     ensure!(
         !out.contains("INFO") && !out.contains("WARN"),
@@ -561,16 +570,19 @@ async fn a_text_message_on_the_flow_websocket_closes_it_with_a_code_and_a_warnin
     let (mut ws, _) = tokio_tungstenite::connect_async(url.as_str()).await?;
     ws.send(Message::Text("hello".into())).await?;
     let mut code = None;
-    while let Ok(Some(msg)) = tokio::time::timeout(PATIENCE, ws.next()).await {
-        match msg {
-            Ok(Message::Close(frame)) => {
-                code = frame.map(|f| u16::from(f.code));
-                break;
+    until("the WebSocket to close", PATIENCE, async {
+        while let Ok(Some(msg)) = tokio::time::timeout(PATIENCE, ws.next()).await {
+            match msg {
+                Ok(Message::Close(frame)) => {
+                    code = frame.map(|f| u16::from(f.code));
+                    break;
+                }
+                Ok(_) => {}
+                Err(_) => break,
             }
-            Ok(_) => {}
-            Err(_) => break,
         }
-    }
+    })
+    .await?;
     ensure!(
         code == Some(1003),
         "closed with {code:?}, not 1003 (unsupported data)"

@@ -14,7 +14,7 @@ use std::time::Duration;
 use agent_contract::channels as ch;
 use agent_contract::rules::RuleChange;
 use agent_tests::recording::{self, RecordProcess};
-use agent_tests::{Agent, DataDir, Satellite, fixture, run};
+use agent_tests::{Agent, DataDir, Satellite, fixture, run, until};
 use anyhow::Context;
 use base64::Engine;
 use flow::{Client, Subscription};
@@ -483,10 +483,18 @@ async fn hz_reports_the_rate_and_spread_after_the_count_of_messages() -> anyhow:
     agent_tests::until_subscribed(&publisher).await?;
     // A steady feed at about 50 Hz until flowctl has counted its messages and left.
     let mut tick = tokio::time::interval(Duration::from_millis(20));
-    while publisher.has_subscribers() {
-        tick.tick().await;
-        publisher.publish(&b"t"[..]).await?;
-    }
+    until(
+        "flowctl hz to count its messages and leave",
+        PATIENCE,
+        async {
+            while publisher.has_subscribers() {
+                tick.tick().await;
+                publisher.publish(&b"t"[..]).await?;
+            }
+            anyhow::Ok(())
+        },
+    )
+    .await??;
     let out = hz.await??.ok()?;
     println!("{out}");
     let last = out

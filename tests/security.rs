@@ -528,7 +528,11 @@ async fn fifty_hostile_connections_leave_memory_near_idle() -> anyhow::Result<()
         peak_kb = peak_kb.max(agent.rss_kb()?);
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
-    while sockets.join_next().await.is_some() {}
+    tokio::time::timeout(PATIENCE, async {
+        while sockets.join_next().await.is_some() {}
+    })
+    .await
+    .context("the hostile WebSockets did not finish")?;
     drop(tcp);
     let grew_mb = (peak_kb.saturating_sub(idle_kb)) as f64 / 1024.0;
     println!(

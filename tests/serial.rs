@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use agent_tests::metrics::{parse, scrape, value};
 use agent_tests::wires::{PtyPair, check, payload};
-use agent_tests::{Agent, DataDir, PATIENCE, binary};
+use agent_tests::{Agent, DataDir, PATIENCE, binary, recv_until};
 use anyhow::{Context, bail, ensure};
 use flow::{Client, ConnectOptions, FlowAddr, Subscription};
 
@@ -196,15 +196,18 @@ async fn a_line_that_flips_and_drops_bytes_loses_only_damaged_packets_and_the_se
     lossy.store(false, Ordering::Relaxed);
     publisher.publish(payload(SENT, 16)).await?;
     let mut seen = Vec::new();
-    loop {
-        let p = first(&sub).await?;
+    recv_until(&sub, "the last message", PATIENCE * 2, |data| {
         // Never a damaged payload: a packet either arrives whole or not at all.
-        let seq = check(&p)?;
-        if seq == SENT {
-            break;
+        match check(&data.payload) {
+            Err(e) => Some(Err(e)),
+            Ok(seq) if seq == SENT => Some(Ok(())),
+            Ok(seq) => {
+                seen.push(seq);
+                None
+            }
         }
-        seen.push(seq);
-    }
+    })
+    .await??;
     let spoilt = spoilt.load(Ordering::Relaxed);
     let dropped = damaged(&hub, &hub_side.a).await?;
     println!(
@@ -365,19 +368,23 @@ async fn a_subscriber_on_a_slow_line_loses_the_oldest_and_says_so_while_tcp_gets
     }
     // The board gets the newest, intact, and the hub's sequence numbers show what it lost.
     let (mut got, mut last_seq, mut gaps) = (0u32, 0u64, 0u64);
-    loop {
-        let data = tokio::time::timeout(PATIENCE, slow.recv())
-            .await
-            .context("the slow line delivered nothing more")?
-            .context("subscription ended")?;
-        let seq = check(&data.payload)?;
-        got += 1;
-        gaps += data.seq - last_seq - 1;
-        last_seq = data.seq;
-        if seq == SENT - 1 {
-            break;
-        }
-    }
+    recv_until(
+        &slow,
+        "the newest message over the slow line",
+        PATIENCE * 2,
+        |data| {
+            let seq = match check(&data.payload) {
+                Ok(seq) => seq,
+                Err(e) => return Some(Err(e)),
+            };
+            got += 1;
+            gaps += data.seq - last_seq - 1;
+            last_seq = data.seq;
+            (seq == SENT - 1).then_some(Ok(()))
+        },
+    )
+    .await
+    .context("the slow line delivered nothing more")??;
     let dropped = source
         .channels()
         .await?

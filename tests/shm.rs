@@ -13,8 +13,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use agent_tests::metrics::scrape;
-use agent_tests::{Agent, DataDir, PATIENCE, http, recv, until_subscribed};
-use anyhow::{Context, bail};
+use agent_tests::{Agent, DataDir, PATIENCE, http, recv, recv_until, until, until_subscribed};
+use anyhow::{Context, anyhow, bail};
 use bytes::{BufMut, Bytes, BytesMut};
 use flow::protocol::frame::{self, Check};
 use flow::protocol::{
@@ -278,20 +278,24 @@ async fn until_by_reference(
     others: &[&Subscription],
     size: usize,
 ) -> anyhow::Result<u64> {
-    for n in 1..=1000 {
-        publisher.publish(numbered(n, size)).await?;
-        let got = recv(sub).await?;
-        for other in others {
-            recv(other).await?;
+    let what = format!("a message by reference on {}", sub.name());
+    until(&what, SETTLE, async {
+        for n in 1..=1000 {
+            publisher.publish(numbered(n, size)).await?;
+            let got = recv(sub).await?;
+            for other in others {
+                recv(other).await?;
+            }
+            if is_shared(&got.payload) {
+                return Ok(n);
+            }
         }
-        if is_shared(&got.payload) {
-            return Ok(n);
-        }
-    }
-    bail!(
-        "1000 messages of {size} B on {} and none came by reference",
-        publisher.name()
-    )
+        bail!(
+            "1000 messages of {size} B on {} and none came by reference",
+            publisher.name()
+        )
+    })
+    .await?
 }
 
 // ---------------------------------------------------------------- satellite processes
@@ -496,13 +500,18 @@ async fn kill_9_of_a_publisher_process_mid_stream_leaks_nothing_and_the_rest_con
     // What arrives lies in shared memory (from the message after the channel's segment came: the SDK sends the
     // first one inline while it asks for it); the last three views are kept past the publisher's death.
     let mut inline = 0;
-    while !is_shared(&recv(&victim_sub).await?.payload) {
+    recv_until(&victim_sub, "a frame by reference", PATIENCE, |got| {
+        if is_shared(&got.payload) {
+            return Some(Ok(()));
+        }
         inline += 1;
-        anyhow::ensure!(
-            inline < 100,
-            "100 of flowctl's frames and none came by reference"
-        );
-    }
+        (inline >= 100).then(|| {
+            Err(anyhow!(
+                "100 of flowctl's frames and none came by reference"
+            ))
+        })
+    })
+    .await??;
     let mut held = Vec::new();
     for _ in 0..20 {
         let got = recv(&victim_sub).await?;
@@ -696,19 +705,23 @@ async fn a_stalled_shared_memory_subscriber_loses_its_oldest_messages_counted_wh
     signal(&stalled.child, "STOP")?;
     let stopped_at = n;
     // Until the hub counts drops on the channel (and at least 300 messages past the stop).
-    loop {
-        n += 1;
-        publish_one(n).await?;
-        if n.is_multiple_of(50) && n >= stopped_at + 300 {
-            let info = producer.channel("Shm.stalled").await?;
-            if info.stats.dropped > 0 {
-                break;
+    until("a drop counted on Shm.stalled", SETTLE * 2, async {
+        loop {
+            n += 1;
+            publish_one(n).await?;
+            if n.is_multiple_of(50) && n >= stopped_at + 300 {
+                let info = producer.channel("Shm.stalled").await?;
+                if info.stats.dropped > 0 {
+                    return Ok(());
+                }
+            }
+            if n > stopped_at + 20_000 {
+                bail!("no drop counted after 20000 messages past a stopped subscriber");
             }
         }
-        if n > stopped_at + 20_000 {
-            bail!("no drop counted after 20000 messages past a stopped subscriber");
-        }
-    }
+    })
+    .await
+    .with_context(|| format!("{} messages past the stop", n - stopped_at))??;
     assert_eq!(live.dropped(), 0, "the live subscriber lost messages");
     // Counted where operators look: /api/channels and /metrics.
     let list = http::get_json(agent.http, "/api/channels", agent.token()).await?;
@@ -901,21 +914,29 @@ impl RawUnix {
 
     async fn request(&mut self, command: Command) -> anyhow::Result<Result<Reply, ErrorReply>> {
         let req = self.send(command).await?;
-        loop {
-            match self.next_event().await? {
-                Some(Event::Reply { req: r, result }) if r == req => return Ok(result),
-                Some(_) => {}
-                None => bail!("the hub closed the connection before answering request {req}"),
+        until(&format!("the reply to request {req}"), SETTLE, async {
+            loop {
+                match self.next_event().await? {
+                    Some(Event::Reply { req: r, result }) if r == req => return Ok(result),
+                    Some(_) => {}
+                    None => bail!("the hub closed the connection before answering request {req}"),
+                }
             }
-        }
+        })
+        .await?
     }
 
     /// Every event until the hub closes the connection.
     async fn until_closed(&mut self) -> anyhow::Result<Vec<Event>> {
         let mut events = Vec::new();
-        while let Some(event) = self.next_event().await? {
-            events.push(event);
-        }
+        until("the hub to close the connection", SETTLE, async {
+            while let Some(event) = self.next_event().await? {
+                events.push(event);
+            }
+            anyhow::Ok(())
+        })
+        .await
+        .with_context(|| format!("events so far: {events:?}"))??;
         Ok(events)
     }
 }

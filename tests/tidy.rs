@@ -368,7 +368,7 @@ fn tree(root: &Path) -> Vec<String> {
             let p = entry.path();
             let name = entry.file_name().to_string_lossy().into_owned();
             if p.is_dir() {
-                if name.starts_with('.') && name != ".ci"
+                if name.starts_with('.') && name != ".ci" && name != ".config"
                     || matches!(name.as_str(), "target" | "node_modules")
                 {
                     continue;

@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, PATIENCE, fixture};
+use agent_tests::{Agent, DataDir, PATIENCE, fixture, recv_until};
 use agent_vision::geometry::BoxPx;
 use agent_vision::wire::{CodesMsg, DetectionsMsg, FacesMsg, GazeCommand, MotionMsg};
 use anyhow::{Context, bail};
@@ -100,6 +100,24 @@ async fn next<T: DeserializeOwned>(sub: &Subscription) -> anyhow::Result<T> {
         .with_context(|| format!("nothing on {} within {PATIENCE:?}", sub.name()))?
         .context("subscription closed")?;
     serde_json::from_slice(&data.payload).with_context(|| format!("bad JSON on {}", sub.name()))
+}
+
+/// Messages on `sub`, parsed, until `pick` takes one; fails after `patience` in all, however many others come.
+async fn next_until<T: DeserializeOwned, R>(
+    sub: &Subscription,
+    what: &str,
+    patience: Duration,
+    mut pick: impl FnMut(T) -> Option<R>,
+) -> anyhow::Result<R> {
+    recv_until(sub, what, patience, |data| {
+        match serde_json::from_slice::<T>(&data.payload) {
+            Ok(msg) => pick(msg).map(Ok),
+            Err(e) => Some(Err(
+                anyhow::Error::from(e).context(format!("bad JSON on {}", sub.name()))
+            )),
+        }
+    })
+    .await?
 }
 
 /// Any queued messages on `sub`, without waiting.
@@ -227,12 +245,13 @@ async fn qr_codes_decode_exactly_and_are_reported_once_per_appearance() -> anyho
             tokio::time::sleep(FRAME).await;
         }
         // Wait until the module has processed a frame past this image, so every report about it is in.
-        loop {
-            let msg: DetectionsMsg = next(&detections).await?;
-            if msg.frame.seq > last_seq {
-                break;
-            }
-        }
+        next_until(
+            &detections,
+            "detections of a frame past the image",
+            PATIENCE * 2,
+            |msg: DetectionsMsg| (msg.frame.seq > last_seq).then_some(()),
+        )
+        .await?;
         let mut reported: BTreeMap<String, usize> = BTreeMap::new();
         for msg in drain::<CodesMsg>(&codes)? {
             if (first_seq..=last_seq).contains(&msg.frame.seq) {
@@ -279,9 +298,21 @@ async fn motion_sequence_is_still_then_moving_without_flicker() -> anyhow::Resul
             moving.insert(msg.frame.seq, msg.moving);
         }
     }
-    while moving.keys().next_back().is_none_or(|&last| last < 120) {
-        let msg: MotionMsg = next(&motion).await?;
-        moving.insert(msg.frame.seq, msg.moving);
+    if moving.keys().next_back().is_none_or(|&last| last < 120) {
+        next_until(
+            &motion,
+            "the motion of frame 120",
+            PATIENCE * 2,
+            |msg: MotionMsg| {
+                moving.insert(msg.frame.seq, msg.moving);
+                moving
+                    .keys()
+                    .next_back()
+                    .is_some_and(|&last| last >= 120)
+                    .then_some(())
+            },
+        )
+        .await?;
     }
     let line: String = (1..=120)
         .map(|s| match moving.get(&s) {
@@ -343,12 +374,14 @@ async fn a_flood_of_frames_is_skipped_not_queued() -> anyhow::Result<()> {
         rig.publish(&frame).await?;
     }
     // The newest frame is always processed eventually; most of the flood is skipped on the way.
-    let last = loop {
-        let msg: DetectionsMsg = next(&detections).await?;
-        if msg.frame.seq == rig.published {
-            break msg;
-        }
-    };
+    let newest = rig.published;
+    let last = next_until(
+        &detections,
+        "detections of the newest frame",
+        PATIENCE * 2,
+        |msg: DetectionsMsg| (msg.frame.seq == newest).then_some(msg),
+    )
+    .await?;
     let counters = last.counters.context("no counters")?;
     println!(
         "processed {} skipped {} of 300",

@@ -7,7 +7,7 @@
 use agent_contract::channels as ch;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, PATIENCE};
+use agent_tests::{Agent, DataDir, PATIENCE, until};
 use anyhow::{Context, bail};
 use flow::{Client, Subscription};
 use serde_json::{Value, json};
@@ -18,6 +18,8 @@ const RATE: f64 = 22050.0;
 /// An utterance is taken as complete when no more of its speech arrives for this long (it is paced to real time
 /// with a lead of a few hundred milliseconds).
 const QUIET: Duration = Duration::from_millis(1500);
+/// The most one utterance's speech may take to come out in all, however long it is (each chunk has its own wait).
+const SPOKEN: Duration = Duration::from_secs(120);
 
 /// A robot-agent with only the TTS module's behaviour in play (no brain answering, no vision owning
 /// `Agent.detections`), and a satellite watching its output.
@@ -127,25 +129,29 @@ async fn collect_speech(
     quiet: Duration,
 ) -> anyhow::Result<u64> {
     let mut samples = 0;
-    loop {
-        let wait = if samples == 0 { PATIENCE } else { quiet };
-        let Ok(data) = tokio::time::timeout(wait, speech.recv()).await else {
-            if samples == 0 {
-                bail!("no speech for utterance {utterance}");
+    until(&format!("the end of utterance {utterance}"), SPOKEN, async {
+        loop {
+            let wait = if samples == 0 { PATIENCE } else { quiet };
+            let Ok(data) = tokio::time::timeout(wait, speech.recv()).await else {
+                if samples == 0 {
+                    bail!("no speech for utterance {utterance}");
+                }
+                return Ok(samples);
+            };
+            let (id, offset, count) = speech_frame(&data.context("Agent.speech closed")?.payload)?;
+            if id != utterance {
+                continue;
             }
-            return Ok(samples);
-        };
-        let (id, offset, count) = speech_frame(&data.context("Agent.speech closed")?.payload)?;
-        if id != utterance {
-            continue;
+            if offset != samples {
+                bail!(
+                    "utterance {utterance}: chunk at offset {offset}, expected {samples} (a gap or a repeat)"
+                );
+            }
+            samples += count as u64;
         }
-        if offset != samples {
-            bail!(
-                "utterance {utterance}: chunk at offset {offset}, expected {samples} (a gap or a repeat)"
-            );
-        }
-        samples += count as u64;
-    }
+    })
+    .await
+    .with_context(|| format!("{samples} samples so far"))?
 }
 
 /// Samples of any speech arriving within `window` (after a stop, only what was already on its way).
@@ -161,12 +167,17 @@ async fn speech_within(speech: &Subscription, window: Duration) -> anyhow::Resul
 /// Waits until at least half a second of speech has arrived; returns its samples.
 async fn half_a_second_of_speech(speech: &Subscription) -> anyhow::Result<u64> {
     let mut samples = 0;
-    while samples < 11025 {
-        let data = tokio::time::timeout(PATIENCE, speech.recv())
-            .await?
-            .context("Agent.speech closed")?;
-        samples += speech_frame(&data.payload)?.2 as u64;
-    }
+    until("half a second of speech", PATIENCE, async {
+        while samples < 11025 {
+            let data = tokio::time::timeout(PATIENCE, speech.recv())
+                .await?
+                .context("Agent.speech closed")?;
+            samples += speech_frame(&data.payload)?.2 as u64;
+        }
+        anyhow::Ok(())
+    })
+    .await
+    .with_context(|| format!("{samples} samples so far"))??;
     Ok(samples)
 }
 
@@ -347,15 +358,22 @@ async fn ctrl_say_and_stop() -> anyhow::Result<()> {
     assert_eq!(offset, 0);
     ctrl.publish(json!({ "speech": "stop" }).to_string().into_bytes())
         .await?;
-    let stop = loop {
-        let stop = rig.next_command("speech_stop").await?;
-        if stop
-            .get("utterance")
-            .is_none_or(|u| u.as_u64() == Some(utterance))
-        {
-            break stop;
-        }
-    };
+    let stop = until(
+        &format!("the speech_stop of utterance {utterance}"),
+        PATIENCE,
+        async {
+            loop {
+                let stop = rig.next_command("speech_stop").await?;
+                if stop
+                    .get("utterance")
+                    .is_none_or(|u| u.as_u64() == Some(utterance))
+                {
+                    return anyhow::Ok(stop);
+                }
+            }
+        },
+    )
+    .await??;
     assert_eq!(stop["cmd"], "speech_stop");
     Ok(())
 }
@@ -385,12 +403,16 @@ async fn blinks_gaze_at_a_face_and_thinking() -> anyhow::Result<()> {
         "faces": [{ "x": 448, "y": 90, "w": 64, "h": 64 }],
     });
     detections.publish(frame.to_string().into_bytes()).await?;
-    let gaze = loop {
-        let gaze = rig.next_command("gaze").await?;
-        if gaze["source"] == "face" {
-            break gaze;
+    // The eyes also wander by themselves: one deadline for the gaze at the face, however many others come.
+    let gaze = until("a gaze at the face", PATIENCE, async {
+        loop {
+            let gaze = rig.next_command("gaze").await?;
+            if gaze["source"] == "face" {
+                return anyhow::Ok(gaze);
+            }
         }
-    };
+    })
+    .await??;
     let (x, y) = (
         gaze["x"].as_f64().context("x")?,
         gaze["y"].as_f64().context("y")?,
@@ -503,26 +525,35 @@ async fn collect_pcm(
     quiet: Duration,
 ) -> anyhow::Result<Vec<i16>> {
     let mut pcm: Vec<i16> = Vec::new();
-    loop {
-        let wait = if pcm.is_empty() { PATIENCE } else { quiet };
-        let Ok(data) = tokio::time::timeout(wait, speech.recv()).await else {
-            if pcm.is_empty() {
-                bail!("no speech for utterance {utterance}");
+    until(
+        &format!("the end of utterance {utterance}"),
+        SPOKEN,
+        async {
+            loop {
+                let wait = if pcm.is_empty() { PATIENCE } else { quiet };
+                let Ok(data) = tokio::time::timeout(wait, speech.recv()).await else {
+                    if pcm.is_empty() {
+                        bail!("no speech for utterance {utterance}");
+                    }
+                    return Ok(());
+                };
+                let data = data.context("Agent.speech closed")?;
+                let (id, offset, _) = speech_frame(&data.payload)?;
+                if id != utterance {
+                    continue;
+                }
+                anyhow::ensure!(offset == pcm.len() as u64, "a gap in utterance {utterance}");
+                pcm.extend(
+                    data.payload[8..]
+                        .chunks_exact(2)
+                        .map(|b| i16::from_le_bytes([b[0], b[1]])),
+                );
             }
-            return Ok(pcm);
-        };
-        let data = data.context("Agent.speech closed")?;
-        let (id, offset, _) = speech_frame(&data.payload)?;
-        if id != utterance {
-            continue;
-        }
-        anyhow::ensure!(offset == pcm.len() as u64, "a gap in utterance {utterance}");
-        pcm.extend(
-            data.payload[8..]
-                .chunks_exact(2)
-                .map(|b| i16::from_le_bytes([b[0], b[1]])),
-        );
-    }
+        },
+    )
+    .await
+    .with_context(|| format!("{} samples so far", pcm.len()))??;
+    Ok(pcm)
 }
 
 #[tokio::test]

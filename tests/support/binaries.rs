@@ -73,11 +73,15 @@ pub async fn run(mut cmd: Command, stdin: &[u8], timeout: Duration) -> anyhow::R
         .kill_on_drop(true)
         .spawn()
         .context("spawning")?;
-    if let Some(mut input) = child.stdin.take() {
-        input.write_all(stdin).await.context("writing stdin")?;
-        // Dropping the handle closes stdin: the command sees end of input.
-    }
-    let out = tokio::time::timeout(timeout, child.wait_with_output())
+    let input = child.stdin.take();
+    let finished = async {
+        if let Some(mut input) = input {
+            input.write_all(stdin).await.context("writing stdin")?;
+            // Dropping the handle closes stdin: the command sees end of input.
+        }
+        anyhow::Ok(child.wait_with_output().await?)
+    };
+    let out = tokio::time::timeout(timeout, finished)
         .await
         .with_context(|| format!("did not finish within {timeout:?}"))??;
     Ok(Finished {

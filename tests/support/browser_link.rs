@@ -17,7 +17,9 @@ pub async fn post_session(
     );
     s.write_all(req.as_bytes()).await?;
     let mut buf = Vec::new();
-    s.read_to_end(&mut buf).await?;
+    tokio::time::timeout(crate::wait::PATIENCE, s.read_to_end(&mut buf))
+        .await
+        .context("POST /api/session: no complete answer in time")??;
     let text = String::from_utf8_lossy(&buf).to_string();
     let status = text
         .split_whitespace()

@@ -52,8 +52,11 @@ pub async fn request(
     }
     request.push_str("\r\n");
     stream.write_all(request.as_bytes()).await?;
+    // The server closes the connection after its answer (HTTP/1.0): read to the end, within the tests' bound.
     let mut raw = Vec::new();
-    stream.read_to_end(&mut raw).await?;
+    tokio::time::timeout(crate::wait::PATIENCE, stream.read_to_end(&mut raw))
+        .await
+        .with_context(|| format!("{method} {path}: no complete answer in time"))??;
     let text = String::from_utf8(raw).context("response is not UTF-8")?;
     let Some((head, body)) = text.split_once("\r\n\r\n") else {
         bail!("malformed HTTP response: {text:?}");

@@ -64,11 +64,16 @@ pub async fn parse(text: &str) -> anyhow::Result<Vec<Sample>> {
         .stderr(Stdio::piped())
         .spawn()
         .context("starting the venv's python")?;
-    if let Some(mut stdin) = child.stdin.take() {
-        use tokio::io::AsyncWriteExt;
-        stdin.write_all(text.as_bytes()).await?;
-    }
-    let out = child.wait_with_output().await?;
+    let run = async {
+        if let Some(mut stdin) = child.stdin.take() {
+            use tokio::io::AsyncWriteExt;
+            stdin.write_all(text.as_bytes()).await?;
+        }
+        child.wait_with_output().await
+    };
+    let out = tokio::time::timeout(crate::wait::PATIENCE, run)
+        .await
+        .context("prometheus_client did not finish reading /metrics")??;
     anyhow::ensure!(
         out.status.success(),
         "prometheus_client could not parse /metrics: {}",

@@ -110,10 +110,19 @@ impl RawConn {
         command: Command,
     ) -> anyhow::Result<Result<Reply, flow::protocol::ErrorReply>> {
         let req = self.send(command).await?;
+        // One deadline for the reply, however many other events (data of a subscription) come first.
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+        let mut skipped = 0usize;
         loop {
-            match self.next_event(Duration::from_secs(10)).await? {
+            let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+            if left.is_zero() {
+                bail!("no reply to request {req} within 10 s ({skipped} other event(s) came)");
+            }
+            match self.next_event(left).await.with_context(|| {
+                format!("no reply to request {req} within 10 s ({skipped} other event(s) came)")
+            })? {
                 Some(Event::Reply { req: r, result }) if r == req => return Ok(result),
-                Some(_) => continue,
+                Some(_) => skipped += 1,
                 None => bail!("connection closed before the reply to request {req}"),
             }
         }
@@ -125,6 +134,9 @@ impl RawConn {
         let deadline = tokio::time::Instant::now() + timeout;
         loop {
             let left = deadline.saturating_duration_since(tokio::time::Instant::now());
+            if left.is_zero() {
+                bail!("the hub kept the connection open past {timeout:?}; events: {events:?}");
+            }
             match self.next_event(left).await {
                 Ok(Some(e)) => events.push(e),
                 Ok(None) => return Ok(Closed { events }),

@@ -80,10 +80,13 @@ impl RecordProcess {
     pub async fn wait_exit(mut self) -> anyhow::Result<String> {
         let mut stdout = self.child.stdout.take().context("no stdout")?;
         let mut out = String::new();
-        tokio::io::AsyncReadExt::read_to_string(&mut stdout, &mut out).await?;
-        let status = tokio::time::timeout(crate::satellite::SATELLITE_PATIENCE, self.child.wait())
-            .await
-            .context("flowctl record did not exit")??;
+        // Its report is read to the end of its output, which comes when it exits: one bound for both.
+        let status = tokio::time::timeout(crate::satellite::SATELLITE_PATIENCE, async {
+            tokio::io::AsyncReadExt::read_to_string(&mut stdout, &mut out).await?;
+            self.child.wait().await
+        })
+        .await
+        .context("flowctl record did not exit")??;
         anyhow::ensure!(
             status.success(),
             "flowctl record exited with {status}: {out}"

@@ -1,12 +1,19 @@
 //! Waiting on hub events with the tests' generous bound, failing with a clear
 //! message instead of hanging.
+//!
+//! A loop that reads a stream until some message arrives has one overall deadline ([`recv_until`], [`until`]),
+//! never only a timeout per receive: on a busy stream (the avatar's blinks and gaze) every single receive succeeds
+//! in time and such a loop would wait forever for a message that never comes.
 
-use anyhow::Context;
+use std::future::Future;
+use std::time::Duration;
+
+use anyhow::{Context, anyhow, bail};
 use flow::{Data, Publisher, Subscription};
 
 /// A generous bound for anything a test waits on: the machine may be busy
 /// building other crates, and tests never assert on durations.
-pub const PATIENCE: std::time::Duration = std::time::Duration::from_secs(30);
+pub const PATIENCE: Duration = Duration::from_secs(30);
 
 /// The next message of a subscription, or an error after [`PATIENCE`].
 pub async fn recv(sub: &Subscription) -> anyhow::Result<Data> {
@@ -36,14 +43,93 @@ pub async fn until_unsubscribed(publisher: &Publisher) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The next payload of a subscription, unbounded: for loops that wait on several subscriptions inside a timeout of
-/// their own.
+/// The next payload of a subscription, unbounded: for loops that wait on several subscriptions inside a deadline of
+/// their own ([`until`]).
 pub async fn next_payload(sub: &Subscription) -> anyhow::Result<bytes::Bytes> {
     Ok(sub
         .recv()
         .await
         .with_context(|| format!("{} ended", sub.name()))?
         .payload)
+}
+
+/// Receives on `sub` until `pick` returns `Some` for a message, for at most `patience` in all (one deadline for the
+/// whole wait, however many other messages keep arriving). Fails naming `what`, the channel, how many messages
+/// went by and the last of them. Says on stderr what it waits for, so that a test the harness kills shows it.
+pub async fn recv_until<T>(
+    sub: &Subscription,
+    what: &str,
+    patience: Duration,
+    mut pick: impl FnMut(&Data) -> Option<T>,
+) -> anyhow::Result<T> {
+    announce(what, Some(sub.name()), patience);
+    // One deadline for every receive, checked between messages too: a receive that is always ready would otherwise
+    // never see it pass.
+    let deadline = tokio::time::Instant::now() + patience;
+    let mut seen = 0usize;
+    let mut last = None;
+    let ended = loop {
+        if tokio::time::Instant::now() >= deadline {
+            break false;
+        }
+        match tokio::time::timeout_at(deadline, sub.recv()).await {
+            Ok(Some(data)) => {
+                seen += 1;
+                if let Some(v) = pick(&data) {
+                    return Ok(v);
+                }
+                last = Some(data);
+            }
+            Ok(None) => break true,
+            Err(_) => break false,
+        }
+    };
+    let last = last.map_or_else(|| "none".to_owned(), |d| short(&d.payload));
+    if ended {
+        bail!(
+            "{} ended while waiting for {what}: {seen} message(s) seen, the last {last}",
+            sub.name()
+        );
+    }
+    bail!(
+        "timed out after {} s waiting for {what} on {}: {seen} message(s) seen, the last {last}",
+        patience.as_secs_f64(),
+        sub.name()
+    )
+}
+
+/// Runs `fut` (a loop that reads streams until something arrives: several subscriptions in a `select!`, a
+/// WebSocket, a child's output) for at most `patience` in all, failing with an error naming `what`. Says on stderr
+/// what it waits for, so that a test the harness kills shows it.
+pub async fn until<F: Future>(what: &str, patience: Duration, fut: F) -> anyhow::Result<F::Output> {
+    announce(what, None, patience);
+    tokio::time::timeout(patience, fut).await.map_err(|_| {
+        anyhow!(
+            "timed out after {} s waiting for {what}",
+            patience.as_secs_f64()
+        )
+    })
+}
+
+/// The one line a wait prints when it begins.
+fn announce(what: &str, channel: Option<&str>, patience: Duration) {
+    let on = channel.map(|c| format!(" on {c}")).unwrap_or_default();
+    eprintln!("waiting up to {} s for {what}{on}", patience.as_secs_f64());
+}
+
+/// A message, short: its text (JSON or other UTF-8) cut at 160 characters, else its size.
+pub fn short(payload: &[u8]) -> String {
+    match std::str::from_utf8(payload) {
+        Ok(text) if text.chars().count() > 160 => {
+            format!(
+                "{}... ({} bytes)",
+                text.chars().take(160).collect::<String>(),
+                payload.len()
+            )
+        }
+        Ok(text) => text.to_owned(),
+        Err(_) => format!("{} bytes of binary", payload.len()),
+    }
 }
 
 /// A payload read as JSON, if it is JSON.
@@ -56,14 +142,14 @@ pub fn json_message(payload: &[u8]) -> Option<serde_json::Value> {
 pub async fn until_channel(
     client: &flow::Client,
     name: &str,
-    patience: std::time::Duration,
+    patience: Duration,
 ) -> anyhow::Result<String> {
     tokio::time::timeout(patience, async {
         loop {
             if let Ok(info) = client.channel(name).await {
                 return info.header;
             }
-            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+            tokio::time::sleep(Duration::from_millis(50)).await;
         }
     })
     .await
@@ -76,4 +162,75 @@ pub fn free_port() -> anyhow::Result<u16> {
     Ok(std::net::TcpListener::bind("127.0.0.1:0")?
         .local_addr()?
         .port())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A real hub (`flow-hub`) with a channel that never stops sending messages the wait does not want.
+    #[tokio::test]
+    async fn recv_until_gives_up_at_its_deadline_on_a_stream_that_keeps_sending_other_messages()
+    -> anyhow::Result<()> {
+        let dir = crate::DataDir::new()?;
+        let hub = crate::Agent::hub(&dir).await?;
+        let client = hub.client("busy-stream").await?;
+        let publisher = client.publisher("Busy.stream", "{}").await?;
+        let sub = client.subscribe("Busy.stream").await?;
+        until_subscribed(&publisher).await?;
+        // A message every 20 ms: every single receive is far inside any per-receive timeout.
+        let busy = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(Duration::from_millis(20));
+            loop {
+                tick.tick().await;
+                if publisher.publish(&b"{\"blink\":true}"[..]).await.is_err() {
+                    return;
+                }
+            }
+        });
+        let patience = Duration::from_secs(1);
+        let waited = until(
+            "the wait on the busy stream to end",
+            PATIENCE,
+            recv_until(&sub, "a message that never comes", patience, |_| None::<()>),
+        )
+        .await?;
+        busy.abort();
+        let err = waited
+            .expect_err("nothing matches, so the wait fails")
+            .to_string();
+        assert!(err.contains("timed out after 1 s"), "{err}");
+        assert!(err.contains("a message that never comes"), "{err}");
+        assert!(err.contains("Busy.stream"), "{err}");
+        assert!(err.contains(r#"{"blink":true}"#), "{err}");
+        assert!(!err.contains(" 0 message(s)"), "{err}");
+        Ok(())
+    }
+
+    /// The same wait finds the message it picks among the others.
+    #[tokio::test]
+    async fn recv_until_returns_what_it_picks_and_skips_the_rest() -> anyhow::Result<()> {
+        let dir = crate::DataDir::new()?;
+        let hub = crate::Agent::hub(&dir).await?;
+        let client = hub.client("picky").await?;
+        let publisher = client.publisher("Picky.stream", "{}").await?;
+        let sub = client.subscribe("Picky.stream").await?;
+        until_subscribed(&publisher).await?;
+        for n in 1..=5u8 {
+            publisher.publish(vec![n]).await?;
+        }
+        let seq = recv_until(&sub, "the fourth message", PATIENCE, |d| {
+            (d.payload[..] == [4]).then_some(d.seq)
+        })
+        .await?;
+        assert_eq!(seq, 4);
+        Ok(())
+    }
+
+    #[test]
+    fn short_forms_cut_long_text_and_size_binary() {
+        assert_eq!(short(b"{\"a\":1}"), r#"{"a":1}"#);
+        assert!(short("x".repeat(500).as_bytes()).ends_with("... (500 bytes)"));
+        assert_eq!(short(&[0xff, 0xfe, 0]), "3 bytes of binary");
+    }
 }

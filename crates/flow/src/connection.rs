@@ -512,10 +512,14 @@ mod tests {
         writer.flush().await.expect("flush");
         assert_eq!(writer.pending(), 0);
         let mut sent = BytesMut::new();
-        while sent.len() < plain.len() {
-            let n = r.read_into(&mut sent).await.expect("read");
-            assert!(n > 0, "the pipe closed early");
-        }
+        tokio::time::timeout(std::time::Duration::from_secs(30), async {
+            while sent.len() < plain.len() {
+                let n = r.read_into(&mut sent).await.expect("read");
+                assert!(n > 0, "the pipe closed early");
+            }
+        })
+        .await
+        .expect("every queued byte within 30 s");
         assert!(
             sent == plain[..],
             "bytes on the wire differ from encode_event"

@@ -1,6 +1,6 @@
 """Fixtures of the Python SDK's tests: a real robot-agent (the binary `make test` builds) in a fresh data directory
 on free ports, flowctl as the Rust satellite, the shared recordings and pictures, and helpers that wait on events
-with generous timeouts (never on wall-clock assertions)."""
+with generous timeouts (never on wall-clock assertions), each wait under one overall deadline."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Any, Callable, Optional
 
 import pytest
 
@@ -52,16 +52,47 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def wait_until(what: str, check: Callable[[], object], timeout: float = PATIENCE):
-    """Polls `check` until it returns something truthy; fails naming `what` after `timeout`."""
+def wait_until(what: str | Callable[[], str], check: Callable[[], object], timeout: float = PATIENCE):
+    """Polls `check` until it returns something truthy; fails naming `what` after `timeout` (a callable `what` is
+    asked then, so that it can say how things stood at the deadline: a process's output so far)."""
     deadline = time.monotonic() + timeout
     while True:
         got = check()
         if got:
             return got
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out waiting for {what}")
+            pytest.fail(f"timed out after {timeout:g} s waiting for {what() if callable(what) else what}")
         time.sleep(0.02)
+
+
+def short(value, limit: int = 160) -> str:
+    """`repr(value)`, cut to `limit` characters for a failure message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def recv_until(sub, what: str, predicate: Callable[[Any], object], timeout: float = PATIENCE,
+               decode: Callable[[Any], Any] = lambda msg: msg):
+    """Receives from the subscription `sub` until `predicate` holds on a message (as `decode` makes it) and returns
+    that message. The wait has one deadline, `timeout` from now, however busy the channel: each receive gets only
+    the time left, so messages that never match (the avatar's blinks, say) cannot keep it going. Past the deadline
+    it fails naming `what`, the channel, how many messages it saw and the last one."""
+    __tracebackhide__ = True  # a failure points at the test's line
+    from flow import TimeoutError as FlowTimeout
+
+    deadline = time.monotonic() + timeout
+    seen, last = 0, None
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            msg = sub.recv(timeout=left)
+        except FlowTimeout:
+            break  # no message in the time left: that is the deadline
+        seen += 1
+        last = decode(msg)
+        if predicate(last):
+            return last
+    pytest.fail(f"timed out after {timeout:g} s waiting for {what} on {sub.name}: {seen} messages, none matched"
+                + (f"; the last: {short(last)}" if seen else ""))
 
 
 def wait_subscribers(client, channel: str, count: int) -> None:
@@ -118,7 +149,7 @@ class Output:
 
     def wait_for(self, needle: str, timeout: float = PATIENCE) -> str:
         return wait_until(
-            f"{needle!r} in the output:\n{self.text()}",
+            lambda: f"{needle!r} in the output:\n{self.text()}",
             lambda: next((l for l in self.snapshot() if needle in l), None),
             timeout,
         )
@@ -131,7 +162,7 @@ def start_hub_process(cmd: list[str], env: dict, cwd: Optional[Path] = None) -> 
                             env=env, cwd=cwd)
     output = Output(proc.stdout)
     wait_until(
-        f"{name} to listen:\n{output.text()}",
+        lambda: f"{name} to listen:\n{output.text()}",
         lambda: proc.poll() is not None or any("flow hub: unix:" in l for l in output.snapshot()),
     )
     if proc.poll() is not None:

@@ -3,7 +3,7 @@ brain call Robot.command, which examples/body.py serves; its reply is spoken (a 
 
 import subprocess
 
-from conftest import EXAMPLES, PATIENCE, REPO, Agent, binary, wait_subscribers, wait_until
+from conftest import EXAMPLES, PATIENCE, REPO, Agent, binary, recv_until, wait_subscribers, wait_until
 from flow import Client, agent as contract
 
 
@@ -19,10 +19,9 @@ def test_turn_left_is_served_by_the_python_body_and_its_answer_is_spoken(tmp_pat
             # The brain and the speech module (which stops speech when the user talks) both listen.
             wait_subscribers(client, contract.TRANSCRIPT, 2)
             transcript.publish({"text": "Turn left, please.", "final": True})
-            while True:
-                command = contract.Avatar.from_msg(avatar.recv(timeout=PATIENCE))
-                if command.cmd == "say" and "Turning left" in command.text:
-                    break
+            # Agent.avatar is busy (blinks, gaze): only the one deadline ends a wait that never matches.
+            command = recv_until(avatar, "the body's answer spoken (say 'Turning left...')",
+                                 lambda c: c.cmd == "say" and "Turning left" in c.text, decode=contract.Avatar.from_msg)
             assert command.text == "Turning left. I now face 270 degrees."
             pcm = speech.recv(timeout=PATIENCE)
             assert len(pcm) > 8, "speech carries PCM after its utterance/offset prefix"
@@ -56,18 +55,15 @@ def test_a_head_turning_request_reaches_the_python_body_through_the_models_force
             transcript = client.publisher(contract.TRANSCRIPT, contract.HEADERS[contract.TRANSCRIPT])
             wait_subscribers(client, contract.TRANSCRIPT, 2)
             transcript.publish({"text": "Please face the window.", "final": True})
-            while True:
-                event = replies.recv(timeout=PATIENCE).json()
-                if event["event"] == "call":
-                    break
-                assert event["event"] != "end", f"the turn ended without a call: {event}"
+            event = recv_until(replies, "the model's call (or the end of its turn)",
+                               lambda e: e["event"] in ("call", "end"), decode=lambda m: m.json())
+            assert event["event"] == "call", f"the turn ended without a call: {event}"
             assert event["call"]["service"] == "Robot.command"
             assert event["call"]["payload"]["action"] == "turn"
             assert event["call"]["payload"]["direction"] in ("left", "right")
-            while True:
-                command = contract.Avatar.from_msg(avatar.recv(timeout=PATIENCE))
-                if command.cmd == "say" and command.text.startswith("Turning "):
-                    break
+            command = recv_until(avatar, "the body's answer spoken (say 'Turning ...')",
+                                 lambda c: c.cmd == "say" and c.text.startswith("Turning "),
+                                 decode=contract.Avatar.from_msg)
             direction = event["call"]["payload"]["direction"]
             assert command.text.startswith(f"Turning {direction}.")
     finally:

@@ -8,7 +8,7 @@ import wave
 import numpy as np
 import pytest
 
-from conftest import PATIENCE, fixtures, wait_until
+from conftest import PATIENCE, fixtures, recv_until, wait_until
 from flow import Client
 from flow import TimeoutError as FlowTimeout
 
@@ -80,12 +80,13 @@ def test_pcm_streamed_by_rust_reads_as_int16_arrays_equal_to_the_recording(agent
     wav = fixtures() / "audio" / "LJ001-0002.wav"
     agent.flowctl_run("pub-wav", "Rust.pcm", str(wav), "--chunk-ms", "20", "--wait-subscriber")
     chunks = []
-    total = 0
-    while total < len(samples):
-        chunk = sub.recv(timeout=PATIENCE).pcm()
+
+    def complete(chunk) -> bool:
         assert chunk.dtype == np.int16
         chunks.append(chunk)
-        total += len(chunk)
+        return sum(map(len, chunks)) >= len(samples)
+
+    recv_until(sub, f"all {len(samples)} samples", complete, decode=lambda m: m.pcm())
     assert len(chunks[0]) == 441  # 20 ms at 22050 Hz
     assert np.array_equal(np.concatenate(chunks), samples)
 
@@ -135,8 +136,12 @@ def test_a_slow_reader_loses_the_oldest_messages_and_counts_them(agent):
             pub.publish({"n": n})
         # Drain until the newest arrives: everything that is left must end with it.
         seen = []
-        while not seen or seen[-1].json()["n"] != 500:
-            seen.append(sub.recv(timeout=PATIENCE))
+
+        def newest(msg) -> bool:
+            seen.append(msg)
+            return msg.json()["n"] == 500
+
+        recv_until(sub, "the newest message (n = 500)", newest)
         assert len(seen) < 500
         lost = sum(m.gap for m in seen) + (seen[0].seq - 1)
         assert lost == 500 - len(seen), "every missing message shows as a gap"

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from conftest import PATIENCE, wait_until
+from conftest import PATIENCE, Output, wait_until
 
 BLOCKED_RECV = """
 import time
@@ -40,19 +40,16 @@ def test_sigint_interrupts_a_blocked_wait(agent, client, tmp_path, program):
     script = tmp_path / "blocked.py"
     script.write_text(program)
     proc = agent.python(script)
-    lines = []
+    output = Output(proc.stdout)
     try:
-        for raw in proc.stdout:
-            lines.append(raw.decode().strip())
-            if lines[-1] == "waiting":
-                break
+        wait_until(lambda: f"'waiting' from the child:\n{output.text()}", lambda: "waiting" in output.snapshot())
         time.sleep(0.3)  # let it block inside recv or call
         sent = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=PATIENCE) == 130
-        rest = proc.stdout.read().decode().split()
-        assert "interrupted" in rest, lines + rest
-        took_ms = (float(rest[rest.index("interrupted") + 1]) - sent) * 1000
+        assert proc.wait(timeout=PATIENCE) == 130, output.text()
+        line = wait_until(lambda: f"'interrupted' from the child:\n{output.text()}",
+                          lambda: next((ln for ln in output.snapshot() if ln.startswith("interrupted ")), None))
+        took_ms = (float(line.split()[1]) - sent) * 1000
         print(f"SIGINT -> KeyboardInterrupt in {took_ms:.0f} ms")
     finally:
         proc.kill()

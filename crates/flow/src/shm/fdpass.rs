@@ -119,14 +119,19 @@ mod tests {
         let mut buf = BytesMut::with_capacity(16);
         let mut fds = VecDeque::new();
         let mut scratch = vec![0u8; 4];
-        while buf.len() < 6 {
-            assert!(
-                recv_with_fds(&b, &mut scratch, &mut buf, &mut fds)
-                    .await
-                    .expect("recv")
-                    > 0
-            );
-        }
+        // One deadline for the whole read: a lost byte must fail the test, not hang it.
+        tokio::time::timeout(std::time::Duration::from_secs(30), async {
+            while buf.len() < 6 {
+                assert!(
+                    recv_with_fds(&b, &mut scratch, &mut buf, &mut fds)
+                        .await
+                        .expect("recv")
+                        > 0
+                );
+            }
+        })
+        .await
+        .expect("both messages within 30 s");
         assert_eq!(&buf[..], b"onetwo");
         assert_eq!(fds.len(), 2);
         let sizes: Vec<i64> = fds

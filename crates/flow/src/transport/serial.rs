@@ -273,9 +273,13 @@ mod tests {
             writer.write_all(f).await.expect("write");
         }
         let mut got = BytesMut::new();
-        while got.len() < frames.concat().len() {
-            reader.read_into(&mut got).await.expect("read");
-        }
+        tokio::time::timeout(std::time::Duration::from_secs(30), async {
+            while got.len() < frames.concat().len() {
+                reader.read_into(&mut got).await.expect("read");
+            }
+        })
+        .await
+        .expect("every frame within 30 s");
         assert_eq!(&got[..], &frames.concat()[..]);
         assert_eq!((stats.packets(), stats.damaged()), (20, 0));
     }
@@ -297,9 +301,13 @@ mod tests {
         wire[1][10] ^= 0x10;
         raw.write_all(&wire.concat()).await.expect("write");
         let mut got = BytesMut::new();
-        while got.len() < 2 * frames[0].len() {
-            reader.read_into(&mut got).await.expect("read");
-        }
+        tokio::time::timeout(std::time::Duration::from_secs(30), async {
+            while got.len() < 2 * frames[0].len() {
+                reader.read_into(&mut got).await.expect("read");
+            }
+        })
+        .await
+        .expect("the two whole frames within 30 s");
         assert_eq!(
             &got[..],
             &[frames[0].clone(), frames[2].clone()].concat()[..]

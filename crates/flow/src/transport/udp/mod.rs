@@ -433,13 +433,17 @@ mod tests {
         f
     }
 
-    /// Reads until `want` bytes came.
+    /// Reads until `want` bytes came, within one deadline for them all.
     async fn read_exactly(reader: &mut UdpReader, want: usize) -> Vec<u8> {
         let mut got = BytesMut::new();
-        while got.len() < want {
-            let n = reader.read_into(&mut got).await.expect("read");
-            assert!(n > 0, "closed after {} of {want} bytes", got.len());
-        }
+        let read = tokio::time::timeout(std::time::Duration::from_secs(30), async {
+            while got.len() < want {
+                let n = reader.read_into(&mut got).await.expect("read");
+                assert!(n > 0, "closed after {} of {want} bytes", got.len());
+            }
+        })
+        .await;
+        assert!(read.is_ok(), "{} of {want} bytes within 30 s", got.len());
         got.to_vec()
     }
 
