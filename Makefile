@@ -12,7 +12,7 @@ ifneq ($(FIXTURES_FOUND),)
 export AGENT_FIXTURES ?= $(FIXTURES_FOUND)
 endif
 
-.PHONY: soak run test bench fuzz deps model model-base model-face model-voice model-llm llm-server model-release build build-debug python clean
+.PHONY: soak run test install uninstall bench fuzz deps model model-base model-face model-voice model-llm llm-server model-release build build-debug python clean
 
 # The language the agent converses in (`make run LANGUAGE=it`: config/italian.toml, whose [agent] language is "it",
 # and a satellite hearing Italian with the multilingual base model).
@@ -31,9 +31,10 @@ run: deps build model-release model-face model-voice model-llm
 ## Install everything, then check formatting, types and lints and run every test: the page's JavaScript units (node's
 ## test runner, no npm package needed), the workspace's Rust suites (cargo-nextest: a process per test and a ceiling per
 ## test, .config/nextest.toml; then the doc tests, which nextest does not run) and the Python SDK's pytest suite
-## against the debug binaries (pytest-timeout's ceiling per test). Every crate is compiled once: `build-debug` builds every target with the features `cargo test` uses, the
-## model conversion runs that build's whisper-sat, and clippy's check pass is the only other compilation. Each phase
-## prints its time (`phase NAME: N s`, scripts/phase.sh; docs/testing.md).
+## against the debug binaries (pytest-timeout's ceiling per test). Every crate is compiled once: `build-debug` builds
+## every target with the features `cargo test` uses, the model conversion runs that build's whisper-sat, and clippy's
+## check pass is the only other compilation. Each phase prints its time (`phase NAME: N s`, scripts/phase.sh;
+## docs/testing.md).
 test: deps build-debug model model-base model-face model-voice model-llm llm-server python
 	scripts/phase.sh fmt $(CARGO) fmt --all --check
 	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
@@ -43,6 +44,16 @@ test: deps build-debug model model-base model-face model-voice model-llm llm-ser
 	scripts/phase.sh cargo-test scripts/test-digest.sh $(CARGO) nextest run --workspace --no-fail-fast
 	scripts/phase.sh doc-test $(CARGO) test --workspace --doc
 	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
+
+## Install as a systemd service (docs/deploy.md): the release binaries (it does not build: `make build` first), config/,
+## the provisioned models and deploy/'s units rendered for PREFIX. DESTDIR stages it; ROLE=satellites installs only the
+## satellites (hub on another machine); MODELS=link links models/ instead of copying it.
+PREFIX ?= /usr/local
+install:
+	DESTDIR="$(DESTDIR)" BIN_DIR="$(or $(BIN_DIR),$(TARGET_DIR)/release)" scripts/install.sh "$(PREFIX)"
+
+uninstall:
+	DESTDIR="$(DESTDIR)" scripts/uninstall.sh "$(PREFIX)"
 
 ## Benchmarks against their baselines, side by side (not part of the tests): every one is a binary of one crate,
 ## `agent-bench` (bench/), run from the release build that `make run` uses. Each bench's output is kept in

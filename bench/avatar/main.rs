@@ -21,23 +21,27 @@ use agent_tests::Agent;
 use agent_tests::DataDir;
 use agent_tests::browser_chromium::{Chromium, Devices};
 use agent_tests::browser_link::start_link_only;
-use anyhow::{Context, bail, ensure};
+use anyhow::{Context, ensure};
+use clap::Parser;
 use serde_json::{Value, json};
 
 const RATE: usize = 22050;
 
+/// Avatar renderer benchmark: the page's frame cost with the 3D head on software WebGL against the 2D face, in
+/// headless Chromium. Needs a built `robot-agent` and chromium.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Seconds per renderer and round (at least 2).
+    #[arg(long, default_value_t = 10)]
+    seconds: u64,
+    /// Rounds, alternating the renderers; the median round is reported.
+    #[arg(long, default_value_t = 3)]
+    rounds: usize,
+}
+
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    let mut seconds = 10u64;
-    let mut rounds = 3usize;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--seconds" => seconds = args.next().context("--seconds N")?.parse()?,
-            "--rounds" => rounds = args.next().context("--rounds N")?.parse()?,
-            other => bail!("unknown option {other} (use --seconds N, --rounds N)"),
-        }
-    }
+    let Args { seconds, rounds } = Args::parse();
     ensure!(seconds >= 2 && rounds >= 1, "--seconds >= 2, --rounds >= 1");
     let data = DataDir::new()?;
     let agent = start_link_only(&data).await?;

@@ -21,24 +21,28 @@ use agent_tests::fixtures::fixtures;
 use agent_tests::{Agent, DataDir};
 use anyhow::{Context, bail};
 use bytes::Bytes;
+use clap::Parser;
 use futures_util::{SinkExt, StreamExt};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
 const CHUNK_BYTES: usize = 882; // 20 ms at 22050 Hz, s16le mono
 
+/// Browser link benchmark: server CPU and memory with a real browser streaming, and the latency the link adds,
+/// each against a flow satellite over TCP. Needs a built `robot-agent`, chromium and ffmpeg.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Streaming window per CPU phase (s).
+    #[arg(long, default_value_t = 60)]
+    seconds: u64,
+    /// Latency samples per path.
+    #[arg(long, default_value_t = 1500)]
+    chunks: usize,
+}
+
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {
-    let mut seconds = 60u64;
-    let mut chunks = 1500usize;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--seconds" => seconds = args.next().context("--seconds N")?.parse()?,
-            "--chunks" => chunks = args.next().context("--chunks N")?.parse()?,
-            other => bail!("unknown option {other} (use --seconds N, --chunks N)"),
-        }
-    }
+    let Args { seconds, chunks } = Args::parse();
     let window = Duration::from_secs(seconds);
     let dir = tempfile::Builder::new()
         .prefix("bench-browser-")

@@ -21,25 +21,33 @@ mod links;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
+use clap::Parser;
 
 use agent_bench::percentile;
 
+/// Federation benchmark: the latency two federated hubs add and their throughput, against a plain Zenoh pair and
+/// raw TCP. Needs release builds of `flow-hub` (`AGENT_BIN_DIR`) and the shared fixtures.
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Seconds per latency phase.
+    #[arg(long, default_value_t = 20)]
+    seconds: u64,
+    /// Seconds per throughput phase.
+    #[arg(long, default_value_t = 5)]
+    burst_seconds: u64,
+    /// Write the Markdown report here.
+    #[arg(long, value_name = "PATH")]
+    write: Option<PathBuf>,
+}
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> anyhow::Result<()> {
-    let mut seconds = 20u64;
-    let mut burst = 5u64;
-    let mut write: Option<PathBuf> = None;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut value = || args.next().with_context(|| format!("{a} needs a value"));
-        match a.as_str() {
-            "--seconds" => seconds = value()?.parse()?,
-            "--burst-seconds" => burst = value()?.parse()?,
-            "--write" => write = Some(PathBuf::from(value()?)),
-            other => bail!("unknown option {other} (--seconds N, --burst-seconds N, --write PATH)"),
-        }
-    }
+    let Args {
+        seconds,
+        burst_seconds: burst,
+        write,
+    } = Args::parse();
     let fixtures = agent_tests::fixtures::fixtures();
     let jpeg = std::fs::read(fixtures.join("faces/derived/fr_two_people_640x360.jpg"))
         .context("reading the fixture JPEG")?;

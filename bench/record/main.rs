@@ -17,29 +17,39 @@ mod replay_timing;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
+use clap::Parser;
+
+/// Recording benchmark: the hub's CPU cost of a `flowctl record` subscriber, and `flowctl replay`'s timing. Needs
+/// release builds of `flow-hub` and `flowctl` (`AGENT_BIN_DIR`).
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// Seconds per CPU phase.
+    #[arg(long, default_value_t = 10)]
+    seconds: u64,
+    /// Rounds of the alternating CPU phases.
+    #[arg(long, default_value_t = 3)]
+    rounds: u32,
+    /// Publish rate of the CPU phases (frames per second).
+    #[arg(long, default_value_t = 200)]
+    fps: u32,
+    /// Seconds of the replayed recording.
+    #[arg(long, default_value_t = 20)]
+    replay_seconds: u64,
+    /// Write the Markdown report here.
+    #[arg(long, value_name = "PATH")]
+    write: Option<PathBuf>,
+}
 
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> anyhow::Result<()> {
-    let mut seconds = 10u64;
-    let mut rounds = 3u32;
-    let mut fps = 200u32;
-    let mut replay_seconds = 20u64;
-    let mut write: Option<PathBuf> = None;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut value = || args.next().with_context(|| format!("{a} needs a value"));
-        match a.as_str() {
-            "--seconds" => seconds = value()?.parse()?,
-            "--rounds" => rounds = value()?.parse()?,
-            "--fps" => fps = value()?.parse()?,
-            "--replay-seconds" => replay_seconds = value()?.parse()?,
-            "--write" => write = Some(PathBuf::from(value()?)),
-            other => bail!(
-                "unknown option {other} (--seconds N, --rounds N, --fps N, --replay-seconds N, --write PATH)"
-            ),
-        }
-    }
+    let Args {
+        seconds,
+        rounds,
+        fps,
+        replay_seconds,
+        write,
+    } = Args::parse();
     println!(
         "recording benchmark: {rounds} rounds of {seconds} s per phase at {fps} fps, {replay_seconds} s replay"
     );

@@ -26,6 +26,7 @@ use agent_tests::browser_chromium::{Chromium, Devices};
 use agent_tests::browser_media::prepare_pipeline;
 use agent_tests::{Agent, AgentOptions, DataDir, Satellite};
 use anyhow::{Context, bail};
+use clap::Parser;
 
 /// How often the processes are sampled.
 const SAMPLE_EVERY: Duration = Duration::from_secs(60);
@@ -107,18 +108,21 @@ fn lock(seen: &Mutex<Seen>) -> std::sync::MutexGuard<'_, Seen> {
     seen.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// The soak: the whole agent with a browser, two satellites and the recorder for a long while, sampled every
+/// minute (`make soak`).
+#[derive(Debug, clap::Parser)]
+struct Args {
+    /// How long (at least 11: the first and last five minutes are compared).
+    #[arg(long, default_value_t = 30)]
+    minutes: u64,
+    /// Write the Markdown report here (the samples' CSV beside it, with `.csv`).
+    #[arg(long, value_name = "PATH")]
+    write: Option<PathBuf>,
+}
+
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> anyhow::Result<()> {
-    let mut minutes = 30u64;
-    let mut write: Option<PathBuf> = None;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--minutes" => minutes = args.next().context("--minutes N")?.parse()?,
-            "--write" => write = Some(PathBuf::from(args.next().context("--write PATH")?)),
-            other => bail!("unknown option {other} (use --minutes N, --write PATH)"),
-        }
-    }
+    let Args { minutes, write } = Args::parse();
     if minutes < 11 {
         bail!("--minutes must be at least 11: the first and last five minutes are compared");
     }

@@ -1,13 +1,8 @@
 """Draws the soak's CSV (bench/soak/main.rs --write) as one PNG: RSS and open descriptors per process by minute,
 and every turn's voice-to-voice time, so that a leak or a slowdown shows as a slope."""
 
+import argparse
 import csv
-import sys
-
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 
 
 def read(path):
@@ -25,6 +20,12 @@ def read(path):
 
 
 def main(csv_path, png_path):
+    # Imported here, so that --help answers without matplotlib (it is in bench/soak/.venv, `make soak`).
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     samples, turns = read(csv_path)
     head, rows = samples[0], samples[1:]
     minutes = [int(r[0]) for r in rows]
@@ -50,4 +51,8 @@ def main(csv_path, png_path):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("csv", help="the soak's CSV (written beside its --write report)")
+    ap.add_argument("png", help="the PNG to draw")
+    args = ap.parse_args()
+    main(args.csv, args.png)

@@ -30,6 +30,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
+use clap::Parser;
 use flow::{Client, ConnectOptions, FlowAddr};
 use tokio::sync::{mpsc, oneshot};
 
@@ -59,54 +60,39 @@ const MID_SENTENCE: [(&str, f64); 2] = [
 /// How long one run may take from the end of speech to the reply before it counts as lost.
 const RUN_PATIENCE: Duration = Duration::from_secs(60);
 
+/// Voice-to-voice latency of the whole agent: end of the user's speech to the first reply PCM, with a release
+/// `robot-agent`, `whisper-sat` and (the chat phase) `llm-sat`.
+#[derive(Debug, clap::Parser)]
 struct Options {
+    /// Turns said and timed (at least 1).
+    #[arg(long, default_value_t = 20)]
     runs: usize,
+    /// The satellite's inference threads.
+    #[arg(long, default_value_t = 2)]
     threads: u32,
+    /// The satellite's end-of-speech hangover (ms) [default: the satellite's].
+    #[arg(long)]
     hangover_ms: Option<u32>,
-    /// Further `whisper-sat run` arguments, as given (`--satellite-arg --turn-confirm-ms=150`).
+    /// Passed on to `whisper-sat run`, to measure another setting (repeatable; `--satellite-arg
+    /// --turn-confirm-ms=150`).
+    #[arg(long = "satellite-arg", value_name = "ARG", allow_hyphen_values = true)]
     satellite_args: Vec<String>,
+    /// Write a Markdown report here.
+    #[arg(long, value_name = "PATH")]
     write: Option<PathBuf>,
+    /// Barge-ins: the user talking over the agent's reply.
+    #[arg(long, default_value_t = 8)]
     barge_ins: usize,
+    /// Open questions the rules hand to the language model (0 skips the chat phase).
+    #[arg(long, default_value_t = chat::QUESTIONS.len())]
     chat_runs: usize,
+    /// llm-sat's generation threads.
+    #[arg(long, default_value_t = 2)]
     llm_threads: u32,
 }
 
 fn options() -> anyhow::Result<Options> {
-    let mut o = Options {
-        runs: 20,
-        threads: 2,
-        hangover_ms: None,
-        satellite_args: Vec::new(),
-        write: None,
-        barge_ins: 8,
-        chat_runs: chat::QUESTIONS.len(),
-        llm_threads: 2,
-    };
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        let mut value = |name: &str| args.next().with_context(|| format!("{name} needs a value"));
-        match a.as_str() {
-            "--runs" => o.runs = value("--runs")?.parse().context("--runs N")?,
-            "--threads" => o.threads = value("--threads")?.parse().context("--threads N")?,
-            "--hangover-ms" => {
-                o.hangover_ms = Some(value("--hangover-ms")?.parse().context("--hangover-ms N")?);
-            }
-            "--satellite-arg" => o.satellite_args.push(value("--satellite-arg")?),
-            "--write" => o.write = Some(PathBuf::from(value("--write")?)),
-            "--barge-ins" => {
-                o.barge_ins = value("--barge-ins")?.parse().context("--barge-ins N")?
-            }
-            "--chat-runs" => {
-                o.chat_runs = value("--chat-runs")?.parse().context("--chat-runs N")?
-            }
-            "--llm-threads" => {
-                o.llm_threads = value("--llm-threads")?.parse().context("--llm-threads N")?
-            }
-            other => bail!(
-                "unknown option {other} (use --runs N, --threads N, --hangover-ms N, --satellite-arg ARG, --barge-ins N, --chat-runs N, --llm-threads N, --write PATH)"
-            ),
-        }
-    }
+    let o = Options::parse();
     if o.runs == 0 {
         bail!("--runs must be at least 1");
     }

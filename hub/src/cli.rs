@@ -1,11 +1,12 @@
 //! The command line of the hub's binaries (`flow-hub`, `robot-agent`): options, the configuration, logging, the
 //! application's modules and routes, and a clean shutdown on Ctrl-C or SIGTERM. Configuration errors exit with
-//! status 2 and name the file, the key and the reason.
+//! status 2 and name the file, the key and the reason. `doctor` checks the machine instead of serving
+//! (`crate::doctor`).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clap::{CommandFactory, FromArgMatches, Parser};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 use crate::config::{Config, ConfigError};
@@ -15,21 +16,23 @@ use crate::server::Application;
 #[derive(Debug, Parser)]
 #[command(version)]
 pub struct Args {
+    #[command(subcommand)]
+    command: Option<Command>,
     /// Configuration file layered over the embedded defaults.
-    #[arg(long)]
+    #[arg(long, global = true)]
     config: Option<PathBuf>,
     /// HTTP address (UI, /api, /flow WebSocket).
-    #[arg(long)]
+    #[arg(long, global = true)]
     http: Option<String>,
     /// FlowProtocol TCP address ("" disables).
-    #[arg(long)]
+    #[arg(long, global = true)]
     flow_tcp: Option<String>,
     /// FlowProtocol Unix socket path ("" disables).
-    #[arg(long)]
+    #[arg(long, global = true)]
     flow_unix: Option<String>,
     /// Serve the page over HTTPS (`[http] tls`): with a certificate made for this machine, unless --tls-cert and
     /// --tls-key name one.
-    #[arg(long)]
+    #[arg(long, global = true)]
     https: bool,
     /// PEM certificate chain for HTTPS (with --tls-key).
     #[arg(long, value_name = "FILE", requires = "tls_key")]
@@ -38,12 +41,28 @@ pub struct Args {
     #[arg(long, value_name = "FILE", requires = "tls_cert")]
     tls_key: Option<PathBuf>,
     /// Directory for tokens, the pair database and the socket.
-    #[arg(long)]
+    #[arg(long, global = true)]
     data_dir: Option<PathBuf>,
     /// Record every stream channel into this MCAP file from start to shutdown (the recorder module,
     /// `[modules.recorder] file`; robot-agent has it, the bare hub records with `flowctl record`).
     #[arg(long, value_name = "FILE")]
     record: Option<PathBuf>,
+}
+
+/// What to do instead of serving.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Check this machine: models and their checksums, ports, the data directory, the certificate, satellites.
+    ///
+    /// Checks before or while the agent runs: the models and their checksums, the configured ports, the data
+    /// directory's room, the HTTPS certificate's names and the connected satellites. One line per finding, with its
+    /// fix. Exit status: 0 when no problem was found (warnings included), 1 when one was, 2 for an invalid
+    /// configuration.
+    Doctor {
+        /// The models folder (default: the checkout's `models/`, or the installed `PREFIX/share/robot-agent/models`).
+        #[arg(long, value_name = "DIR")]
+        models: Option<PathBuf>,
+    },
 }
 
 /// Runs the binary `name` (described by `about`) with the application `build` makes from the configuration, until
@@ -58,34 +77,57 @@ pub async fn main(
         Ok(a) => a,
         Err(e) => e.exit(),
     };
+    if let Some(Command::Doctor { models }) = &args.command {
+        let code = match doctor(&args, models.clone()) {
+            Ok(code) => code,
+            Err(e) => exit_code(name, &e),
+        };
+        std::process::exit(code);
+    }
     if let Err(e) = run(name, args, build).await {
-        // A module's section is checked at start: report it like any other configuration error.
-        if let Some(config) = e.downcast_ref::<ConfigError>() {
-            eprintln!("{name}: invalid configuration: {config}");
-            std::process::exit(2);
-        }
-        eprintln!("{name}: {e:#}");
-        std::process::exit(1);
+        std::process::exit(exit_code(name, &e));
     }
 }
 
-async fn run(
-    name: &str,
-    args: Args,
-    build: fn(&Config) -> anyhow::Result<Application>,
-) -> anyhow::Result<()> {
+/// Reports an error and gives the exit status for it: 2 for an invalid configuration, 1 otherwise.
+fn exit_code(name: &str, e: &anyhow::Error) -> i32 {
+    // A module's section is checked at start: report it like any other configuration error.
+    if let Some(config) = e.downcast_ref::<ConfigError>() {
+        eprintln!("{name}: invalid configuration: {config}");
+        return 2;
+    }
+    eprintln!("{name}: {e:#}");
+    1
+}
+
+/// `doctor`: prints the findings on stdout and returns the exit status.
+fn doctor(args: &Args, models: Option<PathBuf>) -> anyhow::Result<i32> {
+    let config = configure(args)?;
+    let options = crate::doctor::Options {
+        models: models.unwrap_or_else(crate::doctor::default_models_dir),
+    };
+    let findings = crate::doctor::examine(&config, &options);
+    for finding in &findings {
+        println!("{finding}");
+    }
+    Ok(crate::doctor::exit_code(&findings))
+}
+
+/// The configuration: the file over the embedded defaults, with the command line's addresses, data directory and
+/// TLS over both.
+fn configure(args: &Args) -> anyhow::Result<Config> {
     let mut config = Config::load(args.config.as_deref())?;
-    if let Some(v) = args.http {
-        config.server.http = v;
+    if let Some(v) = &args.http {
+        config.server.http.clone_from(v);
     }
-    if let Some(v) = args.flow_tcp {
-        config.server.flow_tcp = v;
+    if let Some(v) = &args.flow_tcp {
+        config.server.flow_tcp.clone_from(v);
     }
-    if let Some(v) = args.flow_unix {
-        config.server.flow_unix = v;
+    if let Some(v) = &args.flow_unix {
+        config.server.flow_unix.clone_from(v);
     }
-    if let Some(v) = args.data_dir {
-        config.server.data_dir = v;
+    if let Some(v) = &args.data_dir {
+        config.server.data_dir.clone_from(v);
     }
     if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
         config.http.tls = "files".into();
@@ -100,6 +142,15 @@ async fn run(
             toml::Value::String(file.display().to_string()),
         );
     }
+    Ok(config)
+}
+
+async fn run(
+    name: &str,
+    args: Args,
+    build: fn(&Config) -> anyhow::Result<Application>,
+) -> anyhow::Result<()> {
+    let config = configure(&args)?;
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(&config.server.log));
     crate::log::init(filter);

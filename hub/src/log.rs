@@ -1,11 +1,11 @@
-//! The hub's log: on stderr (stdout carries only what the operator reads: the address to open), with the WebSocket
-//! libraries capped below trace, and federation peers that a hub refuses logged on that hub. Zenoh reports a failed
-//! handshake at debug only; a small layer watches its accept side and says at WARN who was refused and why.
+//! The hub's log: on stderr (stdout carries only what the operator reads: the address to open) as every process of
+//! the workspace logs (`flow::log`: plain lines unless on a terminal), with the WebSocket libraries capped below
+//! trace, and federation peers that a hub refuses logged on that hub. Zenoh reports a failed handshake at debug only;
+//! a small layer watches its accept side and says at WARN who was refused and why.
 
-use std::io::IsTerminal;
-use std::sync::{Mutex, PoisonError};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
+use flow::log::Throttle;
 use tracing::field::{Field, Visit};
 use tracing::{Event, Level, Subscriber};
 use tracing_subscriber::EnvFilter;
@@ -20,12 +20,9 @@ const REFUSALS_EVERY: Duration = Duration::from_secs(10);
 
 /// Installs the log: `filter` for what is printed, and the refusal watcher beside it.
 pub fn init(filter: EnvFilter) {
-    let printed = tracing_subscriber::fmt::layer()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_filter(quiet_frames(filter));
+    let printed = flow::log::stderr().with_filter(quiet_frames(filter));
     let refusals =
-        PeerRefusals::default().with_filter(Targets::new().with_target(ZENOH_ACCEPT, Level::DEBUG));
+        PeerRefusals::new().with_filter(Targets::new().with_target(ZENOH_ACCEPT, Level::DEBUG));
     tracing_subscriber::registry()
         .with(printed)
         .with(refusals)
@@ -42,9 +39,17 @@ fn quiet_frames(filter: EnvFilter) -> EnvFilter {
 }
 
 /// Turns Zenoh's debug report of a peer that failed user/password authentication into one WARN per interval.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct PeerRefusals {
-    last: Mutex<Option<(Instant, u64)>>,
+    reports: Throttle,
+}
+
+impl PeerRefusals {
+    fn new() -> Self {
+        PeerRefusals {
+            reports: Throttle::new(REFUSALS_EVERY),
+        }
+    }
 }
 
 /// An event's message, as text.
@@ -88,18 +93,10 @@ impl<S: Subscriber> Layer<S> for PeerRefusals {
         let Some(why) = refusal(&message.0) else {
             return;
         };
-        let now = Instant::now();
-        let mut last = self.last.lock().unwrap_or_else(PoisonError::into_inner);
-        let quiet = match *last {
-            Some((at, quiet)) if now.duration_since(at) < REFUSALS_EVERY => {
-                *last = Some((at, quiet + 1));
-                return;
-            }
-            Some((_, quiet)) => quiet,
-            None => 0,
+        let Some(quiet) = self.reports.admit() else {
+            return;
         };
-        *last = Some((now, 0));
-        drop(last);
+        let quiet = quiet.0;
         tracing::warn!(
             target: "flow_hub::federation",
             "refused a federation peer that came with {why} (peers must match [federation] users_file; {quiet} more \

@@ -9,10 +9,15 @@
 //! database is opened again, so the store closes and reopens it itself at the
 //! next call: the failed write is reported to its writer with the reason, and
 //! writes succeed again once the disk has room, without a restart.
+//!
+//! A full disk refuses every write until there is room, and each refusal would log the same warning and the same
+//! reopening: the store logs the first at once and then at most one per minute, with the count of those left out.
 
 use std::path::{Path, PathBuf};
 use std::sync::{RwLock, RwLockReadGuard};
+use std::time::Duration;
 
+use flow::log::Throttle;
 use redb::{Database, ReadableTable, TableDefinition};
 use thiserror::Error;
 
@@ -23,6 +28,9 @@ const DATABASES: TableDefinition<&str, u64> = TableDefinition::new("databases");
 
 /// The database every connection starts with.
 pub const DEFAULT_DB: &str = "main";
+
+/// How often a failure that repeats on every call (a full disk, a damaged file) is logged at most.
+const WARNINGS_EVERY: Duration = Duration::from_secs(60);
 
 #[derive(Debug, Error)]
 pub enum PairDbError {
@@ -54,6 +62,11 @@ pub struct PairDb {
     /// `None` after an I/O error until a reopen succeeds. Calls share the read lock; a reopen takes the write lock,
     /// so the old handle is gone (redb allows one per file) before the new one opens.
     db: RwLock<Option<Database>>,
+    /// The log of I/O failures, of the reopenings after them, and of other storage failures, each held to one line
+    /// per interval.
+    io_failures: Throttle,
+    reopenings: Throttle,
+    storage_failures: Throttle,
 }
 
 impl PairDb {
@@ -64,6 +77,9 @@ impl PairDb {
         let this = PairDb {
             path: path.to_path_buf(),
             db: RwLock::new(Some(db)),
+            io_failures: Throttle::new(WARNINGS_EVERY),
+            reopenings: Throttle::new(WARNINGS_EVERY),
+            storage_failures: Throttle::new(WARNINGS_EVERY),
         };
         if !this.exists(DEFAULT_DB)? {
             this.create(DEFAULT_DB)?;
@@ -71,7 +87,8 @@ impl PairDb {
         Ok(this)
     }
 
-    /// Runs `op` on the open database; after an I/O error, closes it so that the next call opens it again.
+    /// Runs `op` on the open database; after an I/O error, closes it so that the next call opens it again. Logs the
+    /// storage's failures (the caller's get the reason in their reply), each kind at most once per interval.
     fn with<T>(
         &self,
         op: impl FnOnce(&Database) -> Result<T, PairDbError>,
@@ -85,15 +102,25 @@ impl PairDb {
             };
             op(store)
         };
-        if let Err(PairDbError::Io(e)) = &result {
-            tracing::warn!(
-                path = %self.path.display(),
-                "pair database: {e}; it is opened again at the next call"
-            );
-            *self
-                .db
-                .write()
-                .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
+        match &result {
+            Err(PairDbError::Io(e)) => {
+                if let Some(left_out) = self.io_failures.admit() {
+                    tracing::warn!(
+                        path = %self.path.display(),
+                        "pair database: {e}; it is opened again at the next call{left_out}"
+                    );
+                }
+                *self
+                    .db
+                    .write()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
+            }
+            Err(PairDbError::Storage(e)) => {
+                if let Some(left_out) = self.storage_failures.admit() {
+                    tracing::warn!(path = %self.path.display(), "pair database error: {e}{left_out}");
+                }
+            }
+            _ => {}
         }
         result
     }
@@ -121,7 +148,12 @@ impl PairDb {
                         self.path.display()
                     ))
                 })?;
-                tracing::info!(path = %self.path.display(), "pair database opened again after an I/O error");
+                if let Some(left_out) = self.reopenings.admit() {
+                    tracing::info!(
+                        path = %self.path.display(),
+                        "pair database opened again after an I/O error{left_out}"
+                    );
+                }
                 *slot = Some(db);
             }
         }
@@ -309,5 +341,53 @@ mod tests {
         );
         drop(db);
         let _ = std::fs::remove_file(&dir);
+    }
+
+    /// The levels of the events that the pair database logs, in order.
+    #[derive(Clone, Default)]
+    struct Logged(std::sync::Arc<std::sync::Mutex<Vec<tracing::Level>>>);
+
+    impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for Logged {
+        fn on_event(
+            &self,
+            event: &tracing::Event<'_>,
+            _ctx: tracing_subscriber::layer::Context<'_, S>,
+        ) {
+            if event.metadata().target() == module_path!().trim_end_matches("::tests") {
+                self.0
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .push(*event.metadata().level());
+            }
+        }
+    }
+
+    #[test]
+    fn a_failing_disk_logs_one_warning_and_one_reopening_not_one_per_refused_write() {
+        use tracing_subscriber::layer::SubscriberExt;
+
+        let dir = tempfile::tempdir().expect("temp dir");
+        let db = PairDb::open(&dir.path().join("pairs.redb")).expect("open");
+        let logged = Logged::default();
+        let subscriber = tracing_subscriber::registry().with(logged.clone());
+        tracing::subscriber::with_default(subscriber, || {
+            // As a full disk fails every write: each call first opens the database again, then fails.
+            for _ in 0..10 {
+                let refused = db.with(|_| -> Result<(), _> {
+                    Err(PairDbError::Io("No space left on device".into()))
+                });
+                assert!(matches!(refused, Err(PairDbError::Io(_))));
+            }
+            // The disk has room again: calls succeed, and say nothing.
+            db.set(DEFAULT_DB, "k", "1")
+                .expect("a write once the disk has room");
+        });
+        let levels = logged
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        assert_eq!(levels, [tracing::Level::WARN, tracing::Level::INFO]);
+        assert_eq!(db.get(DEFAULT_DB, "k").expect("get").as_deref(), Some("1"));
     }
 }

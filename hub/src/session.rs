@@ -7,7 +7,7 @@ use std::sync::Arc;
 use flow::protocol::{
     Command, Envelope, ErrorCode, ErrorReply, Event, PROTOCOL_VERSION, Reply, ReqId,
 };
-use tracing::{debug, info, warn};
+use tracing::{debug, info};
 
 use crate::hub::{ConnId, Hub, LeaseError, Outbox, ShmPeer};
 use crate::pairdb::{DEFAULT_DB, PairDb, PairDbError};
@@ -334,11 +334,9 @@ impl Session {
                 ErrorCode::Exists,
                 format!("database {n} already exists"),
             )),
-            Ok(Err(PairDbError::Storage(e))) => {
-                warn!("pair database error: {e}");
-                Err(ErrorReply::new(ErrorCode::Database, e))
-            }
-            // Logged by the store itself, which opens the database again at the next call.
+            // Both logged by the store itself (at most once a minute: they repeat on every call); after an I/O
+            // error it opens the database again at the next call.
+            Ok(Err(PairDbError::Storage(e))) => Err(ErrorReply::new(ErrorCode::Database, e)),
             Ok(Err(PairDbError::Io(e))) => Err(ErrorReply::new(
                 ErrorCode::Database,
                 format!("the disk failed, nothing was written: {e}"),

@@ -8,10 +8,12 @@
 //!   call services, use the pair database, reconnect automatically.
 //! - [`shm`]: shared-memory segments and slots for clients on the hub's machine.
 //! - [`sketch`]: the setup-then-loop programming style of the paper's PySketch.
+//! - [`log`]: the log every binary installs (feature `logging`) and [`log::Throttle`] for repeated warnings.
 
 pub mod client;
 pub mod connection;
 pub mod error;
+pub mod log;
 pub mod protocol;
 pub mod queue;
 pub mod shm;

@@ -76,12 +76,10 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .with_writer(std::io::stderr)
-        .init();
+    // Plain lines unless stderr is a terminal (a pipe or the journal), as every process of the workspace logs.
+    flow::log::init(
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+    );
     let args = <Args as clap::Parser>::parse();
     let addr: FlowAddr = args.addr.parse().map_err(anyhow::Error::msg)?;
     let token = resolve_token(args.token.as_deref(), &args.data_dir, TokenKind::User)?;

@@ -2,8 +2,6 @@
 
 mod cli;
 
-use std::io::IsTerminal;
-
 use clap::Parser;
 
 /// Logging when `RUST_LOG` is not set. whisper.cpp's own messages are left out: every speculative decode that the
@@ -22,11 +20,7 @@ fn main() -> anyhow::Result<()> {
     {
         filter = filter.add_directive(quiet);
     }
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        // Colour codes only for a terminal: `make run` piped to a file gets plain text.
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+    // Plain lines unless stderr is a terminal, as every process of the workspace logs.
+    flow::log::init(filter);
     cli::Command::parse().run()
 }
