@@ -31,6 +31,17 @@ async fn doctor(dir: &Path, http: &str, extra: &[&str]) -> anyhow::Result<Finish
     run(cmd, b"", DEADLINE).await
 }
 
+/// Runs `robot-agent doctor` on free ports with the models of `models`, so only the models and the folder are judged.
+async fn doctor_on_models(dir: &Path, models: &Path) -> anyhow::Result<Finished> {
+    let models = models.display().to_string();
+    doctor(
+        dir,
+        ANY_PORT,
+        &["--flow-tcp", ANY_PORT, "--models", &models],
+    )
+    .await
+}
+
 /// Free addresses: binding port 0 always finds the port free, so only the models and the folder are judged.
 const ANY_PORT: &str = "127.0.0.1:0";
 
@@ -47,13 +58,7 @@ async fn a_missing_model_is_named_with_its_path_and_make_target_and_exits_one() 
 {
     let dir = DataDir::new()?;
     let models = tempfile::tempdir()?;
-    let models_arg = models.path().display().to_string();
-    let out = doctor(
-        dir.path(),
-        ANY_PORT,
-        &["--flow-tcp", ANY_PORT, "--models", &models_arg],
-    )
-    .await?;
+    let out = doctor_on_models(dir.path(), models.path()).await?;
     assert_eq!(code(&out), Some(1), "{out:?}");
     let tiny = models.path().join("ggml-tiny.en.bin");
     let missing = line(&out, &format!("{} is missing", tiny.display()))
@@ -77,13 +82,7 @@ async fn a_corrupt_model_is_called_corrupt() -> anyhow::Result<()> {
     bytes[at] ^= 0x01;
     let corrupt = models.path().join("centerface.onnx");
     std::fs::write(&corrupt, &bytes)?;
-    let models_arg = models.path().display().to_string();
-    let out = doctor(
-        dir.path(),
-        ANY_PORT,
-        &["--flow-tcp", ANY_PORT, "--models", &models_arg],
-    )
-    .await?;
+    let out = doctor_on_models(dir.path(), models.path()).await?;
     assert_eq!(code(&out), Some(1), "{out:?}");
     let found = line(&out, &format!("{} is corrupt", corrupt.display()))
         .with_context(|| format!("no line calls the model corrupt:\n{}", out.stdout))?;
@@ -141,13 +140,7 @@ async fn the_ports_of_a_running_agent_are_recognised_as_its_own() -> anyhow::Res
 async fn a_machine_with_its_models_and_free_ports_exits_zero() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
     // The checkout's models, as `make test` provisions them.
-    let models = checkout_models().display().to_string();
-    let out = doctor(
-        dir.path(),
-        ANY_PORT,
-        &["--flow-tcp", ANY_PORT, "--models", &models],
-    )
-    .await?;
+    let out = doctor_on_models(dir.path(), &checkout_models()).await?;
     assert_eq!(code(&out), Some(0), "{out:?}");
     assert!(!out.stdout.contains("PROBLEM"), "{}", out.stdout);
     assert!(

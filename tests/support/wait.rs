@@ -168,16 +168,24 @@ pub fn free_port() -> anyhow::Result<u16> {
 mod tests {
     use super::*;
 
+    /// A real hub (`flow-hub`, kept alive with its data directory) and a channel `name` with a subscriber.
+    async fn stream(
+        name: &str,
+    ) -> anyhow::Result<((crate::DataDir, crate::Agent), Publisher, Subscription)> {
+        let dir = crate::DataDir::new()?;
+        let hub = crate::Agent::hub(&dir).await?;
+        let client = hub.client("waiting-test").await?;
+        let publisher = client.publisher(name, "{}").await?;
+        let sub = client.subscribe(name).await?;
+        until_subscribed(&publisher).await?;
+        Ok(((dir, hub), publisher, sub))
+    }
+
     /// A real hub (`flow-hub`) with a channel that never stops sending messages the wait does not want.
     #[tokio::test]
     async fn recv_until_gives_up_at_its_deadline_on_a_stream_that_keeps_sending_other_messages()
     -> anyhow::Result<()> {
-        let dir = crate::DataDir::new()?;
-        let hub = crate::Agent::hub(&dir).await?;
-        let client = hub.client("busy-stream").await?;
-        let publisher = client.publisher("Busy.stream", "{}").await?;
-        let sub = client.subscribe("Busy.stream").await?;
-        until_subscribed(&publisher).await?;
+        let (_hub, publisher, sub) = stream("Busy.stream").await?;
         // A message every 20 ms: every single receive is far inside any per-receive timeout.
         let busy = tokio::spawn(async move {
             let mut tick = tokio::time::interval(Duration::from_millis(20));
@@ -210,12 +218,7 @@ mod tests {
     /// The same wait finds the message it picks among the others.
     #[tokio::test]
     async fn recv_until_returns_what_it_picks_and_skips_the_rest() -> anyhow::Result<()> {
-        let dir = crate::DataDir::new()?;
-        let hub = crate::Agent::hub(&dir).await?;
-        let client = hub.client("picky").await?;
-        let publisher = client.publisher("Picky.stream", "{}").await?;
-        let sub = client.subscribe("Picky.stream").await?;
-        until_subscribed(&publisher).await?;
+        let (_hub, publisher, sub) = stream("Picky.stream").await?;
         for n in 1..=5u8 {
             publisher.publish(vec![n]).await?;
         }

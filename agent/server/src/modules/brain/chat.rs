@@ -156,11 +156,9 @@ impl Chats {
     ) -> u64 {
         // A turn still running (or waiting for its answer) is cut off here: the memory keeps what was heard of it.
         self.interrupt(Instant::now());
+        // (`interrupt` has just marked it, so its outcome is the interrupted reply without the model's text.)
         if let Some(old) = self.current.take() {
-            let mut outcome = old.outcome();
-            outcome.interrupted = true;
-            outcome.generated = None;
-            self.remember(outcome);
+            self.remember(old.outcome());
         }
         if self.stale(&self.memory) && !self.memory.lines.is_empty() {
             self.memory = Memory::default();
