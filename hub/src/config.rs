@@ -29,6 +29,7 @@ pub struct Config {
     pub http: HttpSection,
     pub agent: AgentSection,
     pub federation: FederationSection,
+    pub telemetry: TelemetrySection,
     /// `[modules.NAME]` tables, handed to each module as JSON parameters.
     #[serde(default)]
     pub modules: BTreeMap<String, toml::Table>,
@@ -132,6 +133,15 @@ impl HttpSection {
 pub struct AgentSection {
     /// The language the agent converses in, as an ISO 639-1 code; the application checks that it knows it.
     pub language: String,
+}
+
+/// `[telemetry]`: OpenTelemetry traces of each conversational turn (docs/telemetry.md).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TelemetrySection {
+    /// The OTLP/HTTP collector (`http://HOST:4318`); "" leaves telemetry to the `OTEL_*` variables, off unless they
+    /// name one.
+    pub otlp: String,
 }
 
 /// `[federation]`: this hub on a Zenoh network with other hubs and Zenoh clients (docs/federation.md).
@@ -395,6 +405,8 @@ impl Config {
                 format!("{} is shorter than ticks.fast_ms", self.ticks.slow_ms),
             ));
         }
+        flow_telemetry::traces_endpoint(Some(("telemetry.otlp", &self.telemetry.otlp)), |_| None)
+            .map_err(|e| ("telemetry.otlp", e.reason()))?;
         self.federation.validate()
     }
 
@@ -605,6 +617,19 @@ mod tests {
             .expect_err("open beyond loopback");
         assert_eq!(e.key, "http.open_on_loopback");
         assert!(load_text("[http]\nopen_on_loopback = true\n").is_ok());
+    }
+
+    #[test]
+    fn a_collector_that_traces_cannot_reach_is_refused_at_start_by_its_key() {
+        assert!(load_text("[telemetry]\notlp = \"http://127.0.0.1:4318\"\n").is_ok());
+        for (url, words) in [
+            ("https://collector:4318", "HTTPS"),
+            ("collector:4318", "not an http:// URL"),
+        ] {
+            let e = load_text(&format!("[telemetry]\notlp = \"{url}\"\n")).expect_err(url);
+            assert_eq!(e.key, "telemetry.otlp", "{url}: {e}");
+            assert!(e.reason.contains(words), "{url}: {e}");
+        }
     }
 
     #[test]

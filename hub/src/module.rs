@@ -93,6 +93,11 @@ impl ModuleContext {
         self.shared.metrics.clone()
     }
 
+    /// Where the module's spans go (docs/telemetry.md): a handle that records nothing when telemetry is off.
+    pub fn telemetry(&self) -> flow_telemetry::Telemetry {
+        self.shared.telemetry.clone()
+    }
+
     /// The server's configuration (e.g. the data directory).
     pub fn config(&self) -> &crate::config::Config {
         &self.shared.config

@@ -141,6 +141,10 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         )),
         shutdown,
         modules_stop: watch::channel(false).0,
+        telemetry: flow_telemetry::Telemetry::start(
+            &service_name(),
+            Some(("[telemetry] otlp", &config.telemetry.otlp)),
+        )?,
         reports: Mutex::new(BTreeMap::new()),
         config,
     });
@@ -298,4 +302,13 @@ async fn join_within(tasks: Vec<JoinHandle<()>>, what: &str) {
             tracing::warn!("{what} did not stop within 5 s");
         }
     }
+}
+
+/// The `service.name` of this process's spans: the binary's name (`robot-agent`, `flow-hub`).
+fn service_name() -> String {
+    std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .filter(|name| !name.is_empty())
+        .unwrap_or_else(|| "robot-agent".to_owned())
 }

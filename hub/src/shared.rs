@@ -31,6 +31,8 @@ pub struct Shared {
     /// Flips to true first at shutdown: the modules' stop signal. They stop while the hub still serves them, so
     /// that one finishing its work (the recorder draining what the hub had accepted) still has its link.
     pub modules_stop: watch::Sender<bool>,
+    /// Where modules' spans go (`[telemetry]`, docs/telemetry.md); off unless a collector is named.
+    pub telemetry: flow_telemetry::Telemetry,
     pub(crate) reports: Mutex<BTreeMap<String, serde_json::Value>>,
 }
 

@@ -90,6 +90,8 @@ pub struct AgentOptions {
     pub netns: Option<String>,
     /// Start under this open-file limit, soft and hard (`prlimit`), so that the server cannot raise it.
     pub fd_limit: Option<u64>,
+    /// More environment variables (e.g. `OTEL_BSP_SCHEDULE_DELAY`).
+    pub env: Vec<(String, String)>,
 }
 
 /// Everything a process printed, line by line, with a wake-up for waiters.
@@ -265,6 +267,7 @@ impl Agent {
                 }),
             )
             .env("NO_COLOR", "1")
+            .envs(opts.env.iter().map(|(k, v)| (k.as_str(), v.as_str())))
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())

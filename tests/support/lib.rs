@@ -11,6 +11,7 @@ pub mod fixtures;
 pub mod http;
 pub mod metrics;
 pub mod netns;
+pub mod otlp;
 pub mod raw;
 pub mod recording;
 pub mod satellite;

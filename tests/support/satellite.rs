@@ -27,6 +27,16 @@ impl Satellite {
 
     /// Starts `whisper-sat run --name NAME ARGS...` against `agent` and waits until it has joined.
     pub async fn start_with(agent: &Agent, name: &str, args: &[&str]) -> anyhow::Result<Satellite> {
+        Self::start_with_env(agent, name, args, &[]).await
+    }
+
+    /// As [`Satellite::start_with`], with more environment variables.
+    pub async fn start_with_env(
+        agent: &Agent,
+        name: &str,
+        args: &[&str],
+        env: &[(&str, &str)],
+    ) -> anyhow::Result<Satellite> {
         let mut cmd = command("whisper-sat")?;
         cmd.arg("run")
             .arg("--addr")
@@ -42,6 +52,7 @@ impl Satellite {
                     "info,whisper_rs=warn,whisper_rs::whisper_logging_hook=off".into()
                 }),
             )
+            .envs(env.iter().copied())
             .stdin(std::process::Stdio::null());
         let child = cmd.spawn().context("starting whisper-sat")?;
         let sat = Satellite {

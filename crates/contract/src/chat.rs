@@ -38,6 +38,9 @@ pub struct ChatRequest {
     pub max_sentences: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timeout_ms: Option<u64>,
+    /// The W3C `traceparent` of the reply span this turn's generation belongs under (docs/telemetry.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace: Option<String>,
 }
 
 /// What the agent perceives when the turn starts. Texts read from the world (a code) are quoted as data in the

@@ -13,6 +13,9 @@ pub struct SayRequest {
     pub rate_wpm: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pitch: Option<u32>,
+    /// The W3C `traceparent` of the reply this speech starts, when it answers a turn (docs/telemetry.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace: Option<String>,
 }
 
 /// The answer to a request to speak: the utterance number its speech and visemes carry.

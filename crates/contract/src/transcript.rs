@@ -38,6 +38,10 @@ pub struct TranscriptMessage {
     /// the other satellites there. Absent from satellites that do not say.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub threads: Option<u32>,
+    /// The turn's W3C `traceparent` (its root span, `flow_telemetry::TraceContext::turn` of the utterance), which
+    /// the spans of every process that works on the turn hang under (docs/telemetry.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace: Option<String>,
 }
 
 /// What a transcript says about the end of the user's turn (docs/asr.md, "End of turn").
@@ -71,6 +75,9 @@ pub struct VadMessage {
     pub utterance: Option<String>,
     /// The satellite that published the event (the transcript relay).
     pub satellite: String,
+    /// On an end: the `traceparent` of the turn the utterance starts (as on its transcript).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace: Option<String>,
 }
 
 /// What a consumer reads of any `Agent.transcript` message: a [`TranscriptMessage`], a [`VadMessage`], a partial
@@ -87,6 +94,9 @@ pub struct Heard {
     pub partial: bool,
     #[serde(default)]
     pub vad: Option<String>,
+    /// The turn's `traceparent` ([`TranscriptMessage::trace`]).
+    #[serde(default)]
+    pub trace: Option<String>,
 }
 
 impl Heard {

@@ -73,6 +73,11 @@ struct Args {
     /// turns whose rule forces a tool. Small models call tools when they should not: off by default.
     #[arg(long)]
     offer_tools: bool,
+    /// Export the spans of each turn's generation to an OpenTelemetry collector over OTLP/HTTP
+    /// (e.g. http://127.0.0.1:4318); by default `OTEL_EXPORTER_OTLP_ENDPOINT` if set, else no telemetry
+    /// (docs/telemetry.md).
+    #[arg(long)]
+    otlp: Option<String>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -119,6 +124,10 @@ fn main() -> anyhow::Result<()> {
             timeout: Duration::from_secs_f64(args.timeout_s.max(0.1)),
             offer_tools: args.offer_tools,
         },
+        telemetry: flow_telemetry::Telemetry::start(
+            "llm-sat",
+            args.otlp.as_deref().map(|url| ("--otlp", url)),
+        )?,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)

@@ -204,6 +204,7 @@ mod tests {
             speculative: false,
             max_sentences: None,
             timeout_ms: None,
+            trace: None,
         }
     }
 

@@ -14,6 +14,8 @@ use flow::{Client, Publisher};
 use tokio::sync::{mpsc, watch};
 use tracing::{debug, info, warn};
 
+use flow_telemetry::{SpanRecord, Telemetry, TraceContext, now_us};
+
 use crate::generator::Generator;
 use crate::turn::{self, Outcome, Step, TurnLimits};
 
@@ -26,6 +28,8 @@ const STEP_QUEUE: usize = 64;
 pub struct Settings {
     pub name: String,
     pub limits: TurnLimits,
+    /// Where the spans of each turn's generation go (docs/telemetry.md); off unless a collector is named.
+    pub telemetry: Telemetry,
 }
 
 /// One turn handed to the generator's thread.
@@ -55,6 +59,9 @@ struct Running {
     ended: Option<Result<Outcome, String>>,
     /// Sentences published so far.
     published: u32,
+    /// When the request came (µs, Unix clock), and when each sentence was generated: the spans of the turn.
+    received_us: u64,
+    sentences_us: Vec<u64>,
 }
 
 /// Serves chat turns until the hub connection closes or `stop` is set.
@@ -84,6 +91,7 @@ pub async fn run(
         running: None,
         next_id: 0,
         jobs: jobs_tx,
+        telemetry: settings.telemetry.clone(),
     };
     loop {
         tokio::select! {
@@ -111,6 +119,7 @@ struct Hub {
     running: Option<Running>,
     next_id: u64,
     jobs: std::sync::mpsc::Sender<Job>,
+    telemetry: Telemetry,
 }
 
 impl Hub {
@@ -149,6 +158,7 @@ impl Hub {
             running.call = Some(call);
             running.turn = request.turn;
             running.request.speculative = false;
+            running.request.trace = request.trace;
             let held = std::mem::take(&mut running.held);
             let ended = running.ended.take();
             for step in held {
@@ -195,6 +205,8 @@ impl Hub {
             held: Vec::new(),
             ended: None,
             published: 0,
+            received_us: now_us(),
+            sentences_us: Vec::new(),
         });
     }
 
@@ -230,6 +242,9 @@ impl Hub {
                 let Some(running) = self.running.as_mut().filter(|r| r.id == id) else {
                     return;
                 };
+                if matches!(step, Step::Sentence(_)) {
+                    running.sentences_us.push(now_us());
+                }
                 if running.request.speculative {
                     running.held.push(step);
                 } else {
@@ -273,16 +288,18 @@ impl Hub {
 
     /// The running turn ended: its End event, then its caller's answer.
     async fn finish(&mut self, ended: Result<Outcome, String>, adopted: bool) {
-        let Some(running) = self.running.take() else {
+        let Some(mut running) = self.running.take() else {
             return;
         };
-        let Some(call) = running.call else {
+        let Some(call) = running.call.take() else {
             return;
         };
         match ended {
             Ok(outcome) => {
                 let mut stats = outcome.stats;
                 stats.speculated = adopted;
+                let trace = trace_of(&running.request);
+                self.record(&running, trace, &outcome, &stats);
                 self.publish(ChatEvent::End {
                     turn: running.turn,
                     finish: outcome.finish,
@@ -290,6 +307,7 @@ impl Hub {
                 });
                 info!(
                     turn = running.turn,
+                    trace_id = %trace.map(|t| t.trace.to_string()).unwrap_or_default(),
                     finish = ?outcome.finish,
                     sentences = outcome.sentences.len(),
                     tokens = stats.tokens,
@@ -315,6 +333,54 @@ impl Hub {
         }
     }
 
+    /// The turn's spans under the reply span its request named: the generation, its first token, and each
+    /// sentence from the one before it (the first from the first token).
+    fn record(
+        &self,
+        running: &Running,
+        trace: Option<TraceContext>,
+        outcome: &Outcome,
+        stats: &ChatStats,
+    ) {
+        let Some(reply) = trace.filter(|_| self.telemetry.is_on()) else {
+            return;
+        };
+        let start = running.received_us;
+        let end = now_us();
+        let generate = SpanRecord::under(reply, "llm.generate", start, end)
+            .with("satellite", self.satellite.as_str())
+            .with("model", self.model.as_str())
+            .with("turn", running.turn)
+            .with("finish", format!("{:?}", outcome.finish).to_lowercase())
+            .with("prompt_tokens", stats.prompt_tokens)
+            .with("cached_tokens", stats.cached_tokens)
+            .with("tokens", stats.tokens)
+            .with("speculated", stats.speculated);
+        let generation = generate.context;
+        self.telemetry.record(generate);
+        let first_token = start + stats.first_token_ms * 1000;
+        self.telemetry.record(SpanRecord::under(
+            generation,
+            "llm.first_token",
+            start,
+            first_token,
+        ));
+        let mut from = first_token;
+        for (index, &at) in running.sentences_us.iter().enumerate() {
+            self.telemetry.record(
+                SpanRecord::under_as(
+                    generation,
+                    "llm.sentence",
+                    &format!("sentence {index}"),
+                    from,
+                    at,
+                )
+                .with("index", index as u64),
+            );
+            from = at;
+        }
+    }
+
     fn publish(&self, event: ChatEvent) {
         // Overflow: the stream's lanes drop oldest per subscriber; a full local queue drops this event (counted by
         // the SDK) rather than stall the turn.
@@ -324,10 +390,24 @@ impl Hub {
     }
 }
 
-/// Two requests for the same turn: everything but the speculative flag and the turn number is the same.
+/// The reply span a request names, if it names one that parses (a malformed one only costs the turn its spans).
+fn trace_of(request: &ChatRequest) -> Option<TraceContext> {
+    let text = request.trace.as_deref()?;
+    TraceContext::parse(text)
+        .inspect_err(|e| {
+            debug!(
+                turn = request.turn,
+                "llm: the request's trace is not used: {e}"
+            )
+        })
+        .ok()
+}
+
+/// Two requests for the same turn: everything but the speculative flag, the turn number and the trace is the same.
 fn same_turn(a: &ChatRequest, b: &ChatRequest) -> bool {
     let mut a = a.clone();
     a.speculative = b.speculative;
+    a.trace.clone_from(&b.trace);
     a.turn = b.turn;
     &a == b
 }

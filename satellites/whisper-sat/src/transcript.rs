@@ -14,6 +14,9 @@ pub fn vad_message(activity: &VoiceActivity, satellite: &str) -> VadMessage {
     VadMessage {
         vad,
         at_ms: at_us / 1000,
+        trace: utterance
+            .as_deref()
+            .map(|u| flow_telemetry::TraceContext::turn(u).traceparent()),
         utterance,
         satellite: satellite.to_owned(),
     }
@@ -38,9 +41,10 @@ mod tests {
             "sat",
         );
         let v = serde_json::to_value(&end)?;
+        let trace = flow_telemetry::TraceContext::turn("u1").traceparent();
         assert_eq!(
             v,
-            serde_json::json!({"vad":"end","at_ms":2000,"utterance":"u1","satellite":"sat"})
+            serde_json::json!({"vad":"end","at_ms":2000,"utterance":"u1","satellite":"sat","trace":trace})
         );
         // Not a transcript: satellites reading Agent.transcript skip it.
         assert!(serde_json::from_value::<TranscriptMessage>(v).is_err());
@@ -62,6 +66,7 @@ mod tests {
             full_window_retry: false,
             turn: None,
             threads: None,
+            trace: None,
         };
         let v: serde_json::Value = serde_json::to_value(&t)?;
         assert_eq!(v["final"], true);

@@ -1,10 +1,12 @@
 //! The `observer` module: the agent's figures at `/metrics`, read off the contract channels like any other
 //! consumer reads them: vision stage times from `Agent.detections`, ASR per satellite from `Agent.transcript` and
 //! the claim channels, and the stages of each conversational turn from the VAD events, transcripts, rule trace and
-//! speech ([`turns`]), which it also publishes turn by turn on `Agent.latency` for the page's status strip. It
-//! reads and reports only, so switching it off changes nothing else.
+//! speech ([`turns`]), which it also publishes turn by turn on `Agent.latency` for the page's status strip, and
+//! records as the turn's spans when telemetry is on ([`spans`]). It reads and reports only, so switching it off
+//! changes nothing else.
 
 mod claims;
+mod spans;
 mod turns;
 
 use agent_contract::channels;
@@ -231,6 +233,7 @@ impl Module for ObserverModule {
     fn run(self: Box<Self>, mut ctx: ModuleContext) -> ModuleFuture {
         Box::pin(async move {
             let figures = Figures::register(&ctx.metrics());
+            let telemetry = ctx.telemetry();
             let client = ctx.client.clone();
             let mut events = client.events();
             let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
@@ -257,7 +260,7 @@ impl Module for ObserverModule {
                                 .asr_processing
                                 .get_or_create(&label)
                                 .observe(t.processing_ms as f64 / 1000.0);
-                            figures.stages(turns.transcript(&t.utterance, d.ts_us));
+                            figures.stages(turns.transcript(&t.utterance, t.trace.as_deref(), d.ts_us));
                         }
                         Heard::Other => {}
                     },
@@ -266,7 +269,7 @@ impl Module for ObserverModule {
                         if let Ok(r) = serde_json::from_slice::<RuleChange>(&d.payload) {
                             let on_speech = r.because.iter().any(|b| b.starts_with("heard("));
                             let at_ms = u64::try_from(r.ts_ms).unwrap_or(0);
-                            figures.stages(turns.rule(at_ms, on_speech));
+                            figures.stages(turns.rule(&r.rule, at_ms, on_speech));
                         }
                     }
                     Some(d) = speech.recv() => {
@@ -274,6 +277,9 @@ impl Module for ObserverModule {
                             && let Some(turn) = turns.reply_audio(d.ts_us)
                         {
                             figures.reply(&turn);
+                            for span in spans::turn_spans(&turn) {
+                                telemetry.record(span);
+                            }
                             // One small message per turn; a full send queue drops it (counted by the SDK).
                             let message = serde_json::to_vec(&latency_message(&turn)).unwrap_or_default();
                             let _ = latency.try_publish(message);

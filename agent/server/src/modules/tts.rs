@@ -122,6 +122,7 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         sample_rate: synth.sample_rate(),
         lead: params.lead(),
         counters: counters.clone(),
+        telemetry: ctx.telemetry(),
     });
     let tts = Tts {
         synth,
@@ -181,9 +182,13 @@ impl Tts {
     /// Carries out a `say` or `cancel` request; the answer goes back to the caller.
     async fn request(&self, request: SayRequest) -> Result<Bytes, String> {
         match request {
-            SayRequest::Say { text, choice } => {
+            SayRequest::Say {
+                text,
+                choice,
+                trace,
+            } => {
                 let voice = self.voice_for(choice);
-                let utterance = self.speaker.say(&self.synth, &text, &voice)?;
+                let utterance = self.speaker.say(&self.synth, &text, &voice, trace)?;
                 debug!(utterance, %text, "tts: queued");
                 Ok(wire::said(utterance))
             }

@@ -44,6 +44,11 @@ pub struct Args {
     /// then never races the import for them when its hub starts first.
     #[arg(long)]
     no_relay: bool,
+    /// Export this satellite's spans of each turn to an OpenTelemetry collector over OTLP/HTTP
+    /// (e.g. http://127.0.0.1:4318); by default `OTEL_EXPORTER_OTLP_ENDPOINT` if set, else no telemetry
+    /// (docs/telemetry.md).
+    #[arg(long)]
+    otlp: Option<String>,
     #[command(flatten)]
     recognition: RecognitionArgs,
 }
@@ -75,6 +80,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         judge_turns: !args.no_speculate && !args.no_turn_detection,
         echo_gate: args.echo_gate,
         relay: !args.no_relay,
+        telemetry: flow_telemetry::Telemetry::start(
+            "whisper-sat",
+            args.otlp.as_deref().map(|url| ("--otlp", url)),
+        )?,
     };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

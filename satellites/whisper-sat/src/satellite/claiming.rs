@@ -5,7 +5,10 @@ use std::time::{Duration, Instant};
 
 use flow::{Client, ErrorCode, Publisher};
 
+use flow_telemetry::{SpanRecord, Telemetry, TraceContext, now_us};
+
 use super::relay;
+use super::settings::Settings;
 use super::worker::Finished;
 use crate::claim::{self, CLAIM_PREFIX, ClaimHeader, PauseTurn};
 use crate::ledger::{Ledger, Pending, SAME_SPEECH_US, Standing};
@@ -85,14 +88,16 @@ pub(super) async fn try_claim(
 /// Submits an accepted transcript (retrying while the relay role changes hands) and marks the claim done.
 pub(super) async fn finish(
     client: &Client,
-    satellite: &str,
+    settings: &Settings,
     model: &str,
     f: &Finished,
     ledger: &mut Ledger,
 ) {
+    let satellite = settings.name.as_str();
     let u = &f.utterance;
     match &f.outcome {
         Ok(Outcome::Speech(d)) => {
+            let turn = TraceContext::turn(&u.id);
             let msg = TranscriptMessage {
                 utterance: u.id.clone(),
                 text: d.text.clone(),
@@ -106,8 +111,17 @@ pub(super) async fn finish(
                 full_window_retry: d.full_window_retry,
                 turn: f.turn,
                 threads: u32::try_from(d.threads).ok(),
+                trace: Some(turn.traceparent()),
             };
-            tracing::info!(id = %u.id, ms = msg.processing_ms, threads = d.threads, speculative = f.speculative, turn = ?f.turn, text = %msg.text, "transcribed");
+            record_decode(
+                &settings.telemetry,
+                turn,
+                satellite,
+                model,
+                &msg,
+                f.speculative,
+            );
+            tracing::info!(id = %u.id, trace_id = %turn.trace, ms = msg.processing_ms, threads = d.threads, speculative = f.speculative, turn = ?f.turn, text = %msg.text, "transcribed");
             let payload = serde_json::to_vec(&msg).unwrap_or_default();
             let deadline = Instant::now() + Duration::from_secs(15);
             loop {
@@ -143,4 +157,38 @@ pub(super) async fn finish(
     if let Err(e) = f.claim.set_header(&header.to_json()).await {
         tracing::warn!(id = %u.id, "marking the claim done: {e}");
     }
+}
+
+/// The decode's span, under the turn's `transcription` stage (which robot-agent records from the hub's stamps): it
+/// ends now, as the transcript goes to the relay, and began `processing_ms` before (at the pause when it was decoded
+/// speculatively, so it may start before the stage does).
+fn record_decode(
+    telemetry: &Telemetry,
+    turn: TraceContext,
+    satellite: &str,
+    model: &str,
+    msg: &TranscriptMessage,
+    speculative: bool,
+) {
+    if !telemetry.is_on() {
+        return;
+    }
+    let end = now_us();
+    let span = SpanRecord::under_as(
+        turn.child("transcription"),
+        "whisper.decode",
+        &format!("decode {satellite}"),
+        end.saturating_sub(msg.processing_ms.saturating_mul(1000)),
+        end,
+    )
+    .with("satellite", satellite)
+    .with("model", model)
+    .with("utterance", msg.utterance.as_str())
+    .with("audio_ms", msg.end_us.saturating_sub(msg.start_us) / 1000)
+    .with("speculative", speculative);
+    let span = match msg.threads {
+        Some(threads) => span.with("threads", threads),
+        None => span,
+    };
+    telemetry.record(span);
 }

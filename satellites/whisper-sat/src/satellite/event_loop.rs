@@ -508,7 +508,7 @@ impl Satellite {
         }
         finish(
             &self.client,
-            &self.settings.name,
+            &self.settings,
             &self.model,
             &f,
             &mut self.ledger,

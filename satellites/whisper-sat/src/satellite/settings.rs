@@ -22,4 +22,6 @@ pub struct Settings {
     /// Take the transcript relay role when it is free. Off for a satellite on a hub that imports the relay's
     /// channels from another hub (docs/federation.md): the relay lives there.
     pub relay: bool,
+    /// Where this satellite's decode spans go (docs/telemetry.md); off unless a collector is named.
+    pub telemetry: flow_telemetry::Telemetry,
 }

@@ -7,6 +7,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use agent_contract::channels::CHAT;
 use agent_contract::chat::{ChatAnswer, ChatEvent, ChatMessage, ChatRequest, Facts, Role, Tool};
 use flow::Client;
+use flow_telemetry::TraceContext;
 use serde::{Deserialize, Serialize};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
@@ -153,6 +154,7 @@ impl Chats {
         facts: Facts,
         tools: Vec<Tool>,
         force_tool: Option<String>,
+        reply: Option<TraceContext>,
     ) -> u64 {
         // A turn still running (or waiting for its answer) is cut off here: the memory keeps what was heard of it.
         self.interrupt(Instant::now());
@@ -176,6 +178,7 @@ impl Chats {
             speculative: false,
             max_sentences: Some(self.max_sentences),
             timeout_ms: Some(self.reply_timeout.as_millis() as u64),
+            trace: reply.map(|r| r.traceparent()),
         };
         self.current = Some(Turn::new(turn, text, facts));
         let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);

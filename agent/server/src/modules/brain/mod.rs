@@ -90,6 +90,9 @@ struct Mind {
     counters: Counters,
     /// The last reply asked of the TTS module, for the trace entry of a barge-in that cuts it off.
     saying: Option<String>,
+    /// The turn the last final transcript started (its trace context), which a chat turn's request names.
+    answering: Option<flow_telemetry::TraceContext>,
+    speech: Speech,
     /// Chat turns with the language-model satellite.
     chats: Chats,
 }
@@ -130,6 +133,8 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         language,
         counters: Counters::default(),
         saying: None,
+        answering: None,
+        speech: speech.clone(),
         chats: Chats::new(
             client.clone(),
             speech,
@@ -259,7 +264,13 @@ impl Mind {
             return;
         }
         self.counters.transcripts += 1;
-        debug!(transcript = %text, "brain: heard");
+        self.answering = percepts::turn_trace(&data.payload);
+        self.speech
+            .answering(self.answering.map(|t| t.child("reply")));
+        match self.answering {
+            Some(turn) => debug!(transcript = %text, trace_id = %turn.trace, "brain: heard"),
+            None => debug!(transcript = %text, "brain: heard"),
+        }
         self.perceive("heard", vec![Value::Text(text)]);
     }
 
@@ -473,10 +484,14 @@ impl Mind {
             })
             .collect();
         let facts = self.facts(now);
+        let reply = self.answering.map(|t| t.child("reply"));
         let turn = self
             .chats
-            .start(text, self.language.code(), facts, tools, tool);
-        debug!(turn, text, "brain: a chat turn starts");
+            .start(text, self.language.code(), facts, tools, tool, reply);
+        match reply {
+            Some(reply) => info!(turn, trace_id = %reply.trace, "brain: a chat turn starts"),
+            None => debug!(turn, text, "brain: a chat turn starts"),
+        }
     }
 
     fn outcome(&mut self, outcome: Outcome) {

@@ -4,6 +4,7 @@
 use agent_brain::Value;
 use agent_contract::detections::DetectionsMsg;
 use agent_contract::transcript::Heard;
+use flow_telemetry::TraceContext;
 
 /// A percept to assert: `name(args...)`, or the whole current set of a predicate.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,6 +66,13 @@ pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
             })
         }
     }
+}
+
+/// The turn a final transcript starts, from the `traceparent` it carries (docs/telemetry.md); `None` for plain text,
+/// a message without one, or one that does not parse (that turn is then not traced).
+pub fn turn_trace(payload: &[u8]) -> Option<TraceContext> {
+    let message: Heard = serde_json::from_slice(payload).ok()?;
+    TraceContext::parse(message.trace.as_deref()?).ok()
 }
 
 /// The percepts in one `Agent.detections` message (faces, motion and visible codes of a video frame).

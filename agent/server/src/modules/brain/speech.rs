@@ -2,9 +2,11 @@
 //! to know when the agent is speaking (the `speaking` percept).
 
 use std::collections::HashMap;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use flow::Client;
+use flow_telemetry::TraceContext;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 use tracing::{debug, warn};
@@ -23,8 +25,14 @@ const REQUEST_TIMEOUT: Duration = Duration::from_secs(2);
 
 #[derive(Debug)]
 enum Request {
-    Say { text: String, durative: bool },
-    StopDurative { text: String },
+    Say {
+        text: String,
+        durative: bool,
+        trace: Option<TraceContext>,
+    },
+    StopDurative {
+        text: String,
+    },
     CancelAll,
 }
 
@@ -32,6 +40,9 @@ enum Request {
 #[derive(Debug, Clone)]
 pub struct Speech {
     requests: mpsc::Sender<Request>,
+    /// The reply span of the turn just heard, given to the next utterance (the reply's first speech), so that the
+    /// TTS module's synthesis span joins the turn's trace (docs/telemetry.md).
+    reply: Arc<Mutex<Option<TraceContext>>>,
 }
 
 impl Speech {
@@ -39,14 +50,29 @@ impl Speech {
     pub fn start(client: Client) -> Self {
         let (requests, queue) = mpsc::channel(REQUEST_QUEUE);
         tokio::spawn(speak_in_order(client, queue));
-        Speech { requests }
+        Speech {
+            requests,
+            reply: Arc::default(),
+        }
+    }
+
+    /// The turn heard now will be answered under `reply` (its reply span); `None` when what was heard carried no
+    /// trace.
+    pub fn answering(&self, reply: Option<TraceContext>) {
+        *self.reply.lock().unwrap_or_else(PoisonError::into_inner) = reply;
     }
 
     /// Speaks `text`; a durative utterance can be stopped with [`Speech::stop_durative`].
     pub async fn say(&self, text: &str, durative: bool) {
+        let trace = self
+            .reply
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
         self.send(Request::Say {
             text: text.to_owned(),
             durative,
+            trace,
         });
     }
 
@@ -75,11 +101,12 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
     let mut durative: HashMap<String, u64> = HashMap::new();
     while let Some(request) = queue.recv().await {
         let body = match &request {
-            Request::Say { text, .. } => serde_json::to_value(SayRequest {
+            Request::Say { text, trace, .. } => serde_json::to_value(SayRequest {
                 text: text.clone(),
                 voice: None,
                 rate_wpm: None,
                 pitch: None,
+                trace: trace.map(|t| t.traceparent()),
             })
             .unwrap_or_default(),
             Request::StopDurative { text } => match durative.remove(text) {
@@ -97,6 +124,7 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
                 if let Request::Say {
                     text,
                     durative: true,
+                    ..
                 } = request
                     && let Ok(SayAnswer { utterance }) = serde_json::from_slice(&answer)
                 {

@@ -43,9 +43,20 @@ struct Turn {
     vad_end_us: u64,
 }
 
+/// What names a turn across processes: its utterance id and the trace context its transcript carried.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TurnName {
+    pub utterance: String,
+    /// The `traceparent` of the transcript, if it had one.
+    pub trace: Option<String>,
+    /// The rule that answered it.
+    pub rule: String,
+}
+
 /// The turn that has its transcript and waits for its rule, then for its reply.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct Answering {
+    name: TurnName,
     speech_end_us: u64,
     vad_stage_us: u64,
     transcript_us: u64,
@@ -55,8 +66,9 @@ struct Answering {
 }
 
 /// A turn from the end of speech to its reply, every stage in µs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TurnDone {
+    pub name: TurnName,
     pub speech_end_us: u64,
     pub vad_us: u64,
     pub transcript_us: u64,
@@ -105,13 +117,23 @@ impl Turns {
         )]
     }
 
-    /// A final transcript of `utterance` was published at `event_us`.
-    pub fn transcript(&mut self, utterance: &str, event_us: u64) -> Vec<(Stage, u64)> {
+    /// A final transcript of `utterance` was published at `event_us`, carrying the trace context `trace`.
+    pub fn transcript(
+        &mut self,
+        utterance: &str,
+        trace: Option<&str>,
+        event_us: u64,
+    ) -> Vec<(Stage, u64)> {
         let Some(turn) = self.ended.remove(utterance) else {
             return Vec::new();
         };
         let stage = event_us.saturating_sub(turn.vad_end_us);
         self.answering = Some(Answering {
+            name: TurnName {
+                utterance: utterance.to_owned(),
+                trace: trace.map(str::to_owned),
+                rule: String::new(),
+            },
             speech_end_us: turn.speech_end_us,
             vad_stage_us: turn.vad_end_us.saturating_sub(turn.speech_end_us),
             transcript_us: event_us,
@@ -122,13 +144,14 @@ impl Turns {
         vec![(Stage::VadEndToTranscript, stage)]
     }
 
-    /// A rule fired at `at_ms`; `heard` says whether its guard rested on something heard (an answer, not a
+    /// Rule `rule` fired at `at_ms`; `heard` says whether its guard rested on something heard (an answer, not a
     /// greeting or a timer).
-    pub fn rule(&mut self, at_ms: u64, heard: bool) -> Vec<(Stage, u64)> {
+    pub fn rule(&mut self, rule: &str, at_ms: u64, heard: bool) -> Vec<(Stage, u64)> {
         let at_us = at_ms.saturating_mul(1000);
         match &mut self.answering {
             Some(a) if heard && a.rule_us.is_none() && at_us + 1000 >= a.transcript_us => {
                 a.rule_us = Some(at_us);
+                rule.clone_into(&mut a.name.rule);
                 a.rule_stage_us = at_us.saturating_sub(a.transcript_us);
                 vec![(Stage::TranscriptToRule, a.rule_stage_us)]
             }
@@ -138,10 +161,10 @@ impl Turns {
 
     /// The first PCM of an utterance of speech was published at `event_us`: the turn it answers, if any, is done.
     pub fn reply_audio(&mut self, event_us: u64) -> Option<TurnDone> {
-        let a = self.answering?;
-        let rule_us = a.rule_us?;
-        self.answering = None;
+        let rule_us = self.answering.as_ref()?.rule_us?;
+        let a = self.answering.take()?;
         Some(TurnDone {
+            name: a.name,
             speech_end_us: a.speech_end_us,
             vad_us: a.vad_stage_us,
             transcript_us: a.transcript_stage_us,
@@ -156,6 +179,7 @@ impl Turns {
             .retain(|_, t| now_us.saturating_sub(t.vad_end_us) < STALE_US);
         if self
             .answering
+            .as_ref()
             .is_some_and(|a| now_us.saturating_sub(a.transcript_us) >= STALE_US)
         {
             self.answering = None;
@@ -175,13 +199,21 @@ mod tests {
             vec![(Stage::SpeechEndToVadEnd, 300_000)]
         );
         assert_eq!(
-            t.transcript("u1", 1_340_000),
+            t.transcript("u1", Some("00-t-s-01"), 1_340_000),
             vec![(Stage::VadEndToTranscript, 40_000)]
         );
-        assert_eq!(t.rule(1_345, true), vec![(Stage::TranscriptToRule, 5_000)]);
+        assert_eq!(
+            t.rule("main.answer", 1_345, true),
+            vec![(Stage::TranscriptToRule, 5_000)]
+        );
         assert_eq!(
             t.reply_audio(1_400_000),
             Some(TurnDone {
+                name: TurnName {
+                    utterance: "u1".into(),
+                    trace: Some("00-t-s-01".into()),
+                    rule: "main.answer".into(),
+                },
                 speech_end_us: 1_000_000,
                 vad_us: 300_000,
                 transcript_us: 40_000,
@@ -198,9 +230,9 @@ mod tests {
         let mut t = Turns::default();
         assert_eq!(t.reply_audio(5_000_000), None, "a greeting");
         t.vad_end("u2", 10_000, 10_300_000);
-        t.transcript("u2", 10_310_000);
+        t.transcript("u2", None, 10_310_000);
         assert!(
-            t.rule(10_320, false).is_empty(),
+            t.rule("main.greet", 10_320, false).is_empty(),
             "a rule on a face, not on speech"
         );
         assert_eq!(
@@ -208,20 +240,20 @@ mod tests {
             None,
             "no rule answered the turn yet"
         );
-        assert_eq!(t.rule(10_330, true).len(), 1);
+        assert_eq!(t.rule("main.answer", 10_330, true).len(), 1);
         assert!(t.reply_audio(10_500_000).is_some());
     }
 
     #[test]
     fn a_transcript_of_an_unknown_utterance_and_stale_turns_are_ignored() {
         let mut t = Turns::default();
-        assert!(t.transcript("nobody", 1).is_empty());
+        assert!(t.transcript("nobody", None, 1).is_empty());
         t.vad_end("old", 1_000, 1_000_000);
         t.vad_end("new", 40_000, 40_000_000);
         assert!(
-            t.transcript("old", 40_100_000).is_empty(),
+            t.transcript("old", None, 40_100_000).is_empty(),
             "forgotten after 30 s"
         );
-        assert_eq!(t.transcript("new", 40_100_000).len(), 1);
+        assert_eq!(t.transcript("new", None, 40_100_000).len(), 1);
     }
 }

@@ -13,6 +13,7 @@ use std::time::Duration;
 use agent_contract::avatar::AvatarCommand;
 use agent_voice::{CancelToken, SpeechEvent, Synthesizer, Utterance, Viseme, VoiceSettings};
 use flow::Publisher;
+use flow_telemetry::{SpanRecord, Telemetry, TraceContext, now_us};
 use tokio::sync::{Notify, mpsc};
 use tokio::time::Instant;
 use tracing::warn;
@@ -63,6 +64,7 @@ pub struct Outputs {
     pub sample_rate: u32,
     pub lead: Duration,
     pub counters: Arc<Counters>,
+    pub telemetry: Telemetry,
 }
 
 /// An utterance and its text, for the caption.
@@ -70,6 +72,9 @@ pub struct Outputs {
 struct Job {
     utterance: Utterance,
     text: String,
+    /// The reply span it starts, and when it was asked for (µs, Unix clock): its synthesis span.
+    trace: Option<TraceContext>,
+    asked_us: u64,
 }
 
 #[derive(Debug, Default)]
@@ -107,13 +112,17 @@ impl Speaker {
         synth: &Synthesizer,
         text: &str,
         voice: &VoiceSettings,
+        trace: Option<TraceContext>,
     ) -> Result<u64, String> {
+        let asked_us = now_us();
         let utterance = synth.speak(text, voice).map_err(|e| e.to_string())?;
         let id = utterance.id();
         self.state().pending.insert(id, utterance.cancel_token());
         if let Err(error) = self.jobs.try_send(Job {
             utterance,
             text: text.to_owned(),
+            trace,
+            asked_us,
         }) {
             self.state().pending.remove(&id);
             // The utterance is dropped with the error, which stops it in the engine.
@@ -194,6 +203,8 @@ async fn play(job: Job, speaker: &Speaker, out: &Outputs) {
     let Job {
         mut utterance,
         text,
+        trace,
+        asked_us,
     } = job;
     let id = utterance.id();
     let token = utterance.cancel_token();
@@ -248,6 +259,16 @@ async fn play(job: Job, speaker: &Speaker, out: &Outputs) {
                     let payload = wire::speech_payload(id, chunk.start_sample, &chunk.pcm);
                     if let Err(e) = out.speech.publish(payload).await {
                         warn!("tts: speech not sent: {e}");
+                    }
+                    if chunk.start_sample == 0
+                        && let Some(reply) = trace
+                    {
+                        // From the request to its first PCM on the hub: the synthesis the user waits for.
+                        out.telemetry.record(
+                            SpanRecord::under(reply, "synthesis", asked_us, now_us())
+                                .with("utterance", id)
+                                .with("samples", chunk.end_sample()),
+                        );
                     }
                     Counters::bump(&out.counters.chunks);
                     published = chunk.end_sample();

@@ -10,6 +10,7 @@ use agent_contract::say;
 use agent_contract::transcript::Heard;
 use agent_voice::Viseme;
 use bytes::{BufMut, Bytes, BytesMut};
+use flow_telemetry::TraceContext;
 
 /// An `Agent.speech` payload: `[utterance u32 LE][offset u32 LE][s16le PCM]`, `offset` being the index of the
 /// first sample inside the utterance.
@@ -43,7 +44,12 @@ pub enum CancelTarget {
 /// A request to the TTS module.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SayRequest {
-    Say { text: String, choice: VoiceChoice },
+    Say {
+        text: String,
+        choice: VoiceChoice,
+        /// The reply span this speech starts (docs/telemetry.md).
+        trace: Option<TraceContext>,
+    },
     Cancel(CancelTarget),
 }
 
@@ -75,9 +81,15 @@ pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
         rate_wpm: say.rate_wpm,
         pitch: say.pitch,
     };
+    // A trace that does not parse costs the turn its synthesis span, never the speech.
+    let trace = say
+        .trace
+        .as_deref()
+        .and_then(|t| TraceContext::parse(t).ok());
     Ok(SayRequest::Say {
         text: say.text,
         choice,
+        trace,
     })
 }
 
@@ -104,6 +116,7 @@ pub fn ctrl_request(payload: &[u8]) -> Option<SayRequest> {
         return (!text.is_empty()).then(|| SayRequest::Say {
             text: text.to_owned(),
             choice: VoiceChoice::default(),
+            trace: None,
         });
     }
     ctrl.stops_speech()
@@ -255,8 +268,22 @@ mod tests {
                 choice: VoiceChoice {
                     voice: Some("it".into()),
                     ..VoiceChoice::default()
-                }
+                },
+                trace: None,
             })
+        );
+        let reply = TraceContext::turn("u1").child("reply");
+        let traced = format!(r#"{{"text":"Hi","trace":"{}"}}"#, reply.traceparent());
+        assert!(
+            matches!(say_request(traced.as_bytes()), Ok(SayRequest::Say { trace: Some(t), .. }) if t == reply),
+            "a reply's speech names its span"
+        );
+        assert!(
+            matches!(
+                say_request(br#"{"text":"Hi","trace":"junk"}"#),
+                Ok(SayRequest::Say { trace: None, .. })
+            ),
+            "a malformed trace costs the span, not the speech"
         );
         assert_eq!(
             say_request(br#"{"cancel":"all"}"#),
