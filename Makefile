@@ -78,6 +78,7 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
 	$(TARGET_DIR)/release/asr-bench --write docs/bench-asr.md | tee $(BENCH_LOGS)/asr-bench.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/voice-latency --write docs/bench-voice-latency.md | tee $(BENCH_LOGS)/voice-latency.log
+	$(TARGET_DIR)/release/telemetry-bench | tee $(BENCH_LOGS)/telemetry-bench.log
 	$(MAKE) python
 	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PYTHONUNBUFFERED=1 satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md | tee $(BENCH_LOGS)/bench_python.log

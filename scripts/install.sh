@@ -18,6 +18,8 @@
 #                 /etc/systemd/system
 #   SERVICE_USER  the user the services run as (default robot-agent); made as a system user when installing as
 #                 root without DESTDIR, unless CREATE_USER=no
+#   SYSTEMCTL     no: do not tell a running systemd about the units (tests/install.rs installs into a temporary
+#                 PREFIX with SYSTEMCTL=no CREATE_USER=no, touching nothing outside it)
 set -euo pipefail
 
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -177,7 +179,7 @@ if [[ -z "$destdir" && "$(id -u)" == 0 ]]; then
             --comment "robot-agent services" "$user"
         note "made the system user $user"
     fi
-    if [[ -d /run/systemd/system ]]; then
+    if [[ -d /run/systemd/system && "${SYSTEMCTL:-yes}" != no ]]; then
         systemctl daemon-reload
     fi
 fi

@@ -4,7 +4,8 @@
 # administrator's or the robot's: the configuration in SYSCONFDIR/robot-agent, the state directory
 # /var/lib/robot-agent (tokens, the pair database, recordings) and the services' user; it says how to remove them.
 #
-# usage: scripts/uninstall.sh [PREFIX]          PREFIX defaults to /usr/local; DESTDIR as for install.sh
+# usage: scripts/uninstall.sh [PREFIX]          PREFIX defaults to /usr/local; DESTDIR and SYSTEMCTL=no as for
+#                                              install.sh
 set -euo pipefail
 
 prefix="${1:-${PREFIX:-/usr/local}}"
@@ -22,7 +23,7 @@ if [[ ! -f "$manifest" ]]; then
 fi
 
 # Stop the services before their binaries go (for real only: a staged tree has no running services).
-if [[ -z "$destdir" && "$(id -u)" == 0 && -d /run/systemd/system ]]; then
+if [[ -z "$destdir" && "$(id -u)" == 0 && -d /run/systemd/system && "${SYSTEMCTL:-yes}" != no ]]; then
     units=()
     while read -r kind path; do
         [[ "$kind" == file && "$path" == *.service ]] && units+=("${path##*/}")
@@ -50,7 +51,7 @@ if [[ -d "$destdir$pkgdatadir" ]]; then
     find "$destdir$pkgdatadir" -depth -type d -empty -delete
 fi
 
-if [[ -z "$destdir" && "$(id -u)" == 0 && -d /run/systemd/system ]]; then
+if [[ -z "$destdir" && "$(id -u)" == 0 && -d /run/systemd/system && "${SYSTEMCTL:-yes}" != no ]]; then
     systemctl daemon-reload
 fi
 note "removed robot-agent from ${destdir}${prefix}"

@@ -1,7 +1,7 @@
 //! The command line of the hub's binaries (`flow-hub`, `robot-agent`): options, the configuration, logging, the
 //! application's modules and routes, and a clean shutdown on Ctrl-C or SIGTERM. Configuration errors exit with
 //! status 2 and name the file, the key and the reason. `doctor` checks the machine instead of serving
-//! (`crate::doctor`).
+//! (`crate::doctor`), with the checks a binary adds ([`main_with`]).
 
 use std::path::PathBuf;
 
@@ -10,6 +10,7 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use tracing_subscriber::EnvFilter;
 
 use crate::config::{Config, ConfigError};
+use crate::doctor::Check;
 use crate::server::Application;
 
 /// Options common to every hub binary.
@@ -52,33 +53,60 @@ pub struct Args {
 /// What to do instead of serving.
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Check this machine: models and their checksums, ports, the data directory, the certificate, satellites.
+    /// Check this machine: ports, the data directory, the certificate, the page's secure context, the clock,
+    /// satellites.
     ///
-    /// Checks before or while the agent runs: the models and their checksums, the configured ports, the data
-    /// directory's room, the HTTPS certificate's names and the connected satellites. One line per finding, with its
-    /// fix. Exit status: 0 when no problem was found (warnings included), 1 when one was, 2 for an invalid
-    /// configuration.
+    /// Checks before or while the hub runs: the configured ports, the data directory's room, the HTTPS certificate's
+    /// names, whether the page gets the microphone and camera (a secure context), this machine's clock against the
+    /// hub's at the HTTP address (on a satellite's machine: --http ROBOT:PORT) and the connected satellites, after
+    /// the binary's own checks. One line per finding, with its fix. Exit status: 0 when no problem was found
+    /// (warnings included), 1 when one was, 2 for an invalid configuration.
     Doctor {
-        /// The models folder (default: the checkout's `models/`, or the installed `PREFIX/share/robot-agent/models`).
-        #[arg(long, value_name = "DIR")]
-        models: Option<PathBuf>,
+        /// The address or host name a browser will open the page by (`robot.local`, `192.168.1.20`): checks that
+        /// the page is a secure context there, so that it gets the microphone and camera.
+        #[arg(long, value_name = "ADDRESS")]
+        from: Option<String>,
     },
 }
 
 /// Runs the binary `name` (described by `about`) with the application `build` makes from the configuration, until
-/// Ctrl-C or SIGTERM; exits the process on error.
+/// Ctrl-C or SIGTERM; exits the process on error. Its `doctor` runs the hub's checks.
 pub async fn main(
     name: &'static str,
     about: &'static str,
     build: fn(&Config) -> anyhow::Result<Application>,
 ) {
-    let matches = Args::command().name(name).about(about).get_matches();
+    main_with(name, about, build, &[]).await;
+}
+
+/// [`main`], with `checks` run by `doctor` before the hub's (the binary's own parts: robot-agent's models), their
+/// options added to the subcommand.
+pub async fn main_with(
+    name: &'static str,
+    about: &'static str,
+    build: fn(&Config) -> anyhow::Result<Application>,
+    checks: &[&dyn Check],
+) {
+    let command = Args::command()
+        .name(name)
+        .about(about)
+        .mut_subcommand("doctor", |doctor| {
+            checks.iter().fold(doctor, |d, check| check.arguments(d))
+        });
+    let matches = command.get_matches();
     let args = match Args::from_arg_matches(&matches) {
         Ok(a) => a,
         Err(e) => e.exit(),
     };
-    if let Some(Command::Doctor { models }) = &args.command {
-        let code = match doctor(&args, models.clone()) {
+    if let Some(Command::Doctor { from }) = &args.command {
+        let options = crate::doctor::Options {
+            from: from.clone(),
+            args: matches
+                .subcommand_matches("doctor")
+                .cloned()
+                .unwrap_or_default(),
+        };
+        let code = match doctor(&args, &options, checks) {
             Ok(code) => code,
             Err(e) => exit_code(name, &e),
         };
@@ -101,12 +129,13 @@ fn exit_code(name: &str, e: &anyhow::Error) -> i32 {
 }
 
 /// `doctor`: prints the findings on stdout and returns the exit status.
-fn doctor(args: &Args, models: Option<PathBuf>) -> anyhow::Result<i32> {
+fn doctor(
+    args: &Args,
+    options: &crate::doctor::Options,
+    checks: &[&dyn Check],
+) -> anyhow::Result<i32> {
     let config = configure(args)?;
-    let options = crate::doctor::Options {
-        models: models.unwrap_or_else(crate::doctor::default_models_dir),
-    };
-    let findings = crate::doctor::examine(&config, &options);
+    let findings = crate::doctor::examine(&config, options, checks);
     for finding in &findings {
         println!("{finding}");
     }

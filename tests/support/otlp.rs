@@ -124,11 +124,16 @@ impl Collector {
                 Ok(Some(span)) => got.push(span),
                 Ok(None) => anyhow::bail!("the collector stopped"),
                 Err(_) => {
-                    let names: Vec<String> = got
-                        .iter()
-                        .map(|r| format!("{}:{}", r.service, r.span.name))
-                        .collect();
-                    anyhow::bail!("no {what} within {} s; spans: {names:?}", within.as_secs());
+                    let mut names = std::collections::BTreeMap::new();
+                    for r in &got {
+                        *names
+                            .entry(format!("{}:{}", r.service, r.span.name))
+                            .or_insert(0usize) += 1;
+                    }
+                    anyhow::bail!(
+                        "no {what} within {} s; spans by name: {names:?}",
+                        within.as_secs()
+                    );
                 }
             }
         }

@@ -82,6 +82,12 @@ pub fn gather(config: &Config) -> Facts {
     }
 }
 
+/// Whether a certificate made for `names` names `name` (a host name in any case, or an address), so that a browser
+/// opening the page by `name` accepts it.
+pub fn names_name(names: &BTreeSet<String>, name: &str) -> bool {
+    names.iter().any(|n| n.eq_ignore_ascii_case(name))
+}
+
 /// The findings for the certificate (none when HTTPS is off).
 pub fn findings(facts: &Facts) -> Vec<Finding> {
     let unreadable = |cert: &Path, why: &str, fix: &str| {
@@ -115,7 +121,11 @@ pub fn findings(facts: &Facts) -> Vec<Finding> {
                 "delete the data directory's tls folder; the agent makes a new certificate at start",
             )],
             Some(Ok(_)) => {
-                let missing: Vec<&str> = wanted.difference(names).map(String::as_str).collect();
+                let missing: Vec<&str> = wanted
+                    .iter()
+                    .filter(|w| !names_name(names, w))
+                    .map(String::as_str)
+                    .collect();
                 if missing.is_empty() {
                     vec![Finding::ok(
                         "tls",
@@ -228,6 +238,14 @@ mod tests {
             cert,
         });
         assert_eq!(f[0].level, Level::Problem, "{}", f[0]);
+    }
+
+    #[test]
+    fn a_name_is_found_in_any_case() {
+        let made = names(&["robot.local", "192.168.1.20"]);
+        assert!(names_name(&made, "Robot.Local"));
+        assert!(names_name(&made, "192.168.1.20"));
+        assert!(!names_name(&made, "robot"));
     }
 
     #[test]

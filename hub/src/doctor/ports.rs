@@ -2,9 +2,9 @@
 //! as a running robot-agent (its `/healthz` answers), or held by something else.
 
 use std::io::{Read, Write};
-use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::time::{Duration, SystemTime};
 
 use super::finding::Finding;
 use crate::config::Config;
@@ -17,6 +17,8 @@ const PATIENCE: Duration = Duration::from_secs(3);
 pub enum PortState {
     Free,
     InUse,
+    /// The address is none of this machine's: another machine's hub (a satellite's machine checking the robot).
+    Elsewhere,
     /// Binding failed for another reason (a privileged port, an address this machine does not have).
     Unusable(String),
 }
@@ -49,6 +51,7 @@ fn bind_state(addr: SocketAddr) -> PortState {
     match TcpListener::bind(addr) {
         Ok(_) => PortState::Free,
         Err(e) if e.kind() == std::io::ErrorKind::AddrInUse => PortState::InUse,
+        Err(e) if e.kind() == std::io::ErrorKind::AddrNotAvailable => PortState::Elsewhere,
         Err(e) => PortState::Unusable(e.to_string()),
     }
 }
@@ -62,38 +65,87 @@ fn unix_state(path: &Path) -> PortState {
     }
 }
 
-/// `GET path` over plain HTTP/1.0 with an optional bearer token: the status and body, `None` if nothing answers.
-pub fn http_get(addr: SocketAddr, path: &str, token: Option<&str>) -> Option<(u16, String)> {
+/// An answer to [`http_request`], with when the request went out and when the answer began to come back (this
+/// machine's clock).
+#[derive(Debug, Clone)]
+pub struct Reply {
+    pub status: u16,
+    /// The status line and the header lines.
+    pub head: String,
+    pub body: String,
+    pub sent: SystemTime,
+    pub received: SystemTime,
+}
+
+impl Reply {
+    /// The value of header `name` (any case).
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.head.lines().skip(1).find_map(|line| {
+            let (n, v) = line.split_once(':')?;
+            n.trim().eq_ignore_ascii_case(name).then(|| v.trim())
+        })
+    }
+}
+
+/// `GET path` over plain HTTP/1.0 with an optional bearer token, `None` if nothing answers. The connection is made
+/// before `sent` is taken, so that the two stamps hold one round trip, not two.
+pub fn http_request(addr: SocketAddr, path: &str, token: Option<&str>) -> Option<Reply> {
     let mut stream = TcpStream::connect_timeout(&addr, PATIENCE).ok()?;
     stream.set_read_timeout(Some(PATIENCE)).ok()?;
     stream.set_write_timeout(Some(PATIENCE)).ok()?;
     let auth = token.map_or_else(String::new, |t| format!("Authorization: Bearer {t}\r\n"));
     let request = format!("GET {path} HTTP/1.0\r\nHost: {addr}\r\nConnection: close\r\n{auth}\r\n");
+    let sent = SystemTime::now();
     stream.write_all(request.as_bytes()).ok()?;
-    let mut raw = Vec::new();
-    stream.take(4 << 20).read_to_end(&mut raw).ok()?;
+    let mut raw = vec![0u8; 4096];
+    let first = stream.read(&mut raw).ok()?;
+    let received = SystemTime::now();
+    raw.truncate(first);
+    if first > 0 {
+        stream.take(4 << 20).read_to_end(&mut raw).ok()?;
+    }
     let text = String::from_utf8_lossy(&raw);
     let (head, body) = text.split_once("\r\n\r\n")?;
     let status = head.split_whitespace().nth(1)?.parse().ok()?;
-    Some((status, body.to_string()))
+    Some(Reply {
+        status,
+        head: head.to_string(),
+        body: body.to_string(),
+        sent,
+        received,
+    })
+}
+
+/// `GET path` as [`http_request`]: the status and body.
+pub fn http_get(addr: SocketAddr, path: &str, token: Option<&str>) -> Option<(u16, String)> {
+    http_request(addr, path, token).map(|r| (r.status, r.body))
+}
+
+/// `HOST:PORT` as an address: an IP address as it is, else the host name looked up (`robot.local:8080`, the hub of
+/// a satellite's machine).
+pub fn resolve(text: &str) -> Option<SocketAddr> {
+    text.parse()
+        .ok()
+        .or_else(|| text.to_socket_addrs().ok()?.next())
 }
 
 /// Binds each configured address to see whether it is free, and asks the HTTP address's `/healthz`.
 pub fn probe(config: &Config) -> Probes {
-    let parse = |text: &str| text.parse::<SocketAddr>().ok();
-    let http_addr = parse(&config.server.http);
+    let http_addr = resolve(&config.server.http);
     let https = config.http.tls_on();
     let http = (
         config.server.http.clone(),
         http_addr.map(|a| (a, bind_state(a))),
     );
+    // Asked when something holds the port, and when the address is another machine's (a satellite's machine
+    // checking the robot's hub).
     let agent_answers = !https
-        && matches!(http.1, Some((_, PortState::InUse)))
+        && matches!(http.1, Some((_, PortState::InUse | PortState::Elsewhere)))
         && http_addr
             .and_then(|a| http_get(reachable(a), "/healthz", None))
             .is_some_and(|(status, body)| status == 200 && body.trim() == "ok");
     let flow_tcp = (!config.server.flow_tcp.is_empty()).then(|| {
-        let addr = parse(&config.server.flow_tcp);
+        let addr = config.server.flow_tcp.parse::<SocketAddr>().ok();
         (
             config.server.flow_tcp.clone(),
             addr.map(|a| (a, bind_state(a))),
@@ -131,7 +183,16 @@ pub fn findings(p: &Probes) -> Vec<Finding> {
             Some((addr, state)) => state_finding(what, &addr.to_string(), option, state, owner),
         }
     };
-    let mut out = vec![tcp("HTTP", "--http or [server] http", &p.http.0, &p.http.1)];
+    let http = match &p.http.1 {
+        Some((addr, PortState::Elsewhere)) if p.agent_answers => Finding::ok(
+            "ports",
+            format!(
+                "HTTP {addr} is not this machine's, and a hub answers there (the doctor checks a remote hub)"
+            ),
+        ),
+        probed => tcp("HTTP", "--http or [server] http", &p.http.0, probed),
+    };
+    let mut out = vec![http];
     if let Some((text, probed)) = &p.flow_tcp {
         out.push(tcp(
             "flow TCP",
@@ -177,6 +238,11 @@ fn state_finding(
             format!(
                 "if robot-agent is not running, stop the program that holds it or choose another with {option}"
             ),
+        ),
+        (PortState::Elsewhere, _) => Finding::problem(
+            "ports",
+            format!("{what} {addr} is not an address of this machine, and no hub answers there"),
+            format!("give this machine's address with {option}, or the address of a running hub"),
         ),
         (PortState::Unusable(why), _) => Finding::problem(
             "ports",
@@ -237,6 +303,37 @@ mod tests {
             f.iter()
                 .any(|f| f.level == Level::Problem && f.text.contains("nowhere"))
         );
+    }
+
+    #[test]
+    fn another_machines_address_where_a_hub_answers_is_fine() {
+        let addr: SocketAddr = "192.0.2.7:8080".parse().expect("addr");
+        let mut p = probes(PortState::Free, true);
+        p.http = ("192.0.2.7:8080".into(), Some((addr, PortState::Elsewhere)));
+        let f = findings(&p);
+        assert_eq!(f[0].level, Level::Ok, "{}", f[0]);
+        assert!(f[0].text.contains("not this machine's"), "{}", f[0]);
+    }
+
+    #[test]
+    fn another_machines_address_where_nothing_answers_is_a_problem() {
+        let addr: SocketAddr = "192.0.2.7:8080".parse().expect("addr");
+        let mut p = probes(PortState::Free, false);
+        p.http = ("192.0.2.7:8080".into(), Some((addr, PortState::Elsewhere)));
+        assert_eq!(findings(&p)[0].level, Level::Problem);
+    }
+
+    #[test]
+    fn a_reply_header_is_found_in_any_case() {
+        let reply = Reply {
+            status: 200,
+            head: "HTTP/1.1 200 OK\r\nx-hub-time-us: 42\r\ncontent-length: 2".into(),
+            body: "ok".into(),
+            sent: SystemTime::UNIX_EPOCH,
+            received: SystemTime::UNIX_EPOCH,
+        };
+        assert_eq!(reply.header("X-Hub-Time-Us"), Some("42"));
+        assert_eq!(reply.header("date"), None);
     }
 
     #[test]

@@ -34,7 +34,7 @@ impl IntoResponse for AppError {
 /// The router, built from shared state so tests can serve it on any port.
 pub fn app(shared: Arc<Shared>) -> Router {
     Router::new()
-        .route("/healthz", get(|| async { "ok" }))
+        .route("/healthz", get(healthz))
         .route("/api/channels", get(channels))
         .route("/api/status", get(status))
         .route("/metrics", get(metrics))
@@ -42,6 +42,19 @@ pub fn app(shared: Arc<Shared>) -> Router {
         .route("/api/graph/stream", get(graph_stream))
         .route("/flow", get(flow_link))
         .with_state(shared)
+}
+
+/// The header of `/healthz` that tells the hub's clock, in microseconds since the Unix epoch: satellites stamp spans
+/// and transcripts on their own clocks, and `robot-agent doctor` on a satellite's machine compares them with this
+/// one (an HTTP `Date` header has only whole seconds).
+pub const HUB_TIME_HEADER: &str = "x-hub-time-us";
+
+/// `GET /healthz`: `ok` to anyone, with the hub's clock in [`HUB_TIME_HEADER`].
+async fn healthz() -> impl IntoResponse {
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros());
+    ([(HUB_TIME_HEADER, now.to_string())], "ok")
 }
 
 /// `GET /metrics`: the Prometheus text exposition (a scraper sends `Authorization: Bearer` with a token, as every

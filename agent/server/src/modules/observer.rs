@@ -277,8 +277,10 @@ impl Module for ObserverModule {
                             && let Some(turn) = turns.reply_audio(d.ts_us)
                         {
                             figures.reply(&turn);
-                            for span in spans::turn_spans(&turn) {
-                                telemetry.record(span);
+                            if telemetry.is_on() {
+                                for span in spans::turn_spans(&turn) {
+                                    telemetry.record(span);
+                                }
                             }
                             // One small message per turn; a full send queue drops it (counted by the SDK).
                             let message = serde_json::to_vec(&latency_message(&turn)).unwrap_or_default();

@@ -261,6 +261,7 @@ async fn play(job: Job, speaker: &Speaker, out: &Outputs) {
                         warn!("tts: speech not sent: {e}");
                     }
                     if chunk.start_sample == 0
+                        && out.telemetry.is_on()
                         && let Some(reply) = trace
                     {
                         // From the request to its first PCM on the hub: the synthesis the user waits for.

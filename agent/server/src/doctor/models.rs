@@ -1,17 +1,45 @@
-//! The doctor's model check: every model file the programs load, present and matching its checksum in
-//! `config/models.sha256` (embedded at build time, so the binary checks the models of its own version), a missing
-//! one named with the `make` target that provisions it.
+//! robot-agent's model check for the hub's doctor: every model file the agent and its satellites load, present and
+//! matching its checksum in `config/models.sha256` (embedded at build time, so the binary checks the models of its
+//! own version), a missing one named with the `make` target that provisions it. It lives with the agent because
+//! which model each part needs is the agent's knowledge, not the hub's.
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use super::finding::Finding;
-use crate::config::Config;
+use flow_hub::config::Config;
+use flow_hub::doctor::{Check, Finding};
 
 /// `config/models.sha256` as this build knows it (sha256sum's format, paths from the repository root).
-const SUMS: &str = include_str!("../../../config/models.sha256");
+const SUMS: &str = include_str!("../../../../config/models.sha256");
+
+/// The check `robot-agent doctor` runs before the hub's, with its option `--models DIR`.
+#[derive(Debug)]
+pub struct Models;
+
+impl Check for Models {
+    fn arguments(&self, doctor: clap::Command) -> clap::Command {
+        doctor.arg(
+            clap::Arg::new("models")
+                .long("models")
+                .value_name("DIR")
+                .value_parser(clap::value_parser!(PathBuf))
+                .help(
+                    "The models folder (default: the installed PREFIX/share/robot-agent/models beside the binary, \
+                     else the checkout's models/)",
+                ),
+        )
+    }
+
+    fn examine(&self, config: &Config, args: &clap::ArgMatches) -> Vec<Finding> {
+        let dir = args
+            .get_one::<PathBuf>("models")
+            .cloned()
+            .unwrap_or_else(default_models_dir);
+        check(config, &dir)
+    }
+}
 
 /// One model file with its expected checksum, its path under the models folder and whether the configuration
 /// needs it.
@@ -42,7 +70,7 @@ pub fn default_models_dir() -> PathBuf {
     if let Some(dir) = installed.filter(|d| d.is_dir()) {
         return dir;
     }
-    let checkout = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let checkout = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
     checkout.canonicalize().unwrap_or(checkout)
 }
 
@@ -179,7 +207,7 @@ pub fn check(config: &Config, dir: &Path) -> Vec<Finding> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::doctor::Level;
+    use flow_hub::doctor::Level;
 
     fn model(name: &str, required: bool) -> Model {
         Model {
@@ -267,6 +295,36 @@ mod tests {
         );
         assert!(all.iter().all(|m| !m.name.starts_with("models/cache/")));
         assert!(all.iter().all(|m| m.sha256.len() == 64));
+    }
+
+    #[test]
+    fn the_models_option_names_the_folder_to_check() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let args = Models
+            .arguments(clap::Command::new("doctor"))
+            .try_get_matches_from(["doctor", "--models", &dir.path().display().to_string()])
+            .expect("--models parses");
+        let config = Config::load(None).expect("defaults");
+        let findings = Models.examine(&config, &args);
+        let tiny = dir.path().join("ggml-tiny.en.bin");
+        assert!(
+            findings
+                .iter()
+                .any(|f| f.text == format!("{} is missing", tiny.display())),
+            "{findings:?}"
+        );
+    }
+
+    #[test]
+    fn the_checkouts_models_folder_is_the_default_outside_an_installation() {
+        let dir = default_models_dir();
+        assert!(dir.ends_with("models"), "{}", dir.display());
+        assert!(
+            dir.parent()
+                .is_some_and(|root| root.join("config/models.sha256").is_file()),
+            "{}",
+            dir.display()
+        );
     }
 
     #[test]
