@@ -9,9 +9,10 @@
 use agent_contract::channels as ch;
 use std::time::Duration;
 
+use agent_contract::say::PlaybackStarted;
 use agent_tests::browser_chromium::{Chromium, Tab};
 use agent_tests::browser_media::prepare;
-use agent_tests::{Agent, DataDir, PATIENCE, until};
+use agent_tests::{Agent, DataDir, PATIENCE, recv_until, until};
 use anyhow::{Context, ensure};
 use serde::Deserialize;
 use serde_json::{Value, json};
@@ -47,13 +48,18 @@ async fn playback(browser: &Chromium, tab: &Tab) -> anyhow::Result<Playback> {
 }
 
 /// Speaks `text` through `Agent.say` and waits until its speech has played on the page (the page's chunk count
-/// stops growing for a second after it has grown).
+/// stops growing for a second after it has grown). Returns the utterance's number and when it was asked for (ms
+/// since the Unix epoch).
 async fn speak_and_wait(
     say: &flow::Client,
     browser: &Chromium,
     tab: &Tab,
     text: &str,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<(u64, f64)> {
+    let asked_ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)?
+        .as_secs_f64()
+        * 1000.0;
     let before: u64 = serde_json::from_value(browser.eval(tab, "agentDebug.speechChunks").await?)?;
     let answer = say
         .call(
@@ -64,7 +70,9 @@ async fn speak_and_wait(
         .await
         .with_context(|| format!("calling {}", ch::SAY.name))?;
     let answer: Value = serde_json::from_slice(&answer)?;
-    ensure!(answer["utterance"].is_u64(), "Agent.say answered {answer}");
+    let utterance = answer["utterance"]
+        .as_u64()
+        .with_context(|| format!("Agent.say answered {answer}"))?;
     browser
         .wait_for(
             tab,
@@ -85,7 +93,8 @@ async fn speak_and_wait(
         }
     })
     .await
-    .with_context(|| format!("{text:?}: the page's chunk count still grows ({last})"))?
+    .with_context(|| format!("{text:?}: the page's chunk count still grows ({last})"))??;
+    Ok((utterance, asked_ms))
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -184,8 +193,29 @@ async fn speak_and_match(query: &str, engine: &str) -> anyhow::Result<Playback> 
         "One, two, three. The mouth moves with the sound you hear.",
         "Yes. That is all for now.",
     ];
+    let started = say.subscribe(ch::PLAYBACK.name).await?;
+    let mut spoken = Vec::new();
     for text in lines {
-        speak_and_wait(&say, &browser, &tab, text).await?;
+        spoken.push(speak_and_wait(&say, &browser, &tab, text).await?);
+    }
+    // The page told when each utterance began to be heard, on the server's clock: after it was asked for, and
+    // before it had finished playing (docs/telemetry.md, the turn's `playback` span).
+    let done_ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)?
+        .as_secs_f64()
+        * 1000.0;
+    for (utterance, asked_ms) in spoken {
+        let heard = recv_until(&started, "the page's playback start", PATIENCE, |d| {
+            serde_json::from_slice::<PlaybackStarted>(&d.payload)
+                .ok()
+                .filter(|p| p.utterance == utterance)
+        })
+        .await?;
+        ensure!(
+            heard.at_ms > asked_ms && heard.at_ms < done_ms,
+            "utterance {utterance} heard at {} ms, asked for at {asked_ms} ms, all played by {done_ms} ms",
+            heard.at_ms
+        );
     }
     browser
         .wait_for(&tab, "agentDebug.playback.pairs.length >= 4", PATIENCE)

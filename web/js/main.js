@@ -8,6 +8,7 @@ import { Camera } from "./media/camera.js";
 import { Microphone } from "./media/microphone.js";
 import { LoopbackRoute } from "./media/playback-route.js";
 import { SpeechPlayer } from "./media/speech.js";
+import { playedMessage } from "./media/played.js";
 import { Overlay } from "./panels/overlay.js";
 import { Latencies } from "./panels/latency.js";
 import { RuleTrace } from "./panels/rules.js";
@@ -68,6 +69,16 @@ const speech = new SpeechPlayer((utterance, startS) => {
     pendingVisemes.delete(utterance);
     avatar.scheduleVisemes(utterance, startS, items);
   }
+  // When the user will hear it begin, for the turn's trace (docs/telemetry.md); the holder's page is the one heard.
+  const played = playedMessage(
+    utterance,
+    startS,
+    speech.routeDelayS,
+    audioContext().currentTime,
+    performance.timeOrigin + performance.now(),
+    link.clock.offset(),
+  );
+  if (played && page.role === "holder") link.sendJson(played);
 });
 heardTime = (nowS) => speech.heardTime(nowS);
 

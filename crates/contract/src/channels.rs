@@ -69,6 +69,9 @@ pub const RULES: Channel = stream("Agent.rules", "rule trace (brain module)");
 pub const RECORDING: Channel = stream("Agent.recording", "recording state (recorder module)");
 /// One message per conversational turn with its stage latencies ([`crate::latency::TurnLatency`]).
 pub const LATENCY: Channel = stream("Agent.latency", "turn latencies (observer module)");
+/// When a page began playing each utterance of speech, on the server's clock ([`crate::say::PlaybackStarted`]): the
+/// end of the turn as the user hears it (docs/telemetry.md).
+pub const PLAYBACK: Channel = stream("Agent.playback", "speech playback starts (browser link)");
 /// Where whisper satellites submit transcripts for the relay to publish once.
 pub const ASR_SUBMIT: Channel = service(
     "Agent.asr.submit",
@@ -86,7 +89,7 @@ pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
 /// Every channel with a fixed name.
 pub const ALL: &[Channel] = &[
     AUDIO, VIDEO, VIDEO_Y, AUDIO_FFT, CTRL, AVATAR, SPEECH, SAY, TRANSCRIPT, FACES, MOTION, CODES,
-    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT, CHAT, CHAT_REPLY,
+    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT, CHAT, CHAT_REPLY, PLAYBACK,
 ];
 
 /// Headers of the channels whose producer is fixed.
@@ -99,6 +102,9 @@ pub mod headers {
         r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;
     /// `Agent.ctrl` from the page.
     pub const CTRL: &str = r#"{"format":"json","source":"browser"}"#;
+    /// `Agent.playback` from the page link.
+    pub const PLAYBACK: &str =
+        r#"{"format":"json","content":"speech playback starts","source":"browser"}"#;
     /// `Agent.video.y`.
     pub const VIDEO_Y: &str =
         r#"{"format":"jpeg","colour":"grey","width":640,"height":360,"source":"Agent.video"}"#;
@@ -173,6 +179,7 @@ mod tests {
             headers::AUDIO,
             headers::VIDEO,
             headers::CTRL,
+            headers::PLAYBACK,
             headers::VIDEO_Y,
             headers::AVATAR,
             headers::SAY,

@@ -29,3 +29,13 @@ pub struct SayAnswer {
 pub struct CancelAnswer {
     pub cancelled: Vec<u64>,
 }
+
+/// A page began playing utterance `utterance` of `Agent.speech` (the number its chunks carry): `at_ms` is when its
+/// first sample is heard, on the server's clock (ms since the Unix epoch; the page converts with its ping/pong
+/// offset). Published on `Agent.playback` by the page link.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaybackStarted {
+    pub utterance: u64,
+    pub at_ms: f64,
+}

@@ -55,7 +55,11 @@ export class Link extends EventTarget {
     this.setState("open");
     this.sendJson({ type: "hello", version: 1, client: "robot-agent-web", autostart: this.autostart });
     clearInterval(this.pingTimer);
-    this.pingTimer = setInterval(() => this.sendJson({ type: "ping", t: performance.now() }), PING_EVERY_MS);
+    // One ping at once, so the server's clock is known before the first reply plays (its playback start is told
+    // on that clock), then one every few seconds.
+    const ping = () => this.sendJson({ type: "ping", t: performance.now() });
+    ping();
+    this.pingTimer = setInterval(ping, PING_EVERY_MS);
   }
 
   closed(ev) {

@@ -93,6 +93,7 @@ impl BrowserLink {
         Ok(BrowserLink {
             shared: Arc::new(Shared {
                 client: OnceLock::new(),
+                playback: OnceLock::new(),
                 links: Arc::new(Mutex::new(LinkBoard::new(
                     browser.max_links,
                     browser.max_links_per_session,
@@ -145,6 +146,15 @@ impl Module for LinkModule {
                 // Someone attached a client by hand; two would fight over the media channels.
                 anyhow::bail!("the browser module was started twice");
             }
+            let playback = ctx
+                .client
+                .publisher(
+                    agent_contract::channels::PLAYBACK.name,
+                    agent_contract::channels::headers::PLAYBACK,
+                )
+                .await?;
+            // Set once: this module runs once (checked above).
+            let _ = self.shared.playback.set(playback);
             ctx.stopped().await;
             Ok(())
         })

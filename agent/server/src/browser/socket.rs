@@ -309,6 +309,20 @@ impl Conn {
                     .await;
                 }
             }
+            PageMessage::Played { utterance, at_ms } => {
+                // The holder's page is the one the user hears (docs/telemetry.md).
+                if !self.is_holder() {
+                    return Ok(());
+                }
+                let started = agent_contract::say::PlaybackStarted { utterance, at_ms };
+                // One small message per utterance; a full send queue drops it (counted by the SDK).
+                if let Some(publisher) = self.shared.playback.get()
+                    && let Err(e) =
+                        publisher.try_publish(serde_json::to_vec(&started).unwrap_or_default())
+                {
+                    tracing::debug!("playback start not published: {e}");
+                }
+            }
             PageMessage::Ping { t } => {
                 // The server's clock rides along, so the page can put hub timestamps on its own clock.
                 let server_ms = std::time::SystemTime::now()

@@ -23,6 +23,9 @@ pub enum Notice {
 pub struct Shared {
     /// The link's hub connection, set when the `browser` module starts.
     pub client: OnceLock<flow::Client>,
+    /// `Agent.playback`, where the holder's page says when each utterance of speech began to be heard; made by the
+    /// `browser` module when it starts, so the channel is there before any page plays.
+    pub playback: OnceLock<flow::Publisher>,
     pub links: Arc<Mutex<LinkBoard>>,
     pub sessions: Mutex<SessionStore>,
     pub session_ttl_s: u64,

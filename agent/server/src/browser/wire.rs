@@ -129,6 +129,11 @@ pub enum PageMessage {
     Ping {
         t: f64,
     },
+    /// The page began playing an utterance of speech (`agent_contract::say::PlaybackStarted`).
+    Played {
+        utterance: u64,
+        at_ms: f64,
+    },
 }
 
 /// What a text frame turned out to be: a known message, or a JSON object of a type this server does not know
@@ -163,7 +168,7 @@ pub fn parse_text(text: &str) -> Result<PageText, WireError> {
 fn is_known_type(kind: &str) -> bool {
     matches!(
         kind,
-        "hello" | "claim" | "release" | "media" | "ctrl" | "ping"
+        "hello" | "claim" | "release" | "media" | "ctrl" | "ping" | "played"
     )
 }
 
@@ -302,6 +307,17 @@ mod tests {
             Ok(PageText::Unknown("dance".into()))
         );
         assert!(matches!(parse_text("not json"), Err(WireError::Json(_))));
+        assert!(
+            matches!(parse_text(r#"{"type":"played","utterance":-1,"at_ms":1}"#), Err(WireError::Json(m)) if m.contains("played")),
+            "a malformed playback start is refused"
+        );
+        assert_eq!(
+            parse_text(r#"{"type":"played","utterance":3,"at_ms":1765000000000.5}"#),
+            Ok(PageText::Message(PageMessage::Played {
+                utterance: 3,
+                at_ms: 1_765_000_000_000.5
+            }))
+        );
         assert!(
             matches!(parse_text(r#"{"type":"ping","t":"x"}"#), Err(WireError::Json(m)) if m.contains("ping"))
         );

@@ -13,6 +13,7 @@ use agent_contract::channels;
 use agent_contract::detections::DetectionsMsg;
 use agent_contract::latency::TurnLatency;
 use agent_contract::rules::RuleChange;
+use agent_contract::say::PlaybackStarted;
 use agent_contract::transcript::{TranscriptMessage, VadKind, VadMessage};
 use flow::{ClientEvent, Data};
 use flow_hub::metrics::{HistogramFamily, Metrics, latency_family};
@@ -219,6 +220,13 @@ fn starts_utterance(payload: &[u8]) -> bool {
     payload.len() > 8 && payload[4..8] == [0, 0, 0, 0]
 }
 
+/// The utterance number a speech chunk carries (its first four bytes, little-endian), as the page reads it.
+fn speech_utterance(payload: &[u8]) -> u64 {
+    payload
+        .first_chunk::<4>()
+        .map_or(0, |b| u64::from(u32::from_le_bytes(*b)))
+}
+
 impl Module for ObserverModule {
     fn name(&self) -> &'static str {
         "observer"
@@ -240,6 +248,9 @@ impl Module for ObserverModule {
             let detections = client.subscribe(channels::DETECTIONS.name).await?;
             let rules = client.subscribe(channels::RULES.name).await?;
             let speech = client.subscribe(channels::SPEECH.name).await?;
+            let playback = client.subscribe(channels::PLAYBACK.name).await?;
+            // The last reply's speech utterance and turn, until its page says it is heard.
+            let mut replied: Option<(u64, TurnDone)> = None;
             let latency = client
                 .publisher(channels::LATENCY.name, channels::headers::LATENCY)
                 .await?;
@@ -265,6 +276,14 @@ impl Module for ObserverModule {
                         Heard::Other => {}
                     },
                     Some(d) = detections.recv() => figures.detections(&d),
+                    Some(d) = playback.recv() => {
+                        if let Ok(started) = serde_json::from_slice::<PlaybackStarted>(&d.payload)
+                            && let Some((_, turn)) = replied.take_if(|(u, _)| *u == started.utterance)
+                        {
+                            let heard_us = (started.at_ms.max(0.0) * 1000.0) as u64;
+                            telemetry.record(spans::playback_span(&turn, heard_us));
+                        }
+                    }
                     Some(d) = rules.recv() => {
                         if let Ok(r) = serde_json::from_slice::<RuleChange>(&d.payload) {
                             let on_speech = r.because.iter().any(|b| b.starts_with("heard("));
@@ -281,6 +300,7 @@ impl Module for ObserverModule {
                                 for span in spans::turn_spans(&turn) {
                                     telemetry.record(span);
                                 }
+                                replied = Some((speech_utterance(&d.payload), turn.clone()));
                             }
                             // One small message per turn; a full send queue drops it (counted by the SDK).
                             let message = serde_json::to_vec(&latency_message(&turn)).unwrap_or_default();

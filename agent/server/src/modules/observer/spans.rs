@@ -1,7 +1,7 @@
 //! A finished turn as the spans robot-agent records for it: the root `turn` (end of speech -> first reply PCM) and
 //! its four stages, each from the hub stamps `Agent.latency` is computed from, so the stages add up to the turn
-//! and the turn to `total_ms`. The satellites' spans hang under these by id (docs/telemetry.md): `whisper.decode`
-//! under `transcription`, `llm.generate` and `synthesis` under `reply`. Pure.
+//! and the turn to `total_ms`; then the page's `playback`. The satellites' spans hang under these by id
+//! (docs/telemetry.md): `whisper.decode` under `transcription`, `llm.generate` and `synthesis` under `reply`. Pure.
 
 use flow_telemetry::{SpanRecord, TraceContext};
 
@@ -47,6 +47,14 @@ pub fn turn_spans(done: &TurnDone) -> Vec<SpanRecord> {
         from = to;
     }
     spans
+}
+
+/// The page's playback start of the reply: from its first PCM on the hub to when the holder's page says the user
+/// hears it begin (`Agent.playback`), under the turn. It starts where the turn ends: the turn is what the agent
+/// controls, this is the route to the ear (the page's jitter buffer and the loopback the echo canceller covers).
+pub fn playback_span(done: &TurnDone, heard_us: u64) -> SpanRecord {
+    let end = done.speech_end_us + done.total_us;
+    SpanRecord::under(turn_context(done), "playback", end, heard_us)
 }
 
 #[cfg(test)]
@@ -102,6 +110,16 @@ mod tests {
         assert_eq!(spans[0].context, other);
         let spans = turn_spans(&done(Some("garbage".into())));
         assert_eq!(spans[0].context, TraceContext::turn("u1000"));
+    }
+
+    #[test]
+    fn the_playback_follows_the_turn_under_its_root() {
+        let d = done(None);
+        let span = playback_span(&d, 1_480_000);
+        assert_eq!(span.parent, Some(TraceContext::turn("u1000").span));
+        assert_eq!((span.start_us, span.end_us), (1_400_000, 1_480_000));
+        // A page clock that puts the start before the first PCM makes an empty span, not a negative one.
+        assert_eq!(playback_span(&d, 1_300_000).duration_us(), 0);
     }
 
     #[test]
