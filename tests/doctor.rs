@@ -119,6 +119,60 @@ async fn a_port_held_by_another_program_is_a_problem_with_its_fix() -> anyhow::R
     Ok(())
 }
 
+/// A small tmpfs mounted for one test, unmounted when dropped.
+struct SmallDisk {
+    path: PathBuf,
+}
+
+impl SmallDisk {
+    /// Mounts a 4 MB tmpfs on a fresh folder, or says why it cannot (not root, no mount in this container).
+    fn mount(parent: &Path) -> anyhow::Result<Result<SmallDisk, String>> {
+        let path = parent.join("small-disk");
+        std::fs::create_dir_all(&path)?;
+        let out = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
+            .arg(&path)
+            .output();
+        Ok(match out {
+            Ok(o) if o.status.success() => Ok(SmallDisk { path }),
+            Ok(o) => Err(String::from_utf8_lossy(&o.stderr).trim().to_owned()),
+            Err(e) => Err(e.to_string()),
+        })
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg(&self.path)
+            .status();
+    }
+}
+
+#[tokio::test]
+async fn a_full_disk_under_the_data_directory_is_a_problem_with_its_fix() -> anyhow::Result<()> {
+    let parent = DataDir::new()?;
+    let disk = match SmallDisk::mount(parent.path())? {
+        Ok(disk) => disk,
+        Err(why) => {
+            println!("skipped: cannot mount a small tmpfs here ({why})");
+            return Ok(());
+        }
+    };
+    // Filled to the last block, as a disk a recording ran out of.
+    let filler = vec![0u8; 64 * 1024];
+    let mut file = std::fs::File::create(disk.path.join("filler"))?;
+    while std::io::Write::write_all(&mut file, &filler).is_ok() {}
+    drop(file);
+    let out = doctor(&disk.path, ANY_PORT, &["--flow-tcp", ANY_PORT]).await?;
+    assert_eq!(code(&out), Some(1), "{out:?}");
+    let found = line(&out, "file system is full")
+        .with_context(|| format!("no line calls the disk full:\n{}", out.stdout))?;
+    assert!(found.starts_with("PROBLEM data:"), "{found}");
+    assert!(found.contains("free space"), "{found}");
+    Ok(())
+}
+
 #[tokio::test]
 async fn the_ports_of_a_running_agent_are_recognised_as_its_own_and_its_clock_agrees()
 -> anyhow::Result<()> {

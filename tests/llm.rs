@@ -13,12 +13,11 @@ use std::path::PathBuf;
 use std::process::Stdio;
 use std::time::Duration;
 
-use agent_tests::satellite::wait_channel;
+use agent_tests::satellite::{LlmSat, llm_model};
 use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, until};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
-use tokio::process::Child;
 use tokio::time::Instant;
 
 /// One rig at a time: the model's threads take both cores, and the tests watch the order of events.
@@ -31,43 +30,6 @@ const APOLOGY: &str = "Sorry, I did not understand.";
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn model() -> PathBuf {
-    repo().join("models/llm/SmolLM2-135M-Instruct.Q4_1.gguf")
-}
-
-/// A running `llm-sat`, killed (SIGKILL) on drop.
-struct LlmSat {
-    child: Child,
-}
-
-impl LlmSat {
-    /// `llm-sat` on the default model.
-    async fn start(agent: &Agent, args: &[&str]) -> anyhow::Result<LlmSat> {
-        let model = model();
-        let mut all = vec![
-            "--model",
-            model.to_str().context("a model path that is not UTF-8")?,
-        ];
-        all.extend_from_slice(args);
-        Self::start_bare(agent, &all).await
-    }
-
-    async fn start_bare(agent: &Agent, args: &[&str]) -> anyhow::Result<LlmSat> {
-        let mut cmd = command("llm-sat")?;
-        cmd.arg("--addr")
-            .arg(agent.tcp().to_string())
-            .arg("--token")
-            .arg(agent.token())
-            .args(args)
-            .env("RUST_LOG", "info")
-            .stdin(Stdio::null())
-            .kill_on_drop(true);
-        let child = cmd.spawn().context("starting llm-sat")?;
-        wait_channel(agent, ch::CHAT.name).await?;
-        Ok(LlmSat { child })
-    }
 }
 
 /// A robot-agent on the default program (vision off: the test plays the camera's detector), and a client that
@@ -579,7 +541,7 @@ async fn the_endpoint_mode_streams_a_turn_from_llama_cpp_pythons_server_on_the_s
     let port = free_port()?;
     let mut server = tokio::process::Command::new(&python)
         .args(["-m", "llama_cpp.server", "--model"])
-        .arg(model())
+        .arg(llm_model())
         .args(["--host", "127.0.0.1", "--port", &port.to_string()])
         .args(["--n_threads", "2", "--n_ctx", "2048"])
         .stdin(Stdio::null())
@@ -600,8 +562,12 @@ async fn the_endpoint_mode_streams_a_turn_from_llama_cpp_pythons_server_on_the_s
     .context("llama_cpp.server did not listen")?;
     let rig = Rig::start().await?;
     let url = format!("http://127.0.0.1:{port}/v1");
-    let _llm =
-        LlmSat::start_bare(&rig.agent, &["--endpoint", &url, "--max-sentences", "2"]).await?;
+    let _llm = LlmSat::start_bare(
+        &rig.agent,
+        &["--endpoint", &url, "--max-sentences", "2"],
+        &[],
+    )
+    .await?;
     rig.hear("Why is the sky blue?").await?;
     let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
     assert!(

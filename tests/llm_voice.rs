@@ -9,15 +9,13 @@
 
 use agent_contract::channels as ch;
 use std::path::PathBuf;
-use std::process::Stdio;
 use std::time::Duration;
 
-use agent_tests::satellite::wait_channel;
+use agent_tests::satellite::LlmSat;
 use agent_tests::spoken::{say, silence, write_wav};
-use agent_tests::{Agent, DataDir, Satellite, command, json_message, next_payload, run};
+use agent_tests::{Agent, DataDir, Satellite, json_message, next_payload, run};
 use anyhow::{Context, bail};
 use serde_json::Value;
-use tokio::process::Child;
 
 /// Everything here runs on two shared cores, whisper and the model side by side, possibly beside a build: waits are
 /// generous, never timed.
@@ -43,25 +41,6 @@ async fn conversing_agent(dir: &DataDir) -> anyhow::Result<Agent> {
         program.display().to_string()
     );
     Agent::start_configured(dir, &config, "brain: program loaded").await
-}
-
-/// `llm-sat` on the default model, at most `max_sentences` sentences a reply; ready once `Agent.chat` exists.
-async fn start_llm_sat(agent: &Agent, max_sentences: u32) -> anyhow::Result<Child> {
-    let mut cmd = command("llm-sat")?;
-    cmd.arg("--addr")
-        .arg(agent.tcp().to_string())
-        .arg("--token")
-        .arg(agent.token())
-        .arg("--model")
-        .arg(repo().join("models/llm/SmolLM2-135M-Instruct.Q4_1.gguf"))
-        .arg("--max-sentences")
-        .arg(max_sentences.to_string())
-        .env("RUST_LOG", "info")
-        .stdin(Stdio::null())
-        .kill_on_drop(true);
-    let child = cmd.spawn().context("starting llm-sat")?;
-    wait_channel(agent, ch::CHAT.name).await?;
-    Ok(child)
 }
 
 /// One message the watcher saw, in the order it was taken.
@@ -92,7 +71,7 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
     let avatar = watcher.subscribe(ch::AVATAR.name).await?;
     let speech = watcher.subscribe(ch::SPEECH.name).await?;
     let _asr = Satellite::start(&agent, "llm-voice-asr").await?;
-    let _llm = start_llm_sat(&agent, 3).await?;
+    let _llm = LlmSat::start(&agent, &["--max-sentences", "3"]).await?;
 
     // The question said by espeak-ng, with silence before it and after it so that the utterance ends, streamed in
     // 20 ms chunks paced in real time.

@@ -10,17 +10,15 @@
 
 use std::collections::HashSet;
 use std::path::PathBuf;
-use std::process::Stdio;
 use std::time::Duration;
 
 use agent_contract::channels as ch;
 use agent_contract::latency::TurnLatency;
 use agent_tests::otlp::{Collector, Received};
-use agent_tests::satellite::wait_channel;
+use agent_tests::satellite::LlmSat;
 use agent_tests::spoken::{say, silence, write_wav};
-use agent_tests::{Agent, AgentOptions, DataDir, Satellite, command, recv_until, run};
+use agent_tests::{Agent, AgentOptions, DataDir, Satellite, recv_until, run};
 use anyhow::Context;
-use tokio::process::Child;
 
 /// Whisper and the model share two cores, possibly beside a build: waits are generous, never timed.
 const PATIENCE: Duration = Duration::from_secs(180);
@@ -63,27 +61,6 @@ async fn agent(dir: &DataDir, telemetry: &str, env: &[(&str, &str)]) -> anyhow::
     Ok(agent)
 }
 
-/// `llm-sat` on the default model with `args`, ready once `Agent.chat` exists.
-async fn llm_sat(agent: &Agent, args: &[&str], env: &[(&str, &str)]) -> anyhow::Result<Child> {
-    let mut cmd = command("llm-sat")?;
-    cmd.arg("--addr")
-        .arg(agent.tcp().to_string())
-        .arg("--token")
-        .arg(agent.token())
-        .arg("--model")
-        .arg(repo().join("models/llm/SmolLM2-135M-Instruct.Q4_1.gguf"))
-        .arg("--max-sentences")
-        .arg("2")
-        .args(args)
-        .envs(env.iter().copied())
-        .env("RUST_LOG", "info")
-        .stdin(Stdio::null())
-        .kill_on_drop(true);
-    let child = cmd.spawn().context("starting llm-sat")?;
-    wait_channel(agent, ch::CHAT.name).await?;
-    Ok(child)
-}
-
 /// Says `question` into the agent's microphone in real time and returns the turn's `Agent.latency` message.
 async fn spoken_turn(agent: &Agent, dir: &DataDir, question: &str) -> anyhow::Result<TurnLatency> {
     let watcher = agent.client("telemetry-test").await?;
@@ -124,7 +101,8 @@ async fn a_spoken_turn_exports_one_trace_across_robot_agent_whisper_sat_and_llm_
     let dir = DataDir::new()?;
     let agent = agent(&dir, &format!("[telemetry]\notlp = {url:?}\n"), &batch).await?;
     let _asr = Satellite::start_with_env(&agent, "trace-asr", &["--otlp", &url], &batch).await?;
-    let _llm = llm_sat(&agent, &["--otlp", &url], &batch).await?;
+    let _llm =
+        LlmSat::start_with_env(&agent, &["--max-sentences", "2", "--otlp", &url], &batch).await?;
 
     let latency = spoken_turn(&agent, &dir, OPEN_QUESTION).await?;
     let wanted = [

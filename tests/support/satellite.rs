@@ -79,3 +79,58 @@ pub async fn wait_channel(agent: &Agent, name: &str) -> anyhow::Result<()> {
         }
     }
 }
+
+/// The language model `make model-llm` provisions, the one `llm-sat` loads by default.
+pub fn llm_model() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/llm/SmolLM2-135M-Instruct.Q4_1.gguf")
+}
+
+/// A running `llm-sat`, killed (SIGKILL) on drop.
+#[derive(Debug)]
+pub struct LlmSat {
+    pub child: Child,
+}
+
+impl LlmSat {
+    /// `llm-sat ARGS...` on the default model, once `Agent.chat` exists.
+    pub async fn start(agent: &Agent, args: &[&str]) -> anyhow::Result<LlmSat> {
+        Self::start_with_env(agent, args, &[]).await
+    }
+
+    /// As [`LlmSat::start`], with more environment variables.
+    pub async fn start_with_env(
+        agent: &Agent,
+        args: &[&str],
+        env: &[(&str, &str)],
+    ) -> anyhow::Result<LlmSat> {
+        let model = llm_model();
+        let mut all = vec![
+            "--model",
+            model.to_str().context("a model path that is not UTF-8")?,
+        ];
+        all.extend_from_slice(args);
+        Self::start_bare(agent, &all, env).await
+    }
+
+    /// `llm-sat ARGS...` with no model chosen for it (`--endpoint`), once `Agent.chat` exists.
+    pub async fn start_bare(
+        agent: &Agent,
+        args: &[&str],
+        env: &[(&str, &str)],
+    ) -> anyhow::Result<LlmSat> {
+        let mut cmd = command("llm-sat")?;
+        cmd.arg("--addr")
+            .arg(agent.tcp().to_string())
+            .arg("--token")
+            .arg(agent.token())
+            .args(args)
+            .envs(env.iter().copied())
+            .env("RUST_LOG", "info")
+            .stdin(std::process::Stdio::null())
+            .kill_on_drop(true);
+        let child = cmd.spawn().context("starting llm-sat")?;
+        wait_channel(agent, agent_contract::channels::CHAT.name).await?;
+        Ok(LlmSat { child })
+    }
+}

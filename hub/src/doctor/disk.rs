@@ -8,6 +8,9 @@ use super::finding::Finding;
 /// Below this much free space the doctor warns: a recording fills megabytes a minute and a full disk makes the
 /// pair database refuse writes.
 pub const LOW_SPACE: u64 = 500 * 1_000_000;
+/// Below this much the disk is as good as full: the pair database's next writes (a page of its file at a time) and
+/// the tokens at start may not fit.
+pub const FULL: u64 = 16 * 1_000_000;
 
 /// The facts the data-directory findings are made from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -66,6 +69,15 @@ pub fn findings(facts: &Facts) -> Vec<Finding> {
         )),
     }
     match facts.free {
+        Some(free) if free < FULL => out.push(Finding::problem(
+            "data",
+            format!(
+                "{shown}'s file system is full ({} kB free): the pair database refuses writes and recordings stop",
+                free / 1000
+            ),
+            "free space on that file system (old recordings in the data directory's recordings), or move the data \
+             directory with --data-dir",
+        )),
         Some(free) if free < LOW_SPACE => out.push(Finding::warning(
             "data",
             format!(
@@ -108,6 +120,18 @@ mod tests {
     fn a_writable_folder_with_room_is_fine() {
         let f = findings(&facts(Ok(()), Some(10 * LOW_SPACE)));
         assert!(f.iter().all(|f| f.level == Level::Ok), "{f:?}");
+    }
+
+    #[test]
+    fn a_full_disk_is_a_problem_with_the_fix() {
+        let f = findings(&facts(Ok(()), Some(200_000)));
+        let full = f.iter().find(|x| x.text.contains("full")).expect("named");
+        assert_eq!(full.level, Level::Problem);
+        assert!(
+            full.fix
+                .as_deref()
+                .is_some_and(|fix| fix.contains("free space"))
+        );
     }
 
     #[test]
