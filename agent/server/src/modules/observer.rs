@@ -215,6 +215,24 @@ fn latency_message(turn: &TurnDone) -> TurnLatency {
     }
 }
 
+/// A finished turn: its figures, its `Agent.latency` message and, with telemetry on, its spans.
+fn finished(
+    figures: &Figures,
+    latency: &flow::Publisher,
+    telemetry: &flow_telemetry::Telemetry,
+    turn: &TurnDone,
+) {
+    figures.reply(turn);
+    if telemetry.is_on() {
+        for span in spans::turn_spans(turn) {
+            telemetry.record(span);
+        }
+    }
+    // One small message per turn; a full send queue drops it (counted by the SDK).
+    let message = serde_json::to_vec(&latency_message(turn)).unwrap_or_default();
+    let _ = latency.try_publish(message);
+}
+
 /// The first chunk of a reply's speech: `[utterance u32][offset u32][PCM]` with offset 0.
 fn starts_utterance(payload: &[u8]) -> bool {
     payload.len() > 8 && payload[4..8] == [0, 0, 0, 0]
@@ -288,23 +306,22 @@ impl Module for ObserverModule {
                         if let Ok(r) = serde_json::from_slice::<RuleChange>(&d.payload) {
                             let on_speech = r.because.iter().any(|b| b.starts_with("heard("));
                             let at_ms = u64::try_from(r.ts_ms).unwrap_or(0);
-                            figures.stages(turns.rule(&r.rule, at_ms, on_speech));
+                            let (stages, done) = turns.rule(&r.rule, at_ms, on_speech);
+                            figures.stages(stages);
+                            if let Some(turn) = done {
+                                finished(&figures, &latency, &telemetry, &turn);
+                                // Its speech utterance is not known here: no playback span for this turn.
+                            }
                         }
                     }
                     Some(d) = speech.recv() => {
                         if starts_utterance(&d.payload)
                             && let Some(turn) = turns.reply_audio(d.ts_us)
                         {
-                            figures.reply(&turn);
+                            finished(&figures, &latency, &telemetry, &turn);
                             if telemetry.is_on() {
-                                for span in spans::turn_spans(&turn) {
-                                    telemetry.record(span);
-                                }
-                                replied = Some((speech_utterance(&d.payload), turn.clone()));
+                                replied = Some((speech_utterance(&d.payload), turn));
                             }
-                            // One small message per turn; a full send queue drops it (counted by the SDK).
-                            let message = serde_json::to_vec(&latency_message(&turn)).unwrap_or_default();
-                            let _ = latency.try_publish(message);
                         }
                     }
                     event = events.recv() => match event {

@@ -63,6 +63,10 @@ struct Answering {
     transcript_stage_us: u64,
     rule_us: Option<u64>,
     rule_stage_us: u64,
+    /// The first PCM of an utterance that came before any rule: the rule's message may arrive after the reply's
+    /// first chunk (they travel on different channels, and a reply that needs no work follows its rule within a
+    /// millisecond), so the turn is completed when the rule comes, if the speech started after it fired.
+    early_reply_us: Option<u64>,
 }
 
 /// A turn from the end of speech to its reply, every stage in µs.
@@ -140,28 +144,48 @@ impl Turns {
             transcript_stage_us: stage,
             rule_us: None,
             rule_stage_us: 0,
+            early_reply_us: None,
         });
         vec![(Stage::VadEndToTranscript, stage)]
     }
 
     /// Rule `rule` fired at `at_ms`; `heard` says whether its guard rested on something heard (an answer, not a
-    /// greeting or a timer).
-    pub fn rule(&mut self, rule: &str, at_ms: u64, heard: bool) -> Vec<(Stage, u64)> {
+    /// greeting or a timer). Returns the stage it completed, and the whole turn when its reply's first PCM had
+    /// already come.
+    pub fn rule(
+        &mut self,
+        rule: &str,
+        at_ms: u64,
+        heard: bool,
+    ) -> (Vec<(Stage, u64)>, Option<TurnDone>) {
         let at_us = at_ms.saturating_mul(1000);
-        match &mut self.answering {
+        let stage = match &mut self.answering {
             Some(a) if heard && a.rule_us.is_none() && at_us + 1000 >= a.transcript_us => {
                 a.rule_us = Some(at_us);
                 rule.clone_into(&mut a.name.rule);
                 a.rule_stage_us = at_us.saturating_sub(a.transcript_us);
-                vec![(Stage::TranscriptToRule, a.rule_stage_us)]
+                (a.rule_stage_us, a.early_reply_us.take())
             }
-            _ => Vec::new(),
-        }
+            _ => return (Vec::new(), None),
+        };
+        let (rule_stage_us, early) = stage;
+        // Speech that started before the rule fired (by more than its millisecond stamp) was not its reply.
+        let done = early
+            .filter(|e| e + 1000 >= at_us)
+            .and_then(|e| self.reply_audio(e));
+        (vec![(Stage::TranscriptToRule, rule_stage_us)], done)
     }
 
     /// The first PCM of an utterance of speech was published at `event_us`: the turn it answers, if any, is done.
     pub fn reply_audio(&mut self, event_us: u64) -> Option<TurnDone> {
-        let rule_us = self.answering.as_ref()?.rule_us?;
+        let answering = self.answering.as_mut()?;
+        let Some(rule_us) = answering.rule_us else {
+            // Its rule's message has not come yet (or it is not a reply): kept for when it does.
+            if answering.early_reply_us.is_none() && event_us >= answering.transcript_us {
+                answering.early_reply_us = Some(event_us);
+            }
+            return None;
+        };
         let a = self.answering.take()?;
         Some(TurnDone {
             name: a.name,
@@ -204,7 +228,7 @@ mod tests {
         );
         assert_eq!(
             t.rule("main.answer", 1_345, true),
-            vec![(Stage::TranscriptToRule, 5_000)]
+            (vec![(Stage::TranscriptToRule, 5_000)], None)
         );
         assert_eq!(
             t.reply_audio(1_400_000),
@@ -232,16 +256,53 @@ mod tests {
         t.vad_end("u2", 10_000, 10_300_000);
         t.transcript("u2", None, 10_310_000);
         assert!(
-            t.rule("main.greet", 10_320, false).is_empty(),
+            t.rule("main.greet", 10_320, false).0.is_empty(),
             "a rule on a face, not on speech"
         );
         assert_eq!(
-            t.reply_audio(10_400_000),
+            t.reply_audio(10_325_000),
             None,
-            "no rule answered the turn yet"
+            "speech of the greeting: no rule answered the turn yet"
         );
-        assert_eq!(t.rule("main.answer", 10_330, true).len(), 1);
+        let (stages, done) = t.rule("main.answer", 10_330, true);
+        assert_eq!(
+            (stages.len(), done),
+            (1, None),
+            "the greeting began before the answer's rule"
+        );
         assert!(t.reply_audio(10_500_000).is_some());
+    }
+
+    #[test]
+    fn a_reply_whose_first_pcm_overtakes_its_rule_message_still_completes_the_turn() {
+        let mut t = Turns::default();
+        t.vad_end("u1", 1_000, 1_300_000);
+        t.transcript("u1", None, 1_340_000);
+        // The reply's first chunk arrives before the rule's message, which says it fired just before.
+        assert_eq!(t.reply_audio(1_346_500), None);
+        let (stages, done) = t.rule("main.answer", 1_346, true);
+        assert_eq!(stages, vec![(Stage::TranscriptToRule, 6_000)]);
+        let done = done.expect("the turn completes with the rule");
+        assert_eq!((done.reply_us, done.total_us), (500, 346_500));
+        assert_eq!(t.reply_audio(1_400_000), None, "one reply per turn");
+    }
+
+    #[test]
+    fn speech_that_began_before_the_rule_fired_is_not_its_reply() {
+        let mut t = Turns::default();
+        t.vad_end("u1", 1_000, 1_300_000);
+        t.transcript("u1", None, 1_340_000);
+        assert_eq!(
+            t.reply_audio(1_341_000),
+            None,
+            "a greeting already under way"
+        );
+        let (_, done) = t.rule("main.answer", 1_350, true);
+        assert_eq!(done, None);
+        assert!(
+            t.reply_audio(1_360_000).is_some(),
+            "the reply that follows the rule"
+        );
     }
 
     #[test]
