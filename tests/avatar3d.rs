@@ -1,5 +1,6 @@
-//! End-to-end tests of the avatar's two renderers, the 3D head (the page's default, three.js on SwiftShader's
-//! software WebGL) and the 2D canvas face (`?avatar=2d`): the same commands move both alike; the 3D head's
+//! End-to-end tests of the avatar's two renderers, the 3D head (`?avatar=3d`, three.js on SwiftShader's software
+//! WebGL; the page's own choice only on a GPU) and the 2D canvas face (the page's choice on software WebGL, and
+//! `?avatar=2d`): the same commands move both alike; the 3D head's
 //! mouth follows the viseme schedule on the audio clock, its eyes turn towards the gaze target, it blinks at the
 //! specified intervals and phases; without WebGL the page falls back to the 2D face. Screenshots of both
 //! renderers (rest, smile, thinking, listening, surprise, visemes "aa" "O" "FF" "PP" "SS", blinking, looking left
@@ -504,8 +505,8 @@ async fn the_3d_head_blinks_every_450_ms_to_4_s_in_close_hold_open_phases() -> a
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> {
     let _one = ONE_BROWSER.lock().await;
-    // The page's default renderer is the 3D head: without WebGL it must show the 2D face instead.
-    let s = Stage::open("default", &["--disable-3d-apis"]).await?;
+    // The 3D head asked for: without WebGL the page must show the 2D face instead.
+    let s = Stage::open("3d", &["--disable-3d-apis"]).await?;
     assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("2d"));
     assert_eq!(
         s.eval("!!document.createElement('canvas').getContext('webgl2')")
@@ -523,16 +524,27 @@ async fn a_page_without_webgl_falls_back_to_the_2d_face() -> anyhow::Result<()> 
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_page_without_an_avatar_parameter_shows_the_3d_head_and_avatar_2d_keeps_the_2d_face()
+async fn on_software_webgl_a_page_shows_the_2d_face_by_itself_and_the_3d_head_when_asked()
 -> anyhow::Result<()> {
     let _one = ONE_BROWSER.lock().await;
+    // Headless Chromium's WebGL is SwiftShader: the 3D head would take a core of the agent's machine.
     let s = Stage::open("default", WEBGL).await?;
+    assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("2d"));
+    let reason = s.eval("agentDebug.avatarReason").await?;
+    assert!(
+        reason
+            .as_str()
+            .is_some_and(|r| r.contains("software rasteriser")),
+        "{reason}"
+    );
+    s.quit().await;
+    // Asked for, the 3D head is the lite model there, drawn and moving.
+    let s = Stage::open("3d", WEBGL).await?;
     assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("3d"));
-    // On software WebGL the default head is the lite model, drawn and moving.
     let (model, software, triangles) = drawn(&s).await?;
     assert_eq!(model, "assets/avatar-lite.glb");
     assert_eq!(software, Some(true));
-    assert!(triangles > 0, "the default 3D head drew no triangles");
+    assert!(triangles > 0, "the 3D head drew no triangles");
     s.quit().await;
     let s = Stage::open("2d", WEBGL).await?;
     assert_eq!(s.eval("agentDebug.avatarRenderer").await?, json!("2d"));

@@ -1,6 +1,6 @@
 //! `window.agentDebug`: a read-only view of the page's state for end-to-end tests and for debugging by hand.
 
-export function installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech, latencies }) {
+export function installDebugHook({ avatar, avatarRenderer, avatarReason, link, page, camera, mic, spectrum, overlay, rules, speech, latencies }) {
   const hook = {};
   const define = (name, get) => Object.defineProperty(hook, name, { get, enumerable: true });
   define("eyelid", () => avatar.debugState().eyelid);
@@ -18,6 +18,8 @@ export function installDebugHook({ avatar, avatarRenderer, link, page, camera, m
   // rotations (radians), morph weights, and a per-frame trace (audio time, mouth opening, blink) for timing tests;
   // for both, [page time, cost ms] of recent frames (avatarFrameMs).
   define("avatarRenderer", () => avatarRenderer);
+  // Why the page chose it (renderer-choice.js).
+  define("avatarReason", () => avatarReason);
   define("avatarFrameMs", () => avatar.debugState().frameMs ?? null);
   define("avatarQuality", () => avatar.debugState().quality ?? null);
   define("eyeRotation", () => avatar.debugState().eyeRotation ?? null);

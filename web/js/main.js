@@ -41,8 +41,9 @@ const link = new Link({ autostart });
 // speech player below sets it; the avatar may draw before that).
 let heardTime = (/** @type {number} */ nowS) => nowS;
 const heardClock = () => heardTime(audioClock());
-// The 3D head by default, `?avatar=2d` for the 2D face; the 3D head falls back to the 2D face where it cannot run.
-const { avatar, renderer: avatarRenderer } = await createAvatar(
+// The 3D head where WebGL is hardware-accelerated, the 2D face otherwise (the page's CPU budget on a machine without
+// a GPU, issue 47); `?avatar=3d|2d` asks for one, and the 3D head falls back to the 2D face where it cannot run.
+const { avatar, renderer: avatarRenderer, reason: avatarReason } = await createAvatar(
   $("avatar"),
   heardClock,
   params.get("avatar") ?? DEFAULT_RENDERER,
@@ -440,6 +441,6 @@ setInterval(() => {
   refreshAgentControls();
 }, 500);
 
-installDebugHook({ avatar, avatarRenderer, link, page, camera, mic, spectrum, overlay, rules, speech, latencies });
+installDebugHook({ avatar, avatarRenderer, avatarReason, link, page, camera, mic, spectrum, overlay, rules, speech, latencies });
 refreshButtons();
 link.start();

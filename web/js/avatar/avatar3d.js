@@ -42,7 +42,7 @@ export class Avatar3D {
     // more per shaded pixel: there the head is the lite model, with Lambert materials and without multisampling,
     // and drops its resolution when frames come late (see `adapt`), so it stays smooth; a GPU gets the full
     // model, physically based materials and antialiasing.
-    const software = quality.software ?? softwareWebgl();
+    const software = quality.software ?? true;
     url ??= software ? LITE_MODEL_URL : MODEL_URL;
     const antialias = quality.antialias ?? !software;
     const material = quality.material ?? (software ? "lambert" : "standard");
@@ -419,16 +419,3 @@ float skinNoise( vec3 p ) {
 }`;
 const SKIN_WRAP = 0.55;
 
-/** Whether WebGL here is a software rasteriser (no GPU): SwiftShader, llvmpipe, softpipe. */
-function softwareWebgl() {
-  try {
-    const gl = document.createElement("canvas").getContext("webgl2");
-    if (!gl) return true;
-    const info = gl.getExtension("WEBGL_debug_renderer_info");
-    const name = info ? String(gl.getParameter(info.UNMASKED_RENDERER_WEBGL)) : String(gl.getParameter(gl.RENDERER));
-    gl.getExtension("WEBGL_lose_context")?.loseContext();
-    return /swiftshader|llvmpipe|softpipe|software/i.test(name);
-  } catch {
-    return true;
-  }
-}
