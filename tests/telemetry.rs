@@ -27,6 +27,16 @@ const BATCH_MS: &str = "200";
 /// Spans stamped by different processes (and the hub's stamps) on one machine's clock agree this closely.
 const CLOCKS_MS: f64 = 10.0;
 
+/// The spans robot-agent records for a turn answered by the model.
+const AGENT_SPANS: [&str; 6] = [
+    "turn",
+    "voice_activity",
+    "transcription",
+    "rule",
+    "reply",
+    "synthesis",
+];
+
 /// An open question no rule catches, so the catch-all hands it to the model.
 const OPEN_QUESTION: &str = "Why is the sky blue?";
 /// A question a rule answers itself.
@@ -105,18 +115,13 @@ async fn a_spoken_turn_exports_one_trace_across_robot_agent_whisper_sat_and_llm_
         LlmSat::start_with_env(&agent, &["--max-sentences", "2", "--otlp", &url], &batch).await?;
 
     let latency = spoken_turn(&agent, &dir, OPEN_QUESTION).await?;
-    let wanted = [
-        "turn",
-        "voice_activity",
-        "transcription",
-        "rule",
-        "reply",
-        "synthesis",
+    let satellites_spans = [
         "whisper.decode",
         "llm.generate",
         "llm.first_token",
         "llm.sentence",
     ];
+    let wanted: Vec<&str> = AGENT_SPANS.into_iter().chain(satellites_spans).collect();
     let spans = collector
         .until(PATIENCE, "every span of the turn", |got| {
             let names: HashSet<&str> = got.iter().map(|s| s.span.name.as_str()).collect();
@@ -139,14 +144,7 @@ async fn a_spoken_turn_exports_one_trace_across_robot_agent_whisper_sat_and_llm_
 
     // Each process exported its own part, under its service name.
     let service_of = |name: &str| one(&spans, name).map(|s| s.service.clone());
-    for name in [
-        "turn",
-        "voice_activity",
-        "transcription",
-        "rule",
-        "reply",
-        "synthesis",
-    ] {
+    for name in AGENT_SPANS {
         assert_eq!(service_of(name)?, "robot-agent", "{name}");
     }
     assert_eq!(service_of("whisper.decode")?, "whisper-sat");

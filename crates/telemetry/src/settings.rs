@@ -57,21 +57,19 @@ pub fn traces_endpoint(
     if url.starts_with("https://") {
         return Err(SettingsError::Https { origin, url });
     }
-    let Some(rest) = url
+    let has_host = url
         .strip_prefix("http://")
-        .filter(|r| !r.is_empty() && !r.starts_with('/'))
-    else {
+        .is_some_and(|rest| !rest.is_empty() && !rest.starts_with('/'));
+    if !has_host {
         return Err(SettingsError::NotHttp { origin, url });
-    };
+    }
     // A base address gets the traces path, as the OTLP exporter specification says for OTEL_EXPORTER_OTLP_ENDPOINT;
     // a signal-specific one is used as it is.
-    if base && !rest.contains('/') {
-        return Ok(Some(format!("{url}/v1/traces")));
-    }
-    if base && let Some(stripped) = url.strip_suffix('/') {
-        return Ok(Some(format!("{stripped}/v1/traces")));
-    }
-    Ok(Some(url))
+    Ok(Some(if base {
+        format!("{}/v1/traces", url.trim_end_matches('/'))
+    } else {
+        url
+    }))
 }
 
 #[cfg(test)]

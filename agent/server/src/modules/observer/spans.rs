@@ -59,23 +59,17 @@ pub fn playback_span(done: &TurnDone, heard_us: u64) -> SpanRecord {
 
 #[cfg(test)]
 mod tests {
-    use super::super::turns::TurnName;
+    use super::super::turns::Turns;
     use super::*;
 
+    /// A whole turn as the observer follows it: speech ends at 1.0 s, the VAD says so at 1.3 s, the transcript comes
+    /// at 1.34 s, the rule at 1.345 s and the reply's first PCM at 1.4 s.
     fn done(trace: Option<String>) -> TurnDone {
-        TurnDone {
-            name: TurnName {
-                utterance: "u1000".into(),
-                trace,
-                rule: "main.answer".into(),
-            },
-            speech_end_us: 1_000_000,
-            vad_us: 300_000,
-            transcript_us: 40_000,
-            rule_us: 5_000,
-            reply_us: 55_000,
-            total_us: 400_000,
-        }
+        let mut turns = Turns::default();
+        turns.vad_end("u1000", 1_000, 1_300_000);
+        turns.transcript("u1000", trace.as_deref(), 1_340_000);
+        turns.rule("main.answer", 1_345, true);
+        turns.reply_audio(1_400_000).expect("a whole turn")
     }
 
     #[test]

@@ -159,7 +159,7 @@ impl Turns {
         heard: bool,
     ) -> (Vec<(Stage, u64)>, Option<TurnDone>) {
         let at_us = at_ms.saturating_mul(1000);
-        let stage = match &mut self.answering {
+        let (rule_stage_us, early) = match &mut self.answering {
             Some(a) if heard && a.rule_us.is_none() && at_us + 1000 >= a.transcript_us => {
                 a.rule_us = Some(at_us);
                 rule.clone_into(&mut a.name.rule);
@@ -168,7 +168,6 @@ impl Turns {
             }
             _ => return (Vec::new(), None),
         };
-        let (rule_stage_us, early) = stage;
         // Speech that started before the rule fired (by more than its millisecond stamp) was not its reply.
         let done = early
             .filter(|e| e + 1000 >= at_us)
