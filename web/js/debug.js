@@ -43,6 +43,8 @@ export function installDebugHook({ avatar, avatarRenderer, avatarReason, link, p
   }));
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));
+  // Audio chunks the server dropped on its side of the link (its status's audio_dropped).
+  define("audioDropped", () => page.audioDropped);
   define("received", () => ({ ...link.received }));
   define("videoFps", () => camera.fps);
   define("cameraSkipped", () => camera.skipped);

@@ -120,6 +120,8 @@ const page = {
   wantCam: false,
   sent: { audio: 0, video: 0 },
   serverDrops: 0,
+  /** Audio chunks the server dropped because the hub side fell behind (its status's audio_dropped). */
+  audioDropped: 0,
   lastError: null,
   videoFps: 15,
   /** The recorder module's state, as Agent.recording last said. */
@@ -330,6 +332,7 @@ link.addEventListener("status", (ev) => {
   const st = ev.detail;
   const d = st.dropped ?? {};
   page.serverDrops = (d.video_queue ?? 0) + (d.to_page ?? 0);
+  page.audioDropped = st.audio_dropped ?? 0;
   const fps = st.advice?.video_fps;
   if (Number.isFinite(fps)) {
     page.videoFps = fps;

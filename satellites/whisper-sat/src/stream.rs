@@ -4,8 +4,14 @@
 //! Every satellite runs this same deterministic pipeline on the same messages, so they find the same utterances
 //! with the same ids: an utterance's id is its start time on the hub clock, derived from the per-message hub
 //! timestamps (identical for every subscriber) plus the sample offset within the stream. The pipeline restarts when
-//! the stream does (the channel's sequence goes backwards, or a gap in the hub timestamps), so satellites that saw
-//! the stream start stay in step; see docs/asr.md for what a satellite that joins mid-stream does.
+//! the stream does (the channel's sequence goes backwards), when it has a hole (the sequence skips: messages lost
+//! before this subscriber), or when the hub clock runs past the audio by more than a starved publisher could be
+//! late, so satellites that saw the stream start stay in step; see docs/asr.md for what a satellite that joins
+//! mid-stream does.
+//!
+//! Late is not lost: a page whose main thread is starved sends a second of chunks at once, stamped late and close
+//! together. The samples are still one stream, so lateness alone never restarts it (a restart there cut the
+//! user's first words off the question they began).
 
 use std::collections::VecDeque;
 
@@ -19,8 +25,13 @@ use crate::turn::Turn;
 /// The hub's audio rate (`Agent.audio`).
 pub const HUB_RATE: u32 = 22_050;
 
-/// A jump of the hub clock beyond the audio's own duration by more than this restarts the pipeline.
-const MAX_CLOCK_SLIP_US: i64 = 500_000;
+/// Messages later than the least late one by more than this are a pause in publishing, not a late delivery: the
+/// pipeline restarts. A starved page delivers seconds late; a publisher that stopped and went on is a new stream.
+pub const MAX_LATENESS_US: u64 = 4_000_000;
+/// The hub clock and a sound card's sample clock drift apart by up to a few hundred parts per million: the
+/// baseline lateness follows a drift of up to this many µs per second of audio, so hours of audio never add up to
+/// a restart.
+const DRIFT_US_PER_S: u64 = 1_000;
 
 /// One message of `Agent.audio` as the SDK delivers it.
 #[derive(Debug, Clone, Copy)]
@@ -109,7 +120,8 @@ pub struct AudioStream {
     cfg: SegmenterConfig,
     resampler: StreamResampler,
     segmenter: Segmenter,
-    /// Hub timestamp of the stream's first sample, and samples (22050 Hz) received since.
+    /// Hub time the stream's first sample had on the least late message so far (the baseline: each message's
+    /// lateness is its stamp less this plus the audio before it), and samples (22050 Hz) received since.
     origin_us: Option<u64>,
     received: u64,
     last_seq: Option<u64>,
@@ -156,8 +168,9 @@ impl AudioStream {
     ) -> Result<(), StreamError> {
         let restart = match (self.last_seq, self.origin_us) {
             (Some(last), Some(origin)) => {
-                let expected_us = origin + self.received * 1_000_000 / u64::from(HUB_RATE);
-                msg.seq <= last || (msg.ts_us as i64 - expected_us as i64).abs() > MAX_CLOCK_SLIP_US
+                let before_us = self.received * 1_000_000 / u64::from(HUB_RATE);
+                let lateness = msg.ts_us.saturating_sub(origin + before_us);
+                msg.seq <= last || msg.seq > last + 1 || lateness > MAX_LATENESS_US
             }
             _ => false,
         };
@@ -165,9 +178,7 @@ impl AudioStream {
             self.finish(out)?;
             out.push(StreamEvent::Restarted);
         }
-        if self.origin_us.is_none() {
-            self.origin_us = Some(msg.ts_us);
-        }
+        self.follow_lateness(msg);
         self.last_seq = Some(msg.seq);
         // The hub stamps a message when it is published; its first sample is that far into the stream.
         let first16 = self.received * u64::from(RATE) / u64::from(HUB_RATE);
@@ -190,6 +201,23 @@ impl AudioStream {
             self.apply_decided_end(out);
         }
         Ok(())
+    }
+
+    /// Moves the baseline: down to a message less late than it (the first messages may have been the late ones),
+    /// up by at most the clocks' drift over this message's audio when the message is later.
+    fn follow_lateness(&mut self, msg: AudioMessage<'_>) {
+        let before_us = self.received * 1_000_000 / u64::from(HUB_RATE);
+        let on_time = msg.ts_us.saturating_sub(before_us);
+        let origin = match self.origin_us {
+            None => on_time,
+            Some(origin) if on_time <= origin => on_time,
+            Some(origin) => {
+                let samples = (msg.pcm.len() / 2) as u64;
+                let drift = samples * DRIFT_US_PER_S / u64::from(HUB_RATE);
+                origin + (on_time - origin).min(drift)
+            }
+        };
+        self.origin_us = Some(origin);
     }
 
     /// One chunk of the agent's own speech (`Agent.speech`, s16le 22050 Hz) that reached the hub at `ts_us`, with
@@ -419,16 +447,7 @@ pub(crate) mod tests {
         seq0: u64,
         t0: u64,
     ) -> Vec<StreamEvent> {
-        let mut out = Vec::new();
-        for (n, chunk) in pcm.chunks(882).enumerate() {
-            let msg = AudioMessage {
-                seq: seq0 + n as u64,
-                ts_us: t0 + n as u64 * 20_000,
-                pcm: chunk,
-            };
-            stream.push(msg, &mut out).expect("push");
-        }
-        out
+        feed_stamped(stream, pcm, seq0, |n| t0 + n * 20_000)
     }
 
     fn utterances(ev: &[StreamEvent]) -> Vec<&ClockedUtterance> {
@@ -500,6 +519,86 @@ pub(crate) mod tests {
         let u = utterances(&ev);
         assert_eq!(u.len(), 1, "{ev:?}");
         assert!(u[0].start_us < 2_000_000);
+    }
+
+    /// Publishes PCM as 20 ms messages from `seq0`, each stamped by `stamp(n)` for its index `n`.
+    pub(crate) fn feed_stamped(
+        stream: &mut AudioStream,
+        pcm: &[u8],
+        seq0: u64,
+        stamp: impl Fn(u64) -> u64,
+    ) -> Vec<StreamEvent> {
+        let mut out = Vec::new();
+        for (n, chunk) in pcm.chunks(882).enumerate() {
+            let msg = AudioMessage {
+                seq: seq0 + n as u64,
+                ts_us: stamp(n as u64),
+                pcm: chunk,
+            };
+            stream.push(msg, &mut out).expect("push");
+        }
+        out
+    }
+
+    #[test]
+    fn a_starved_publishers_late_bursts_are_one_stream_and_keep_the_utterance_whole() {
+        let pcm = [
+            tone_pcm(400, false),
+            tone_pcm(2000, true),
+            tone_pcm(1200, false),
+        ]
+        .concat();
+        let t0 = 1_000_000_000;
+        // The page's main thread is blocked 1.4 s of every 1.5 s: the chunks captured meanwhile reach the hub
+        // together when it runs again, each stamped at the end of its block.
+        let starved = |n: u64| {
+            let captured = t0 + n * 20_000;
+            let block = (captured - t0) / 1_500_000;
+            (t0 + (block + 1) * 1_500_000).max(captured)
+        };
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let ev = feed_stamped(&mut s, &pcm, 1, starved);
+        assert!(!ev.contains(&StreamEvent::Restarted), "{ev:?}");
+        let u = utterances(&ev);
+        assert_eq!(u.len(), 1, "one utterance, whole: {ev:?}");
+        let voiced_s = u[0].audio.len() as f64 / f64::from(RATE);
+        assert!(
+            voiced_s >= 2.0,
+            "the utterance holds all 2 s of voice: {voiced_s} s"
+        );
+    }
+
+    #[test]
+    fn a_hole_in_the_sequence_restarts_the_pipeline() {
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let t0 = 1_000_000_000;
+        let mut ev = feed(&mut s, &tone_pcm(400, false), 1, t0);
+        assert!(!ev.contains(&StreamEvent::Restarted));
+        // 20 messages were dropped before this subscriber (seq 21 to 40), on time otherwise.
+        ev.extend(feed(&mut s, &tone_pcm(400, false), 41, t0 + 800_000));
+        assert!(ev.contains(&StreamEvent::Restarted), "{ev:?}");
+    }
+
+    #[test]
+    fn a_pause_in_publishing_longer_than_any_lateness_restarts_the_pipeline() {
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let t0 = 1_000_000_000;
+        let mut ev = feed(&mut s, &tone_pcm(400, false), 1, t0);
+        // The same stream goes on (seq 21) after the publisher stopped sending for longer than any starvation.
+        let later = t0 + 400_000 + MAX_LATENESS_US + 100_000;
+        ev.extend(feed(&mut s, &tone_pcm(400, false), 21, later));
+        assert!(ev.contains(&StreamEvent::Restarted), "{ev:?}");
+    }
+
+    #[test]
+    fn a_stream_whose_first_messages_were_late_is_not_restarted_when_it_catches_up() {
+        let mut s = AudioStream::new(SegmenterConfig::default()).expect("pipeline");
+        let t0 = 1_000_000_000;
+        // The first second arrives at once, a second late; then everything is on time.
+        let ev = feed_stamped(&mut s, &tone_pcm(3000, false), 1, |n| {
+            (t0 + n * 20_000).max(t0 + 1_000_000)
+        });
+        assert!(!ev.contains(&StreamEvent::Restarted), "{ev:?}");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //!
 //! Each medium has a lane: a bounded drop-oldest queue between the socket and a task that publishes. The socket
 //! never waits for the hub; when the hub side is slower than the page, the oldest waiting item is dropped and
-//! counted (video keeps 4 frames, audio 1 s). Closing a lane ends its task, whose `Publisher` is dropped, which
+//! counted (video keeps 4 frames, audio 10 s). Closing a lane ends its task, whose `Publisher` is dropped, which
 //! removes the channel from the hub.
 
 use std::sync::Arc;
@@ -17,8 +17,11 @@ use agent_contract::channels;
 /// Frames kept while the hub side catches up (about a quarter second at 15 fps): enough to ride out a scheduling
 /// hiccup on a busy machine; anything older is worthless and dropped.
 const VIDEO_QUEUE: usize = 4;
-/// 50 chunks of 20 ms: a second of audio, enough to ride out a hiccup without losing speech.
-const AUDIO_QUEUE: usize = 50;
+/// 500 chunks of 20 ms: ten seconds of audio (440 KB). A page whose main thread was starved sends what it
+/// captured meanwhile at once, seconds of it; those chunks are late, not stale, and a lane of one second dropped
+/// the first words of the question they held. Whisper accepts late audio (`whisper_sat::stream`), so only a hub
+/// side stuck for ten seconds loses any.
+const AUDIO_QUEUE: usize = 500;
 
 #[derive(Debug)]
 struct Lane {

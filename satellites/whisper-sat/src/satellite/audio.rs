@@ -2,7 +2,7 @@
 //!
 //! The segmenter holds the WebRTC detector, which is not `Send`, so it lives on a dedicated thread fed through a
 //! bounded queue. Overflow policy: when the thread falls behind by `QUEUE` messages (about 20 s of audio) new
-//! messages are dropped and counted; the pipeline notices the hole in the hub clock and restarts cleanly.
+//! messages are dropped and counted; the pipeline notices the hole in the sequence and restarts cleanly.
 //!
 //! With speculation on, the thread also reports pauses (an utterance whose audio is complete unless the voice
 //! resumes), resumptions, and utterances abandoned because recognition was switched off while they were open.
@@ -28,8 +28,9 @@ use crate::turn::Turn;
 
 /// Messages the segmentation thread may fall behind by before new ones are dropped.
 const QUEUE: usize = 1024;
-/// An open utterance is closed when the stream has been silent (no messages) this long.
-const STALL: Duration = Duration::from_millis(800);
+/// An open utterance is closed when the stream has been silent (no messages) this long: as long as the stream may
+/// be late (a starved page sends nothing for a second or more, then all of it), so that a late stream is not cut.
+const STALL: Duration = Duration::from_micros(crate::stream::MAX_LATENESS_US);
 /// Voice-activity changes come a few per utterance; a relay that falls this far behind loses the oldest (and logs
 /// how many), which only costs listeners a stale start or end.
 const ACTIVITY_QUEUE: usize = 64;
