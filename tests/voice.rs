@@ -7,7 +7,7 @@
 use agent_contract::channels as ch;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, PATIENCE, until};
+use agent_tests::{Agent, DataDir, PATIENCE, http, until};
 use anyhow::{Context, bail};
 use flow::{Client, Subscription};
 use serde_json::{Value, json};
@@ -71,20 +71,40 @@ impl Rig {
             .with_context(|| format!("no utterance number in {answer}"))
     }
 
-    /// Waits for subscribers on a channel this test publishes, so nothing it sends is lost.
+    /// Waits until the TTS module has subscribed to `channel`, a channel this test publishes, so that nothing it
+    /// sends is lost to the module. The module subscribes when it hears the channel added, and so do others (the
+    /// recorder follows `Agent.ctrl`, the observer `Agent.transcript` and `Agent.detections`), each in its own
+    /// time: a count of one subscriber may be one of them, and a message published then never reaches the TTS
+    /// module. The hub's graph names who subscribed.
     async fn until_subscribed(&self, channel: &str) -> anyhow::Result<()> {
         tokio::time::timeout(PATIENCE, async {
-            while !self
-                .satellite
-                .channel(channel)
-                .await
-                .is_ok_and(|info| info.stats.subscribers >= 1)
-            {
+            while !self.subscribed("tts", channel).await? {
                 tokio::time::sleep(Duration::from_millis(20)).await;
             }
+            anyhow::Ok(())
         })
         .await
-        .with_context(|| format!("nobody subscribed to {channel}"))
+        .with_context(|| format!("the tts module did not subscribe to {channel}"))?
+    }
+
+    /// Whether the connection logged in as `name` (a module's is its name) subscribes to `channel` now.
+    async fn subscribed(&self, name: &str, channel: &str) -> anyhow::Result<bool> {
+        let graph = http::get_json(self.agent.http, "/api/graph", self.agent.token()).await?;
+        let ids: Vec<&Value> = graph["nodes"]
+            .as_array()
+            .context("no nodes in the graph")?
+            .iter()
+            .filter(|node| node["name"] == name)
+            .map(|node| &node["id"])
+            .collect();
+        Ok(graph["channels"]
+            .as_array()
+            .context("no channels in the graph")?
+            .iter()
+            .filter(|c| c["name"] == channel)
+            .filter_map(|c| c["to"].as_array())
+            .flatten()
+            .any(|to| ids.contains(&to)))
     }
 
     /// The next avatar command named `cmd`, skipping others.

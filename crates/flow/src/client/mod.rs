@@ -6,8 +6,11 @@
 //! client's channels, subscriptions and database selection.
 //!
 //! Subscriptions are sticky by name: subscribing to a channel that does not
-//! exist yet, or that is removed and later re-created, delivers its data as soon
-//! as it (re)appears.
+//! exist yet, or that is removed and later re-created, delivers its data once
+//! it (re)appears. The client subscribes when the hub announces the channel, so
+//! what the owner publishes before that subscribe reaches the hub goes to no
+//! one; an owner that must not lose its first messages waits for a subscriber
+//! ([`Publisher::subscribers`], the hub's `StartPublishing`).
 
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
