@@ -75,6 +75,7 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	$(TARGET_DIR)/release/vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_browser | tee $(BENCH_LOGS)/bench_browser.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_avatar | tee $(BENCH_LOGS)/bench_avatar.log
+	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/page-bench | tee $(BENCH_LOGS)/page-bench.log
 	test -x models/bench-venv/bin/python || (python3 -m venv models/bench-venv && models/bench-venv/bin/pip install -q faster-whisper==1.2.1)
 	$(TARGET_DIR)/release/asr-bench --write docs/bench-asr.md | tee $(BENCH_LOGS)/asr-bench.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/voice-latency --write docs/bench-voice-latency.md | tee $(BENCH_LOGS)/voice-latency.log

@@ -552,6 +552,53 @@ async fn on_software_webgl_a_page_shows_the_2d_face_by_itself_and_the_3d_head_wh
     Ok(())
 }
 
+/// Drawings the page's frame clock has made since it loaded (`agentDebug.pageFrames.draws`).
+async fn draws(s: &Stage) -> anyhow::Result<u64> {
+    s.eval("agentDebug.pageFrames.draws")
+        .await?
+        .as_u64()
+        .context("agentDebug.pageFrames.draws")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_hidden_tab_draws_nothing_even_when_told_to_move_and_draws_again_when_shown()
+-> anyhow::Result<()> {
+    let _one = ONE_BROWSER.lock().await;
+    let s = Stage::open("default", WEBGL).await?;
+    // Another tab in front hides the page; it keeps streaming, but draws nothing, whatever it is told.
+    let front = s.browser.open("about:blank").await?;
+    s.wait("document.visibilityState === 'hidden'", 10).await?;
+    // A frame already asked for may still land: count from a moment later.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let hidden_at = draws(&s).await?;
+    for x in [0.9, 0.1, 0.9, 0.1] {
+        s.command(json!({"cmd": "blink", "close_ms": 60, "hold_ms": 40, "open_ms": 100}))
+            .await?;
+        s.command(json!({"cmd": "gaze", "x": x, "y": 0.5})).await?;
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    }
+    let still = draws(&s).await?;
+    let sent = s.eval("agentDebug.sent.audio").await?;
+    assert_eq!(
+        still,
+        hidden_at,
+        "a hidden tab drew {} times in 2 s of commands",
+        still - hidden_at
+    );
+    ensure!(
+        sent.as_u64().unwrap_or(0) > 0,
+        "the hidden page stopped streaming"
+    );
+    // Shown again, it draws the pose it was told meanwhile.
+    s.browser.close(&front).await?;
+    s.wait("document.visibilityState === 'visible'", 10).await?;
+    s.wait(&format!("agentDebug.pageFrames.draws > {still}"), 10)
+        .await?;
+    s.wait("agentDebug.eyeOffset.x > 0.6", 5).await?;
+    s.quit().await;
+    Ok(())
+}
+
 /// What the 3D page drew last: its model, whether it took its WebGL for software, and its triangles.
 async fn drawn(s: &Stage) -> anyhow::Result<(String, Option<bool>, u64)> {
     let q = s.eval("agentDebug.avatarQuality").await?;

@@ -290,6 +290,11 @@ impl Chromium {
         .map(drop)
     }
 
+    /// The browser's process id (its renderers, GPU and utility processes are its descendants), while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        self.child.id()
+    }
+
     /// Stops the browser.
     pub async fn quit(mut self) {
         let _ = self.child.kill().await;

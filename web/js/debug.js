@@ -1,5 +1,7 @@
 //! `window.agentDebug`: a read-only view of the page's state for end-to-end tests and for debugging by hand.
 
+import { frameClock } from "./panels/frame-clock.js";
+
 export function installDebugHook({ avatar, avatarRenderer, avatarReason, link, page, camera, mic, spectrum, overlay, rules, speech, latencies }) {
   const hook = {};
   const define = (name, get) => Object.defineProperty(hook, name, { get, enumerable: true });
@@ -45,6 +47,8 @@ export function installDebugHook({ avatar, avatarRenderer, avatarReason, link, p
   define("sent", () => ({ ...page.sent }));
   // Audio chunks the server dropped on its side of the link (its status's audio_dropped).
   define("audioDropped", () => page.audioDropped);
+  // The page's frame clock (panels/frame-clock.js): frames asked of the browser and drawings made, since load.
+  define("pageFrames", () => ({ frames: frameClock().frames, draws: frameClock().draws }));
   define("received", () => ({ ...link.received }));
   define("videoFps", () => camera.fps);
   define("cameraSkipped", () => camera.skipped);

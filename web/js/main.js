@@ -9,6 +9,7 @@ import { Microphone } from "./media/microphone.js";
 import { LoopbackRoute } from "./media/playback-route.js";
 import { SpeechPlayer } from "./media/speech.js";
 import { playedMessage } from "./media/played.js";
+import { frameClock } from "./panels/frame-clock.js";
 import { Overlay } from "./panels/overlay.js";
 import { Latencies } from "./panels/latency.js";
 import { RuleTrace } from "./panels/rules.js";
@@ -151,6 +152,15 @@ const camera = new Camera(
   },
   () => link.backlog < SEND_BACKLOG_LIMIT,
 );
+
+// The canvases' calm drawing rides on the camera preview's frames, which the compositor makes anyway
+// (panels/frame-clock.js): on a machine without a GPU every frame of its own costs.
+frameClock().pace((cb) => {
+  const video = /** @type {HTMLVideoElement} */ ($("camera"));
+  if (!camera.running || video.paused || video.readyState < 2 || !("requestVideoFrameCallback" in video)) return false;
+  video.requestVideoFrameCallback((now) => cb(now));
+  return true;
+});
 
 // ---- user controls -------------------------------------------------------------------------------------------
 

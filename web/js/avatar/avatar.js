@@ -1,5 +1,6 @@
 //! The animated avatar: turns commands (blink, gaze, visemes, mood) into a face pose every animation frame.
 
+import { frameClock } from "../panels/frame-clock.js";
 import { trackCanvasSize } from "../panels/hidpi-canvas.js";
 import { drawFace, restPose } from "./face.js";
 import { BlinkController } from "./blink.js";
@@ -9,8 +10,12 @@ import { mouthShape } from "./visemes.js";
 import { VisemeTrack } from "./viseme-track.js";
 
 const MOOD_TAU_MS = 160;
-/** Between blinks and speech the face moves slowly: 30 fps is smooth and halves the drawing cost. */
-const CALM_FRAME_MS = 32;
+/** Between blinks and speech the face only breathes and its gaze drifts: 12 fps is smooth enough for that and
+ * leaves the page's CPU to the microphone and the camera. Blinks, speech and commands draw at the clock's cap. */
+const CALM_FRAME_MS = 83;
+/** Eyes and head on their way to a new gaze target (the faces module sends one per camera frame) draw at the
+ * camera's 15 fps; a blink and speech at the frame clock's cap. */
+const TURN_FRAME_MS = 66;
 const MOUTH_TAU_MS = 30; // co-articulation: shapes blend instead of snapping
 const FRAME_LOG = 1200; // frames whose cost the debug hook keeps (~20 s at 60 fps)
 
@@ -39,37 +44,51 @@ export class Avatar {
     this.size = { w: 0, h: 0 };
     trackCanvasSize(canvas, this.ctx, (w, h) => {
       this.size = { w, h };
+      this.wake?.();
     });
-    this.frame = this.frame.bind(this);
-    requestAnimationFrame(this.frame);
+    this.frames = 0;
+    this.wake = frameClock().add((now) => this.frame(now));
   }
 
   blink(phases, fromServer = true) {
     this.blinks.blink(performance.now(), phases, fromServer);
+    this.wake();
   }
 
   lookAt(x, y) {
     this.gaze.look(performance.now(), x, y);
+    this.wake();
   }
 
   setMood(name, intensity = 1) {
     this.moodName = name;
     this.moodTarget = expression(name, intensity);
+    this.wake();
   }
 
   /** Schedules viseme `items` of `utterance` whose sample 0 plays at audio time `startS`. */
   scheduleVisemes(utterance, startS, items) {
     this.track.add(utterance, startS, items);
+    this.wake();
   }
 
   stopSpeech(utterance) {
     this.track.clear(utterance);
+    this.wake();
   }
 
+  /** Draws one frame; returns when the next is wanted: at the cap while it blinks or speaks, calm otherwise, and
+   * in time for the next blink the page does by itself. */
   frame(now) {
-    requestAnimationFrame(this.frame);
-    const busy = this.blinks.current !== null || this.track.pending > 0;
-    if (!busy && now - this.lastDraw < CALM_FRAME_MS) return;
+    this.draw(now);
+    if (this.blinks.current !== null || this.track.pending > 0) return now;
+    if (this.gazeMoving) return now + TURN_FRAME_MS;
+    const nextBlink = this.blinks.owner === "page" ? this.blinks.nextAuto : Infinity;
+    return Math.min(now + CALM_FRAME_MS, Math.max(now, nextBlink));
+  }
+
+  draw(now) {
+    this.frames += 1;
     const dt = Math.min(100, Math.max(0, now - this.last));
     this.last = now;
     this.lastDraw = now;
@@ -93,7 +112,10 @@ export class Avatar {
     for (const k of Object.keys(this.mood)) {
       this.mood[k] += (this.moodTarget[k] - this.mood[k]) * km;
     }
+    const was = { eyeX: p.eyeX, eyeY: p.eyeY, yaw: p.yaw, pitch: p.pitch / 0.6 };
     const g = this.gaze.update(now, dt);
+    // A saccade or a head turn in progress draws at the cap; a settled gaze only drifts.
+    this.gazeMoving = Math.abs(g.eyeX - was.eyeX) + Math.abs(g.eyeY - was.eyeY) + Math.abs(g.yaw - was.yaw) + Math.abs(g.pitch - was.pitch) > 0.002;
     p.eyeX = g.eyeX;
     p.eyeY = g.eyeY;
     p.yaw = g.yaw;
@@ -139,6 +161,7 @@ export class Avatar {
       drawMs: this.drawMs ?? 0,
       renderer: "2d",
       frameMs: this.frameMs.slice(),
+      frames: this.frames,
     };
   }
 }

@@ -7,6 +7,7 @@
 
 import * as THREE from "three";
 import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
+import { frameClock, MIN_FRAME_MS } from "../panels/frame-clock.js";
 import { BlinkController } from "./blink.js";
 import { GazeController } from "./gaze.js";
 import { expression } from "./moods.js";
@@ -16,14 +17,16 @@ import { rig } from "./rig3d.js";
 import { mouthShape } from "./visemes.js";
 
 const MOOD_TAU_MS = 160;
-/** As on the 2D face: between blinks and speech 30 fps is smooth, and halves the cost on GPU-less machines. */
+/** Between blinks and speech the head only breathes and drifts: 30 fps where a GPU draws it. */
 const CALM_FRAME_MS = 32;
 /**
- * On software WebGL, where a frame costs the CPU ~20 ms, the calm head (only breathing and drifting, slow
- * motions) draws at 15 fps: the page's other work (speech, the microphone, the camera) keeps its CPU time. Speech,
- * blinks and gaze moves still draw every frame.
+ * On software WebGL, where a frame costs the CPU ~20 ms, the calm head draws at 12 fps, as the 2D face does: the
+ * page's other work (speech, the microphone, the camera) keeps its CPU time. Speech, blinks and gaze moves draw at
+ * the frame clock's cap.
  */
-const SOFTWARE_CALM_FRAME_MS = 66;
+const SOFTWARE_CALM_FRAME_MS = 83;
+/** Eyes and head on their way to a new gaze target draw at the camera's 15 fps, as on the 2D face. */
+const TURN_FRAME_MS = 66;
 const TRACE_FRAMES = 900; // ~15 s at 60 fps, for the tests' timing checks
 const FRAME_LOG = 1200; // frames whose cost the debug hook keeps, as avatar.js does
 const MIN_PIXEL_RATIO = 0.45; // below this the head turns visibly blurry; slower machines get fewer frames
@@ -166,13 +169,12 @@ export class Avatar3D {
       this.camera.position.set(dist * Math.sin(yaw), this.lookY + 0.012, dist * Math.cos(yaw));
       this.camera.lookAt(0, this.lookY, 0);
       this.camera.updateProjectionMatrix();
-      this.lastDraw = 0; // redraw at once
+      this.wake?.(); // redraw at once
     };
     new ResizeObserver(fit).observe(canvas);
     fit();
 
-    this.frame = this.frame.bind(this);
-    requestAnimationFrame(this.frame);
+    this.wake = frameClock().add((now) => this.frame(now));
   }
 
   calmFrameMs() {
@@ -192,7 +194,7 @@ export class Avatar3D {
    */
   adapt(now, interval, busy) {
     if (!this.quality?.adaptive) return;
-    const wanted = busy ? 1000 / 60 : this.calmFrameMs();
+    const wanted = busy ? MIN_FRAME_MS : this.calmFrameMs();
     const late = Math.min(4, interval / wanted);
     this.lateness = this.lateness === undefined ? late : this.lateness * 0.9 + late * 0.1;
     if (now - (this.lastAdapt ?? 0) < 1000) return;
@@ -208,20 +210,24 @@ export class Avatar3D {
 
   blink(phases, fromServer = true) {
     this.blinks.blink(performance.now(), phases, fromServer);
+    this.wake();
   }
 
   lookAt(x, y) {
     this.gaze.look(performance.now(), x, y);
+    this.wake();
   }
 
   setMood(name, intensity = 1) {
     this.moodName = name;
     this.moodTarget = expression(name, intensity);
+    this.wake();
   }
 
   scheduleVisemes(utterance, startS, items) {
     this.track.add(utterance, startS, items);
     this.mixer.add(utterance, startS, items);
+    this.wake();
     const cues = items.filter((i) => i && typeof i.v === "string" && Number.isFinite(i.t_ms));
     this.schedule.push({ utterance, startS, items: cues.map((i) => ({ t_ms: i.t_ms, v: i.v })) });
     if (this.schedule.length > 16) this.schedule.shift();
@@ -230,12 +236,21 @@ export class Avatar3D {
   stopSpeech(utterance) {
     this.track.clear(utterance);
     this.mixer.clear(utterance);
+    this.wake();
   }
 
+  /** Draws one frame; returns when the next is wanted: at the cap while it blinks, speaks or turns, calm
+   * otherwise, and in time for the next blink the page does by itself. */
   frame(now) {
-    requestAnimationFrame(this.frame);
-    const busy = this.blinks.current !== null || this.mixer.pending > 0 || this.gazeMoving;
-    if (!busy && now - this.lastDraw < this.calmFrameMs()) return;
+    const wasBusy = this.blinks.current !== null || this.mixer.pending > 0 || this.gazeMoving;
+    this.draw(now, wasBusy);
+    if (this.blinks.current !== null || this.mixer.pending > 0) return now;
+    if (this.gazeMoving) return now + TURN_FRAME_MS;
+    const nextBlink = this.blinks.owner === "page" ? this.blinks.nextAuto : Infinity;
+    return Math.min(now + this.calmFrameMs(), Math.max(now, nextBlink));
+  }
+
+  draw(now, busy) {
     const interval = now - this.last;
     const dt = Math.min(100, Math.max(0, interval));
     this.last = now;

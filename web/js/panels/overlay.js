@@ -4,10 +4,13 @@
 // right moves right on screen) and scaled to the card's size, so each point is mapped through the same transform
 // (overlay-items.js, which also turns a message into the geometries drawn).
 
+import { frameClock } from "./frame-clock.js";
 import { trackCanvasSize } from "./hidpi-canvas.js";
 import { detectionItems, frameToCanvas } from "./overlay-items.js";
 
 const FADE_MS = 500;
+/** Boxes fade at 15 fps, the camera's own rate. */
+const FADE_FRAME_MS = 66;
 const COLOURS = { face: "#5fd4c4", motion: "#f2b86b", motion_centre: "#f2b86b", code: "#7aa2ff" };
 
 export class Overlay {
@@ -28,28 +31,38 @@ export class Overlay {
       this.w = w;
       this.h = h;
       this.dirty = true;
+      this.wake?.();
     });
-    this.draw = this.draw.bind(this);
-    requestAnimationFrame(this.draw);
+    this.wake = frameClock().add((now) => this.draw(now));
   }
 
   /** Takes one `Agent.detections` message (the contract's shape); anything else is ignored. */
   show(message) {
     const data = detectionItems(message);
     if (!data) return;
+    // An empty message after an empty one changes nothing on the canvas: the vision module sends one per frame.
+    const changed = data.items.length > 0 || this.items > 0 || this.last === null;
     this.last = data;
     this.items = data.items.length;
     if (data.items.length > 0 && Number.isFinite(message.frame.ts_us)) this.undrawn = message.frame.ts_us;
     this.lastAt = performance.now();
     this.count += 1;
+    if (!changed) return;
     this.dirty = true;
+    this.wake();
   }
 
+  /** Draws when something changed (new detections, a resize) and while boxes fade; returns the next frame wanted:
+   * the fade's next step, the moment it begins, or none. */
   draw(now) {
-    requestAnimationFrame(this.draw);
-    // Redraw only when something changed: new detections, a resize, or while they fade out.
     const age = now - this.lastAt;
-    if (!this.dirty && (!this.last || age > FADE_MS * 2 + 100)) return;
+    if (!this.dirty && (!this.last || age > FADE_MS * 2 + 100)) return Infinity;
+    this.paint(now, age);
+    if (!this.last || this.items === 0 || age > FADE_MS * 2) return Infinity;
+    return age < FADE_MS ? this.lastAt + FADE_MS : now + FADE_FRAME_MS;
+  }
+
+  paint(now, age) {
     this.dirty = false;
     const ctx = this.ctx;
     ctx.clearRect(0, 0, this.w, this.h);

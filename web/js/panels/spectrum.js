@@ -3,11 +3,14 @@
 // Bins are grouped on a logarithmic frequency axis (speech lives in the low kilohertz) and shown in dB, with
 // falling peaks so short sounds stay visible for a moment.
 
+import { frameClock } from "./frame-clock.js";
 import { trackCanvasSize } from "./hidpi-canvas.js";
 
 const BARS = 56;
 const FLOOR_DB = -90;
 const MIN_HZ = 60;
+/** Bars at 15 fps: enough to see speech, and a quarter of the frames of a free-running loop. */
+const FRAME_MS = 66;
 
 export class Spectrum {
   constructor(canvas) {
@@ -25,9 +28,8 @@ export class Spectrum {
       this.w = w;
       this.h = h;
     });
-    this.draw = this.draw.bind(this);
     this.last = performance.now();
-    requestAnimationFrame(this.draw);
+    this.wake = frameClock().add((now) => this.draw(now));
   }
 
   configure(info) {
@@ -56,15 +58,21 @@ export class Spectrum {
       if (db > this.peaks[b]) this.peaks[b] = db;
     }
     this.frames += 1;
+    this.drawnResting = false;
+    this.wake(this.last + FRAME_MS);
   }
 
+  /** Draws the bars at 15 fps while they move; a spectrum at rest (all at the floor) needs no frame until the
+   * next one arrives. */
   draw(now) {
-    requestAnimationFrame(this.draw);
-    // 30 fps is plenty for bars, and a spectrum at rest (all at the floor) needs no redraw at all.
-    if (now - this.last < 32) return;
     const resting = this.peaks.every((p) => p <= FLOOR_DB);
-    if (resting && this.drawnResting) return;
+    if (resting && this.drawnResting) return Infinity;
     this.drawnResting = resting;
+    this.paint(now);
+    return now + FRAME_MS;
+  }
+
+  paint(now) {
     const dt = Math.min(100, now - this.last);
     this.last = now;
     const ctx = this.ctx;
