@@ -14,6 +14,7 @@ pub mod client;
 pub mod connection;
 pub mod error;
 pub mod log;
+pub mod priority;
 pub mod protocol;
 pub mod queue;
 pub mod shm;

@@ -14,6 +14,7 @@ pub mod spectrum;
 pub mod tts;
 pub mod video_y;
 pub mod vision;
+pub mod vision_worker;
 
 /// The built-in modules besides the browser link, in start order (the server starts those enabled), conversing
 /// in `language`. The TTS module starts before any other publisher of avatar commands: it owns

@@ -2,7 +2,8 @@
 //! what they find on `Agent.faces`, `Agent.motion`, `Agent.codes` and `Agent.detections` (and optionally a `gaze`
 //! command on `Agent.avatar`). See docs/vision.md for the messages.
 //!
-//! Frames are never queued for the detectors: while one frame is being processed on a blocking thread, newer
+//! Frames are never queued for the detectors: while one frame is being processed on the detectors' own thread (at
+//! background priority, `vision_worker.rs`), newer
 //! frames replace older ones in the subscription's drop-oldest queue, and the next round takes only the newest,
 //! counting the rest as skipped. The subscription is sticky, so when the camera channel disappears and comes back
 //! (a browser reconnects, a test publishes again) frames flow again by themselves; a sequence number that starts
@@ -13,7 +14,7 @@ use std::collections::VecDeque;
 use agent_vision::pipeline::FaceDetection;
 use agent_vision::settings::VisionSettings;
 use agent_vision::wire::{self, CountersMsg};
-use agent_vision::{FrameDetections, ProcessError, VisionPipeline};
+use agent_vision::{FrameDetections, ProcessError};
 use anyhow::Context;
 use bytes::Bytes;
 use flow::Publisher;
@@ -22,6 +23,8 @@ use serde::Serialize;
 use tracing::{debug, info, warn};
 
 use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+
+use super::vision_worker::VisionWorker;
 
 use agent_contract::channels::{self, AVATAR, CODES, DETECTIONS, FACES, MOTION};
 
@@ -76,11 +79,9 @@ async fn run(mut ctx: ModuleContext) -> anyhow::Result<()> {
     let settings = VisionSettings::from_json(&ctx.params).context("[modules.vision]")?;
     let params = settings.pipeline_params().context("[modules.vision]")?;
     agent_vision::set_opencv_threads(settings.threads).context("[modules.vision] threads")?;
-    // Loading the network (7 MB) or the cascades (a megabyte of XML each) blocks: keep it off the async threads.
-    let mut pipeline = tokio::task::spawn_blocking(move || VisionPipeline::new(params))
-        .await
-        .context("starting the vision detectors")?
-        .context("[modules.vision]")?;
+    // The detectors run on their own thread at background priority (vision_worker.rs), so that on a busy machine
+    // the spoken turn goes first.
+    let pipeline = VisionWorker::start(params).await?;
 
     let client = ctx.client.clone();
     let outputs = Outputs {
@@ -136,13 +137,7 @@ async fn run(mut ctx: ModuleContext) -> anyhow::Result<()> {
                     debug!(seq = frame.seq, "vision: source stream restarted");
                 }
                 figures.last_seq = Some(frame.seq);
-                let (back, result) = tokio::task::spawn_blocking(move || {
-                    let result = pipeline.process_jpeg(&frame.payload, frame.seq, frame.ts_us);
-                    (pipeline, result)
-                })
-                .await
-                .context("vision worker panicked")?;
-                pipeline = back;
+                let result = pipeline.process(frame.payload, frame.seq, frame.ts_us).await?;
                 match result {
                     Ok(detections) => {
                         figures.counters.processed += 1;
