@@ -10,7 +10,7 @@ use agent_contract::channels as ch;
 use std::time::Duration;
 
 use agent_tests::satellite::LlmSat;
-use agent_tests::spoken::{say, silence, write_wav};
+use agent_tests::spoken::{say, silence, words, write_wav};
 use agent_tests::{Agent, DataDir, Satellite, json_message, next_payload, run};
 use anyhow::Context;
 use serde_json::Value;
@@ -39,16 +39,6 @@ impl Drop for BusyLoop {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
-}
-
-fn words(text: &str) -> String {
-    text.to_lowercase()
-        .chars()
-        .map(|c| if c.is_alphanumeric() { c } else { ' ' })
-        .collect::<String>()
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// What the watcher saw, in order.

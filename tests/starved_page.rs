@@ -14,6 +14,7 @@ use agent_contract::channels as ch;
 use agent_contract::transcript::TranscriptMessage;
 use agent_tests::browser_chromium::{Chromium, FakeMedia};
 use agent_tests::browser_media::{prepare, speech_fixture};
+use agent_tests::spoken::words;
 use agent_tests::{Agent, DataDir, PATIENCE, Satellite};
 use anyhow::{Context, bail};
 
@@ -45,16 +46,6 @@ fn question(dir: &std::path::Path) -> anyhow::Result<std::path::PathBuf> {
         .context("running ffmpeg (apt-get install ffmpeg)")?;
     anyhow::ensure!(status.success(), "ffmpeg failed: {status}");
     Ok(out)
-}
-
-fn normalized(text: &str) -> String {
-    text.to_lowercase()
-        .chars()
-        .map(|c| if c.is_alphanumeric() { c } else { ' ' })
-        .collect::<String>()
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -117,7 +108,7 @@ async fn a_starved_page_still_delivers_every_sample_and_the_question_is_heard_wh
                 // Speech that began before the page was starved is not this test's question.
                 if msg.is_final && msg.start_us > starved_at_us {
                     println!("heard while starved: {:?}", msg.text);
-                    heard.push(normalized(&msg.text));
+                    heard.push(words(&msg.text));
                 }
             }
             _ = tokio::time::sleep_until(deadline) => break false,

@@ -115,3 +115,14 @@ pub fn mix(a: &[i16], b: &[i16], offset: usize) -> Vec<i16> {
         })
         .collect()
 }
+
+/// `text` in lower case with its punctuation gone and single spaces, for comparing what was heard with what was said.
+pub fn words(text: &str) -> String {
+    text.to_lowercase()
+        .chars()
+        .map(|c| if c.is_alphanumeric() { c } else { ' ' })
+        .collect::<String>()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
