@@ -4,7 +4,7 @@
 //! its embedded defaults (as `make run` starts it), a real `whisper-sat` and a real `llm-sat` serve two spoken
 //! questions streamed in real time: one a rule answers ("What time is it?") and one the model answers ("Why is the
 //! sky blue?"). Each must be heard whole and answered aloud after it was heard. Only the order of events is asserted,
-//! never a duration.
+//! never a duration. And when the machine cannot keep up, the agent says which stage is behind.
 
 use agent_contract::channels as ch;
 use std::time::Duration;
@@ -138,6 +138,54 @@ async fn beside_two_busy_loops_both_questions_are_heard_whole_and_answered_aloud
             .iter()
             .any(|s| matches!(s, Seen::Reply(v) if v["event"] == "sentence")),
         "the model did not answer the open question: {seen:?}"
+    );
+    Ok(())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stage_over_its_budget_is_named_in_the_log_in_metrics_and_in_the_turns_latency()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    // The silence hangover is never under a millisecond: with that budget every turn's voice activity is behind,
+    // as it would be on a machine too slow for its models.
+    let agent = Agent::start_configured(
+        &dir,
+        "[modules.observer]\nbudgets_ms = { vad = 1 }\n",
+        "module started",
+    )
+    .await?;
+    let watcher = agent.client("pace-test").await?;
+    let latency = watcher.subscribe(ch::LATENCY.name).await?;
+    let _asr = Satellite::start(&agent, "pace-asr").await?;
+    let wav = dir.path().join("three-questions.wav");
+    let question = say(RULE_QUESTION, dir.path())?;
+    let mut samples = silence(500);
+    for _ in 0..3 {
+        samples.extend_from_slice(&question);
+        samples.extend(silence(4000));
+    }
+    write_wav(&wav, &samples)?;
+    let publishing = tokio::spawn(run(agent.microphone(&wav, 1500)?, b"", PATIENCE));
+
+    // Three turns: the first two are not judged yet, the third names the stage.
+    let mut turns = Vec::new();
+    while turns.len() < 3 {
+        let p = tokio::time::timeout(PATIENCE, next_payload(&latency))
+            .await
+            .with_context(|| format!("only {} turns measured: {turns:?}", turns.len()))??;
+        turns.extend(json_message(&p));
+    }
+    publishing.await??.ok()?;
+    assert!(turns[0].get("behind").is_none(), "{turns:?}");
+    assert_eq!(turns[2]["behind"], serde_json::json!(["vad"]), "{turns:?}");
+    agent
+        .output
+        .wait_for("this machine is behind on the turn's vad", 1, PATIENCE)
+        .await?;
+    let samples = agent_tests::metrics::parse(&agent_tests::metrics::scrape(&agent).await?).await?;
+    assert_eq!(
+        agent_tests::metrics::value(&samples, "agent_turn_stage_behind", &[("stage", "vad")]),
+        Some(1.0)
     );
     Ok(())
 }

@@ -42,6 +42,7 @@ export function installDebugHook({ avatar, avatarRenderer, avatarReason, link, p
     voice: { last: latencies.voice.last, median: latencies.voice.median() },
     camera: { last: latencies.camera.last, median: latencies.camera.median() },
     clockOffsetMs: link.clock.offset(),
+    behind: [...latencies.behind],
   }));
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));

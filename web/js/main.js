@@ -445,7 +445,7 @@ setInterval(() => {
       levelDb: mic.levelDb,
       drops: page.serverDrops + camera.skipped,
       rttMs: link.rttMs,
-      voice: latencies.voice.text(),
+      voice: latencies.voiceText(),
       camera: latencies.camera.text(),
     },
     performance.now(),

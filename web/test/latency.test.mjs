@@ -46,6 +46,19 @@ test("the voice figure takes the observer's turn messages", () => {
   assert.equal(l.voice.values.length, totals.length);
 });
 
+test("the stages the server says are behind are shown beside the voice figure, and go when it keeps up", () => {
+  const l = new Latencies();
+  const slow = vector.messages.find((m) => Array.isArray(m.behind) && m.behind.length > 0);
+  assert.ok(slow, "the vectors hold a turn with a stage behind");
+  l.turn(slow);
+  assert.deepEqual(l.behind, slow.behind);
+  assert.ok(l.voiceText().endsWith(`slow: ${slow.behind.join(", ")}`), l.voiceText());
+  const quick = vector.messages.find((m) => !m.behind);
+  l.turn(quick);
+  assert.deepEqual(l.behind, []);
+  assert.ok(!l.voiceText().includes("slow"), l.voiceText());
+});
+
 test("a figure shows the last value and the median of the recent ones", () => {
   const f = new Figure();
   assert.equal(f.text(), "–");

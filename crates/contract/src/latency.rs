@@ -20,4 +20,8 @@ pub struct TurnLatency {
     pub reply_ms: f64,
     /// End of speech -> the first PCM of the reply: what the user waited.
     pub total_ms: f64,
+    /// The stages that are behind on this machine: their median over the last turns is over their budget (`vad`,
+    /// `transcription`, `rule`, `reply`). Empty while the machine keeps up; the page shows them beside the figure.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub behind: Vec<String>,
 }

@@ -311,21 +311,30 @@ pub fn recording() -> serde_json::Value {
 
 /// `Agent.latency`: two turns as the observer publishes them.
 pub fn latency() -> serde_json::Value {
-    let turn =
-        |speech_end_ms: u64, vad_ms: f64, transcript_ms: f64, rule_ms: f64, reply_ms: f64| {
-            crate::latency::TurnLatency {
-                kind: "voice".into(),
-                speech_end_ms,
-                vad_ms,
-                transcript_ms,
-                rule_ms,
-                reply_ms,
-                total_ms: vad_ms + transcript_ms + rule_ms + reply_ms,
-            }
-        };
+    let turn = |speech_end_ms: u64,
+                vad_ms: f64,
+                transcript_ms: f64,
+                rule_ms: f64,
+                reply_ms: f64,
+                behind: &[&str]| {
+        crate::latency::TurnLatency {
+            kind: "voice".into(),
+            speech_end_ms,
+            vad_ms,
+            transcript_ms,
+            rule_ms,
+            reply_ms,
+            total_ms: vad_ms + transcript_ms + rule_ms + reply_ms,
+            behind: behind.iter().map(|s| (*s).to_owned()).collect(),
+        }
+    };
     serde_json::json!({
         "channel": crate::channels::LATENCY.name,
-        "messages": [turn(1_700_000_000_000, 300.0, 12.5, 2.0, 48.5), turn(1_700_000_009_000, 310.0, 0.0, 1.5, 40.0)],
+        "messages": [
+            turn(1_700_000_000_000, 300.0, 12.5, 2.0, 48.5, &[]),
+            turn(1_700_000_009_000, 310.0, 0.0, 1.5, 40.0, &[]),
+            turn(1_700_000_020_000, 320.0, 2400.0, 1.5, 45.0, &["transcription"]),
+        ],
     })
 }
 

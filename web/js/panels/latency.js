@@ -49,6 +49,8 @@ export class Latencies {
   constructor() {
     this.voice = new Figure();
     this.camera = new Figure();
+    /** The turn's stages the server says are behind on its machine (`Agent.latency`'s `behind`). @type {string[]} */
+    this.behind = [];
     /** @type {{sentMs: number, captureMs: number}[]} */
     this.frames = [];
   }
@@ -91,6 +93,14 @@ export class Latencies {
    */
   turn(message) {
     const m = /** @type {any} */ (message);
-    if (m && m.kind === "voice" && Number.isFinite(m.total_ms)) this.voice.add(m.total_ms);
+    if (!m || m.kind !== "voice" || !Number.isFinite(m.total_ms)) return;
+    this.voice.add(m.total_ms);
+    this.behind = Array.isArray(m.behind) ? m.behind.filter((s) => typeof s === "string") : [];
+  }
+
+  /** The voice figure with the stages that are behind: "2400 ms (median 900) · slow: transcription". */
+  voiceText() {
+    const figure = this.voice.text();
+    return this.behind.length ? `${figure} · slow: ${this.behind.join(", ")}` : figure;
   }
 }

@@ -6,6 +6,7 @@
 //! changes nothing else.
 
 mod claims;
+mod pace;
 mod spans;
 mod turns;
 
@@ -20,28 +21,44 @@ use flow_hub::metrics::{HistogramFamily, Metrics, latency_family};
 use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
 use serde::Deserialize;
 use tokio::sync::broadcast::error::RecvError;
 
 use claims::{ClaimNews, Claims};
 use flow_hub::module::{Module, ModuleContext, ModuleFuture};
+use pace::{Budgets, Pace};
+use tracing::{info, warn};
 use turns::{Stage, TurnDone, Turns};
 
 /// The `observer` module.
 #[derive(Debug, Default)]
 pub struct ObserverModule;
 
-/// `[modules.observer]`: only the switch.
+/// `[modules.observer]`: the switch and the turn's stage budgets (`pace.rs`).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 struct ObserverParams {
     enabled: bool,
+    budgets_ms: Budgets,
 }
 
 impl Default for ObserverParams {
     fn default() -> Self {
-        ObserverParams { enabled: true }
+        ObserverParams {
+            enabled: true,
+            budgets_ms: Budgets::default(),
+        }
     }
+}
+
+fn observer_params(params: &serde_json::Value) -> anyhow::Result<ObserverParams> {
+    let p = serde_path_to_error::deserialize::<_, ObserverParams>(params)
+        .map_err(|e| anyhow::anyhow!("[modules.observer] {}: {}", e.path(), e.inner()))?;
+    p.budgets_ms
+        .validate()
+        .map_err(|e| anyhow::anyhow!("[modules.observer] {e}"))?;
+    Ok(p)
 }
 
 #[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
@@ -64,6 +81,7 @@ struct Figures {
     asr_claims_lost: Family<SatelliteLabel, Counter>,
     asr_claims_retried: Family<SatelliteLabel, Counter>,
     conversation: HistogramFamily<StageLabel>,
+    behind: Family<StageLabel, Gauge>,
 }
 
 impl Figures {
@@ -76,7 +94,14 @@ impl Figures {
             asr_claims_lost: Family::default(),
             asr_claims_retried: Family::default(),
             conversation: latency_family(),
+            behind: Family::default(),
         };
+        metrics.register(
+            "agent_turn_stage_behind",
+            "1 while a stage of the turn (vad, transcription, rule, reply) is behind on this machine: its median over \
+             the last turns is over its budget (docs/metrics.md)",
+            f.behind.clone(),
+        );
         metrics.register(
             "agent_vision_stage_seconds",
             "Time the vision module spent per frame, by stage (decode, faces, motion, codes, total)",
@@ -201,8 +226,8 @@ fn heard(payload: &[u8]) -> Heard {
     }
 }
 
-/// A finished turn as the contract's `Agent.latency` message.
-fn latency_message(turn: &TurnDone) -> TurnLatency {
+/// A finished turn as the contract's `Agent.latency` message, with the stages behind now.
+fn latency_message(turn: &TurnDone, behind: Vec<String>) -> TurnLatency {
     let ms = |us: u64| us as f64 / 1000.0;
     TurnLatency {
         kind: "voice".into(),
@@ -212,24 +237,46 @@ fn latency_message(turn: &TurnDone) -> TurnLatency {
         rule_ms: ms(turn.rule_us),
         reply_ms: ms(turn.reply_us),
         total_ms: ms(turn.total_us),
+        behind,
     }
 }
 
 /// A finished turn: its figures, its `Agent.latency` message and, with telemetry on, its spans.
 fn finished(
     figures: &Figures,
+    pace: &mut Pace,
     latency: &flow::Publisher,
     telemetry: &flow_telemetry::Telemetry,
     turn: &TurnDone,
 ) {
     figures.reply(turn);
+    for change in pace.turn(turn) {
+        let (stage, median_ms, budget_ms) = (change.stage, change.median_ms, change.budget_ms);
+        if change.behind {
+            warn!(
+                stage,
+                median_ms,
+                budget_ms,
+                "this machine is behind on the turn's {stage}: the configured models or other work are too slow for it"
+            );
+        } else {
+            info!(
+                stage,
+                median_ms, budget_ms, "the turn's {stage} keeps up again"
+            );
+        }
+        figures
+            .behind
+            .get_or_create(&StageLabel { stage })
+            .set(i64::from(pace.is_behind(stage)));
+    }
     if telemetry.is_on() {
         for span in spans::turn_spans(turn) {
             telemetry.record(span);
         }
     }
     // One small message per turn; a full send queue drops it (counted by the SDK).
-    let message = serde_json::to_vec(&latency_message(turn)).unwrap_or_default();
+    let message = serde_json::to_vec(&latency_message(turn, pace.behind())).unwrap_or_default();
     let _ = latency.try_publish(message);
 }
 
@@ -251,9 +298,7 @@ impl Module for ObserverModule {
     }
 
     fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
-        serde_path_to_error::deserialize::<_, ObserverParams>(params)
-            .map(drop)
-            .map_err(|e| anyhow::anyhow!("[modules.observer] {}: {}", e.path(), e.inner()))
+        observer_params(params).map(drop)
     }
 
     fn run(self: Box<Self>, mut ctx: ModuleContext) -> ModuleFuture {
@@ -275,6 +320,7 @@ impl Module for ObserverModule {
             // Claims already open when the module starts are counted from their next change.
             let mut claims = Claims::default();
             let mut turns = Turns::default();
+            let mut pace = Pace::new(observer_params(&ctx.params)?.budgets_ms);
             loop {
                 tokio::select! {
                     _ = ctx.stopped() => return Ok(()),
@@ -309,7 +355,7 @@ impl Module for ObserverModule {
                             let (stages, done) = turns.rule(&r.rule, at_ms, on_speech);
                             figures.stages(stages);
                             if let Some(turn) = done {
-                                finished(&figures, &latency, &telemetry, &turn);
+                                finished(&figures, &mut pace, &latency, &telemetry, &turn);
                                 // Its speech utterance is not known here: no playback span for this turn.
                             }
                         }
@@ -318,7 +364,7 @@ impl Module for ObserverModule {
                         if starts_utterance(&d.payload)
                             && let Some(turn) = turns.reply_audio(d.ts_us)
                         {
-                            finished(&figures, &latency, &telemetry, &turn);
+                            finished(&figures, &mut pace, &latency, &telemetry, &turn);
                             if telemetry.is_on() {
                                 replied = Some((speech_utterance(&d.payload), turn));
                             }
