@@ -15,9 +15,15 @@
 //! Options: `--runs N` (default 20), `--threads N` (satellite inference threads, default 2), `--hangover-ms N`
 //! (default: the satellite's), `--satellite-arg ARG` (repeatable: passed on to `whisper-sat run`, to measure another
 //! setting), `--chat-runs N` (open questions, default 20; 0 skips the chat phase), `--llm-threads N` (llm-sat's
-//! generation threads, default 2), `--write PATH` (a Markdown report).
+//! generation threads, default 2), `--beside-runs N` (questions per condition of the beside phase, default 6; 0 skips
+//! it), `--write PATH` (a Markdown report).
+//!
+//! The beside phase (`beside.rs`) says rule questions quiet, with the agent's page open in headless Chromium, beside
+//! two busy loops, and beside them at the systemd units' priority, and reports each condition's voice to voice and
+//! the words lost.
 
 mod barge_in;
+mod beside;
 mod chat;
 mod chat_report;
 mod report;
@@ -58,7 +64,7 @@ const MID_SENTENCE: [(&str, f64); 2] = [
     ("audio/LJ001-0001.wav", 4.2),
 ];
 /// How long one run may take from the end of speech to the reply before it counts as lost.
-const RUN_PATIENCE: Duration = Duration::from_secs(60);
+pub(crate) const RUN_PATIENCE: Duration = Duration::from_secs(60);
 
 /// Voice-to-voice latency of the whole agent: end of the user's speech to the first reply PCM, with a release
 /// `robot-agent`, `whisper-sat` and (the chat phase) `llm-sat`.
@@ -89,6 +95,9 @@ struct Options {
     /// llm-sat's generation threads.
     #[arg(long, default_value_t = 2)]
     llm_threads: u32,
+    /// Rule questions per condition of the beside phase: quiet, the page open, two busy loops (0 skips it).
+    #[arg(long, default_value_t = 6)]
+    beside_runs: usize,
 }
 
 fn options() -> anyhow::Result<Options> {
@@ -243,6 +252,28 @@ async fn main() -> anyhow::Result<()> {
         figures.barge_ins = barge_in::measure(&rig, &talkers, &burst, opts.barge_ins).await?;
     }
     figures.load = (load_before, report::load_average());
+    let beside_figures = if opts.beside_runs > 0 {
+        println!(
+            "beside: {} rule questions each quiet, with the page open in headless Chromium, and beside two busy loops",
+            opts.beside_runs
+        );
+        let questions: Vec<(Clip, &str)> = SPOKEN_TURNS
+            .iter()
+            .map(|text| Ok((Clip::espeak(text, scratch.path())?, *text)))
+            .collect::<anyhow::Result<_>>()?;
+        let pids = rig.turn_pids();
+        beside::measure(
+            &mut watcher,
+            &say_tx,
+            &questions,
+            opts.beside_runs,
+            &rig.page_url,
+            &pids,
+        )
+        .await?
+    } else {
+        Vec::new()
+    };
     let chat_figures = if opts.chat_runs > 0 {
         println!(
             "chat: {} open questions answered by llm-sat (default model, {} threads) beside whisper-sat",
@@ -271,6 +302,9 @@ async fn main() -> anyhow::Result<()> {
     mic.await.context("the microphone task")??;
     figures.hop = hop;
     figures.print(&opts_summary(&opts));
+    for line in beside::summary_lines(&beside_figures) {
+        println!("{line}");
+    }
     let chat_setup = format!(
         "{} open questions, llm-sat SmolLM2-135M-Instruct Q4_1 with {} threads beside whisper-sat with {}",
         opts.chat_runs, opts.llm_threads, opts.threads

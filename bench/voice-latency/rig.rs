@@ -40,16 +40,26 @@ fn binary(dir: &Path, name: &str) -> anyhow::Result<PathBuf> {
 
 /// A running server and satellite.
 pub struct Rig {
-    _agent: Child,
+    agent: Child,
     satellite: Option<Child>,
     llm: Option<Child>,
     data_dir: PathBuf,
     /// `tcp://HOST:PORT` of the hub.
     pub flow_tcp: String,
     pub token: String,
+    /// The page's address with its token, as the server printed it (empty if it did not).
+    pub page_url: String,
 }
 
 impl Rig {
+    /// The process ids of the server and the speech satellite (those of the turn's work).
+    pub fn turn_pids(&self) -> Vec<u32> {
+        [self.agent.id(), self.satellite.as_ref().and_then(Child::id)]
+            .into_iter()
+            .flatten()
+            .collect()
+    }
+
     /// Starts the server; the satellite follows with [`Rig::start_satellite`].
     pub async fn start(bins: &Path) -> anyhow::Result<Rig> {
         let data_dir = std::env::temp_dir().join(format!("voice-latency-{}", std::process::id()));
@@ -83,8 +93,13 @@ impl Rig {
             .spawn()
             .context("starting robot-agent")?;
         let mut lines = output_lines(&mut agent);
+        // "robot-agent ready: open URL" comes first, then the hub's addresses.
+        let mut page_url = String::new();
         let flow_tcp = tokio::time::timeout(START_TIMEOUT, async {
             while let Some(line) = lines.recv().await {
+                if let Some(url) = line.strip_prefix("robot-agent ready: open ") {
+                    page_url = url.trim().to_owned();
+                }
                 if let Some(rest) = line.strip_prefix("flow hub: tcp://") {
                     return rest.split_whitespace().next().map(|a| format!("tcp://{a}"));
                 }
@@ -98,12 +113,13 @@ impl Rig {
         tokio::spawn(async move { while lines.recv().await.is_some() {} });
         let token = resolve_token(None, &data_dir, TokenKind::User)?;
         Ok(Rig {
-            _agent: agent,
+            agent,
             satellite: None,
             llm: None,
             data_dir,
             flow_tcp,
             token,
+            page_url,
         })
     }
 
