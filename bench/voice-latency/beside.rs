@@ -13,7 +13,7 @@ use std::time::Duration;
 use agent_tests::browser_chromium::{Chromium, Devices};
 use agent_tests::spoken::words;
 use anyhow::Context;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
 use crate::report::quantile;
 use crate::speech_clip::{Clip, Say};
@@ -157,15 +157,7 @@ pub async fn measure(
         };
         for run in 0..runs {
             let (clip, text) = &questions[run % questions.len()];
-            let (spoken_tx, spoken_rx) = oneshot::channel();
-            say.send(Say {
-                clip: clip.clone(),
-                spoken: spoken_tx,
-                onset: None,
-            })
-            .await
-            .context("the microphone stopped")?;
-            let end = spoken_rx.await.context("the microphone stopped")?;
+            let end = crate::speech_clip::say(say, clip).await?;
             let expected = words(text);
             c.words += expected.split(' ').count();
             match watcher.follow(end, end + crate::RUN_PATIENCE).await {

@@ -5,8 +5,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
 use crate::chat_report::{ChatFigures, peak_rss_kb};
 use crate::speech_clip::{Clip, Say};
@@ -58,15 +57,7 @@ pub async fn measure(
     let mut figures = ChatFigures::default();
     for run in 0..runs {
         let clip = &clips[run % clips.len()];
-        let (spoken_tx, spoken_rx) = oneshot::channel();
-        say.send(Say {
-            clip: clip.clone(),
-            spoken: spoken_tx,
-            onset: None,
-        })
-        .await
-        .context("the microphone stopped")?;
-        let end_of_speech = spoken_rx.await.context("the microphone stopped")?;
+        let end_of_speech = crate::speech_clip::say(say, clip).await?;
         match watcher
             .follow_chat(end_of_speech, Instant::now() + RUN_PATIENCE)
             .await

@@ -38,11 +38,11 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use clap::Parser;
 use flow::{Client, ConnectOptions, FlowAddr};
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 
 use crate::report::Figures;
 use crate::rig::Rig;
-use crate::speech_clip::{Clip, Ending, Say};
+use crate::speech_clip::{Clip, Ending};
 use crate::watch::Watcher;
 
 /// Whole turns, said in turn: two real recorded sentences from the shared fixtures (22050 Hz mono; JFK's last
@@ -208,16 +208,7 @@ async fn main() -> anyhow::Result<()> {
             next_turn += 1;
             &turns[(next_turn - 1) % turns.len()]
         };
-        let (spoken_tx, spoken_rx) = oneshot::channel();
-        say_tx
-            .send(Say {
-                clip: clip.clone(),
-                spoken: spoken_tx,
-                onset: None,
-            })
-            .await
-            .context("the microphone stopped")?;
-        let end_of_speech = spoken_rx.await.context("the microphone stopped")?;
+        let end_of_speech = crate::speech_clip::say(&say_tx, clip).await?;
         match watcher
             .follow(end_of_speech, end_of_speech + RUN_PATIENCE)
             .await

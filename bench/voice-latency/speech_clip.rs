@@ -171,6 +171,19 @@ pub struct Say {
     pub onset: Option<oneshot::Sender<Instant>>,
 }
 
+/// Says `clip` through the microphone task; returns when the chunk holding its last voiced sample went out.
+pub async fn say(tx: &mpsc::Sender<Say>, clip: &Clip) -> anyhow::Result<Instant> {
+    let (spoken, spoken_rx) = oneshot::channel();
+    tx.send(Say {
+        clip: clip.clone(),
+        spoken,
+        onset: None,
+    })
+    .await
+    .context("the microphone stopped")?;
+    spoken_rx.await.context("the microphone stopped")
+}
+
 /// Publishes 20 ms chunks on a fixed real-time schedule: silence, or the clips it is asked to say. A chunk is
 /// published when its last sample has been "captured", as a microphone would, so chunk `k` leaves at
 /// `start + (k + 1) x 20 ms`. Runs until the request queue closes.
