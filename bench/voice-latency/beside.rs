@@ -1,8 +1,9 @@
 //! The rule path's voice to voice beside other work (issue 47), in one run: quiet; with the agent's own page open
 //! in headless Chromium on the same machine (its default avatar choice, without a GPU; no microphone or camera, so
 //! the benchmark's microphone stays the only one: the page draws, plays the replies and moves the avatar); and beside
-//! two busy loops at normal priority (a robot's navigation, a build). Each condition says the same questions; words
-//! lost counts the words of each question missing from its final transcript.
+//! two busy loops at normal priority (a robot's navigation, a build). Each condition says the same rule questions and,
+//! with llm-sat there, the same open questions the model answers; words lost counts the words of each question
+//! missing from its final transcript.
 //!
 //! A fourth condition, `busy_unit`, is the busy one with the server and the speech satellite at the level the systemd
 //! units give them (`Nice=-5`, docs/deploy.md), set on every thread of theirs (each keeps its distance: the vision
@@ -24,6 +25,10 @@ const PAGE_TARGET: f64 = 1.3;
 const BUSY_TARGET: f64 = 2.0;
 /// How long a condition settles before its first question (the page loads, the loops take the cores).
 const SETTLE: Duration = Duration::from_secs(8);
+/// How long a rule question may take from the end of speech to the reply before it counts as lost.
+const RULE_PATIENCE: Duration = Duration::from_secs(60);
+/// A model's reply of two or three sentences, generated and spoken, on a loaded machine fits well within this.
+const MODEL_PATIENCE: Duration = Duration::from_secs(120);
 
 /// The systemd units' level for the turn's processes.
 const UNIT_NICE: i32 = -5;
@@ -110,10 +115,17 @@ impl Beside {
     }
 }
 
-/// One condition's figures.
+/// The questions each condition says: rule ones, and open ones for the model (none without llm-sat).
+pub struct Questions<'a> {
+    pub rule: &'a [(Clip, &'a str)],
+    pub model: &'a [(Clip, &'a str)],
+}
+
+/// One condition's figures on one path (`rule` or `model`).
 #[derive(Debug, Default)]
 pub struct Condition {
     pub name: &'static str,
+    pub path: &'static str,
     pub voice_to_voice_ms: Vec<f64>,
     pub lost_runs: usize,
     pub words: usize,
@@ -134,7 +146,7 @@ impl Condition {
 pub async fn measure(
     watcher: &mut Watcher,
     say: &mpsc::Sender<Say>,
-    questions: &[(Clip, &str)],
+    questions: &Questions<'_>,
     runs: usize,
     page_url: &str,
     turn_pids: &[u32],
@@ -151,60 +163,95 @@ pub async fn measure(
         let beside = Beside::start(name, page_url).await?;
         tokio::time::sleep(SETTLE).await;
         watcher.until_quiet(Duration::from_millis(800)).await?;
-        let mut c = Condition {
-            name,
-            ..Condition::default()
-        };
-        for run in 0..runs {
-            let (clip, text) = &questions[run % questions.len()];
-            let end = crate::speech_clip::say(say, clip).await?;
-            let expected = words(text);
-            c.words += expected.split(' ').count();
-            match watcher.follow(end, end + crate::RUN_PATIENCE).await {
-                Ok(f) => {
-                    let heard = words(&f.text);
-                    let heard: Vec<&str> = heard.split(' ').collect();
-                    let lost = expected.split(' ').filter(|w| !heard.contains(w)).count();
-                    c.words_lost += lost;
-                    println!(
-                        "  {name:<5} run {:>2} {:>6.0} ms  heard {:?}{}",
-                        run + 1,
-                        f.voice_to_voice(),
-                        f.text,
-                        if lost > 0 {
-                            format!(" ({lost} words lost)")
-                        } else {
-                            String::new()
-                        }
-                    );
-                    c.voice_to_voice_ms.push(f.voice_to_voice());
-                }
-                Err(e) => {
-                    println!("  {name:<5} run {:>2} lost: {e:#}", run + 1);
-                    c.lost_runs += 1;
-                    c.words_lost += expected.split(' ').count();
-                }
-            }
-            watcher.until_quiet(Duration::from_millis(800)).await?;
+        out.push(ask(watcher, say, name, "rule", questions.rule, runs).await?);
+        if !questions.model.is_empty() {
+            out.push(
+                ask(
+                    watcher,
+                    say,
+                    name,
+                    "model",
+                    questions.model,
+                    questions.model.len(),
+                )
+                .await?,
+            );
         }
         beside.stop().await;
         if name == "busy_unit" {
             renice(turn_pids, -UNIT_NICE);
         }
-        out.push(c);
     }
     Ok(out)
 }
 
+/// Says `runs` of `questions` (in turn) on `path` in condition `name`, following each to its reply.
+async fn ask(
+    watcher: &mut Watcher,
+    say: &mpsc::Sender<Say>,
+    name: &'static str,
+    path: &'static str,
+    questions: &[(Clip, &str)],
+    runs: usize,
+) -> anyhow::Result<Condition> {
+    let mut c = Condition {
+        name,
+        path,
+        ..Condition::default()
+    };
+    for run in 0..runs {
+        let (clip, text) = &questions[run % questions.len()];
+        let end = crate::speech_clip::say(say, clip).await?;
+        let expected = words(text);
+        c.words += expected.split(' ').count();
+        let heard = if path == "model" {
+            watcher
+                .follow_chat(end, end + MODEL_PATIENCE)
+                .await
+                .map(|f| (f.voice_to_voice(), f.base.text))
+        } else {
+            watcher
+                .follow(end, end + RULE_PATIENCE)
+                .await
+                .map(|f| (f.voice_to_voice(), f.text))
+        };
+        match heard {
+            Ok((ms, text)) => {
+                let said = words(&text);
+                let said: Vec<&str> = said.split(' ').collect();
+                let lost = expected.split(' ').filter(|w| !said.contains(w)).count();
+                c.words_lost += lost;
+                println!(
+                    "  {name:<9} {path:<5} run {:>2} {ms:>6.0} ms  heard {text:?}{}",
+                    run + 1,
+                    if lost > 0 {
+                        format!(" ({lost} words lost)")
+                    } else {
+                        String::new()
+                    }
+                );
+                c.voice_to_voice_ms.push(ms);
+            }
+            Err(e) => {
+                println!("  {name:<9} {path:<5} run {:>2} lost: {e:#}", run + 1);
+                c.lost_runs += 1;
+                c.words_lost += expected.split(' ').count();
+            }
+        }
+        watcher.until_quiet(Duration::from_millis(800)).await?;
+    }
+    Ok(c)
+}
+
 /// The conditions' `SUMMARY` lines.
 pub fn summary_lines(conditions: &[Condition]) -> Vec<String> {
-    let quiet = conditions
-        .iter()
-        .find(|c| c.name == "quiet")
-        .map_or(f64::NAN, Condition::p50);
     conditions
         .iter()
         .map(|c| {
+            let quiet = conditions
+                .iter()
+                .find(|q| q.name == "quiet" && q.path == c.path)
+                .map_or(f64::NAN, Condition::p50);
             let ratio = c.p50() / quiet;
             let target = match c.name {
                 "page" => format!(
@@ -217,8 +264,10 @@ pub fn summary_lines(conditions: &[Condition]) -> Vec<String> {
                 ),
                 _ => String::new(),
             };
+            // The rule path keeps the names it had before the model's path was timed too.
+            let path = if c.path == "model" { "model_" } else { "" };
             format!(
-                "SUMMARY voice_to_voice_beside_{}_p50: {:.0} ms (p95 {:.0} ms, ratio to quiet {ratio:.2}{target}; words lost {} of {}, runs lost {} of {})",
+                "SUMMARY voice_to_voice_beside_{path}{}_p50: {:.0} ms (p95 {:.0} ms, ratio to quiet {ratio:.2}{target}; words lost {} of {}, runs lost {} of {})",
                 c.name,
                 c.p50(),
                 c.p95(),

@@ -18,7 +18,7 @@
 //! generation threads, default 2), `--beside-runs N` (questions per condition of the beside phase, default 6; 0 skips
 //! it), `--write PATH` (a Markdown report).
 //!
-//! The beside phase (`beside.rs`) says rule questions quiet, with the agent's page open in headless Chromium, beside
+//! The beside phase (`beside.rs`) says rule questions (and open ones for the model, with llm-sat) quiet, with the agent's page open in headless Chromium, beside
 //! two busy loops, and beside them at the systemd units' priority, and reports each condition's voice to voice and
 //! the words lost.
 
@@ -64,7 +64,7 @@ const MID_SENTENCE: [(&str, f64); 2] = [
     ("audio/LJ001-0001.wav", 4.2),
 ];
 /// How long one run may take from the end of speech to the reply before it counts as lost.
-pub(crate) const RUN_PATIENCE: Duration = Duration::from_secs(60);
+const RUN_PATIENCE: Duration = Duration::from_secs(60);
 
 /// Voice-to-voice latency of the whole agent: end of the user's speech to the first reply PCM, with a release
 /// `robot-agent`, `whisper-sat` and (the chat phase) `llm-sat`.
@@ -243,6 +243,18 @@ async fn main() -> anyhow::Result<()> {
         figures.barge_ins = barge_in::measure(&rig, &talkers, &burst, opts.barge_ins).await?;
     }
     figures.load = (load_before, report::load_average());
+    // llm-sat joins before the beside phase, which times the model's path too, and stays for the chat phase.
+    let llm_pid = if opts.chat_runs > 0 {
+        let pid = rig.start_llm_sat(&bins, opts.llm_threads)?;
+        watch::wait_channel(&watcher_client, ch::CHAT.name, Duration::from_secs(120))
+            .await
+            .context("llm-sat did not join (is the model there? `make model-llm`)")?;
+        // What the watcher queued during the barge-ins is not a question's.
+        watcher.until_quiet(Duration::from_millis(800)).await?;
+        Some(pid)
+    } else {
+        None
+    };
     let beside_figures = if opts.beside_runs > 0 {
         println!(
             "beside: {} rule questions each quiet, with the page open in headless Chromium, and beside two busy loops",
@@ -252,11 +264,24 @@ async fn main() -> anyhow::Result<()> {
             .iter()
             .map(|text| Ok((Clip::espeak(text, scratch.path())?, *text)))
             .collect::<anyhow::Result<_>>()?;
+        // The model's path: as many open questions per condition, when llm-sat is there.
+        let open: Vec<(Clip, &str)> = if llm_pid.is_some() {
+            chat::QUESTIONS
+                .iter()
+                .take(opts.beside_runs)
+                .map(|text| Ok((Clip::espeak(text, scratch.path())?, *text)))
+                .collect::<anyhow::Result<_>>()?
+        } else {
+            Vec::new()
+        };
         let pids = rig.turn_pids();
         beside::measure(
             &mut watcher,
             &say_tx,
-            &questions,
+            &beside::Questions {
+                rule: &questions,
+                model: &open,
+            },
             opts.beside_runs,
             &rig.page_url,
             &pids,
@@ -265,17 +290,11 @@ async fn main() -> anyhow::Result<()> {
     } else {
         Vec::new()
     };
-    let chat_figures = if opts.chat_runs > 0 {
+    let chat_figures = if let Some(llm_pid) = llm_pid {
         println!(
             "chat: {} open questions answered by llm-sat (default model, {} threads) beside whisper-sat",
             opts.chat_runs, opts.llm_threads
         );
-        let llm_pid = rig.start_llm_sat(&bins, opts.llm_threads)?;
-        watch::wait_channel(&watcher_client, ch::CHAT.name, Duration::from_secs(120))
-            .await
-            .context("llm-sat did not join (is the model there? `make model-llm`)")?;
-        // What the watcher queued during the barge-ins is not a question's.
-        watcher.until_quiet(Duration::from_millis(800)).await?;
         Some(
             chat::measure(
                 &mut watcher,

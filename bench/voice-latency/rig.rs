@@ -52,12 +52,16 @@ pub struct Rig {
 }
 
 impl Rig {
-    /// The process ids of the server and the speech satellite (those of the turn's work).
+    /// The process ids of the server, the speech satellite and the language model (those of the turn's work).
     pub fn turn_pids(&self) -> Vec<u32> {
-        [self.agent.id(), self.satellite.as_ref().and_then(Child::id)]
-            .into_iter()
-            .flatten()
-            .collect()
+        [
+            self.agent.id(),
+            self.satellite.as_ref().and_then(Child::id),
+            self.llm.as_ref().and_then(Child::id),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// Starts the server; the satellite follows with [`Rig::start_satellite`].
