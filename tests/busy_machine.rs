@@ -169,8 +169,9 @@ async fn a_stage_over_its_budget_is_named_in_the_log_in_metrics_and_in_the_turns
 
     // Three turns: the first two are not judged yet, the third names the stage.
     let mut turns = Vec::new();
+    let deadline = tokio::time::Instant::now() + PATIENCE;
     while turns.len() < 3 {
-        let p = tokio::time::timeout(PATIENCE, next_payload(&latency))
+        let p = tokio::time::timeout_at(deadline, next_payload(&latency))
             .await
             .with_context(|| format!("only {} turns measured: {turns:?}", turns.len()))??;
         turns.extend(json_message(&p));
