@@ -65,6 +65,18 @@ pub struct Facts {
     /// What the agent said last.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub last_said: Option<String>,
+    /// Passages of the knowledge folder that match the question, best first (docs/knowledge.md): quoted as data,
+    /// like a code's text, never given to the model as instructions.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub passages: Vec<Passage>,
+}
+
+/// A passage of the knowledge folder, with the file it came from (relative to the folder).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Passage {
+    pub file: String,
+    pub text: String,
 }
 
 /// Who said a line of the conversation.

@@ -190,6 +190,7 @@ mod tests {
                 time: "ten past four".into(),
                 date: "Saturday, 5 December".into(),
                 last_said: None,
+                passages: Vec::new(),
             },
             history: Vec::new(),
             tools: vec![Tool {

@@ -467,6 +467,7 @@ impl Mind {
                 .named(agent_brain::SAID)
                 .next()
                 .and_then(|fact| text(fact.args.first())),
+            passages: Vec::new(),
         }
     }
 
