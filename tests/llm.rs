@@ -14,7 +14,7 @@ use std::process::Stdio;
 use std::time::Duration;
 
 use agent_tests::satellite::{LlmSat, llm_model};
-use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, until};
+use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, metrics, until};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
@@ -39,6 +39,8 @@ struct Rig {
     agent: Agent,
     user: Client,
     transcript: Publisher,
+    /// The transcripts of pauses (`Agent.transcript.pause`), as whisper-sat's relay publishes them.
+    pause: Publisher,
     detections: Publisher,
     avatar: Subscription,
     speech: Subscription,
@@ -71,6 +73,9 @@ impl Rig {
         let transcript = user
             .publisher(ch::TRANSCRIPT.name, ch::headers::TRANSCRIPT)
             .await?;
+        let pause = user
+            .publisher(ch::TRANSCRIPT_PAUSE.name, ch::headers::TRANSCRIPT)
+            .await?;
         let detections = user
             .publisher(ch::DETECTIONS.name, r#"{"format":"json"}"#)
             .await?;
@@ -79,6 +84,7 @@ impl Rig {
             agent,
             user,
             transcript,
+            pause,
             detections,
             avatar,
             speech,
@@ -87,6 +93,7 @@ impl Rig {
         };
         rig.until_subscribers(ch::TRANSCRIPT.name, 2).await?;
         rig.until_subscribers(ch::DETECTIONS.name, 1).await?;
+        rig.until_subscribers(ch::TRANSCRIPT_PAUSE.name, 1).await?;
         Ok(rig)
     }
 
@@ -113,6 +120,40 @@ impl Rig {
         let message = json!({ "text": text, "final": true }).to_string();
         self.transcript.publish(message.into_bytes()).await?;
         Ok(())
+    }
+
+    /// The transcript of a pause, before the end of the turn is decided (`"final": false`), as whisper-sat's relay
+    /// publishes it on `Agent.transcript.pause`.
+    async fn hear_pause(&self, text: &str) -> anyhow::Result<()> {
+        let message = json!({
+            "utterance": "u1", "text": text, "start_us": 1, "end_us": 2, "satellite": "llm-test",
+            "model": "tiny.en", "processing_ms": 200, "final": false, "speculative": true, "turn": "complete",
+        });
+        self.pause.publish(message.to_string().into_bytes()).await?;
+        Ok(())
+    }
+
+    /// The count of preemptive replies with `outcome` (`kept`, `cancelled`) on `/metrics`, once it reaches `at_least`.
+    async fn preemptive(&self, outcome: &str, at_least: f64) -> anyhow::Result<f64> {
+        let wanted = |s: &metrics::Sample| {
+            s.name == "agent_chat_preemptive_total"
+                && s.labels.get("outcome").map(String::as_str) == Some(outcome)
+        };
+        until(
+            &format!("{at_least} preemptive replies {outcome}"),
+            PATIENCE,
+            async {
+                loop {
+                    let samples = metrics::parse(&metrics::scrape(&self.agent).await?).await?;
+                    let count = samples.iter().find(|s| wanted(s)).map_or(0.0, |s| s.value);
+                    if count >= at_least {
+                        return anyhow::Ok(count);
+                    }
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                }
+            },
+        )
+        .await?
     }
 
     /// The user starts to speak (the voice-activity event whisper-sat's relay publishes).
@@ -432,6 +473,102 @@ async fn a_follow_up_question_finds_the_last_turn_in_the_models_cache() -> anyho
         "after the trim the model read {trimmed} new tokens, more than the whole first prompt ({first_prompt}): {}",
         ends[3]
     );
+    Ok(())
+}
+
+/// Preemptive replies (docs/llm.md): the model starts on the transcript of the pause, and the final transcript, the
+/// same words, adopts that generation instead of starting another: the turn's end says it was speculated.
+#[tokio::test]
+async fn a_reply_started_at_the_pause_is_kept_when_the_final_transcript_is_the_same()
+-> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    let rig = Rig::start().await?;
+    let _llm = LlmSat::start(&rig.agent, &["--max-sentences", "2"]).await?;
+    let question = "Why is the sky blue?";
+    rig.hear_pause(question).await?;
+    // Nothing is published for a speculative turn: the first event of a turn comes only once it is adopted.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    rig.hear(question).await?;
+    let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+    assert!(
+        prompt["prompt"]
+            .as_str()
+            .is_some_and(|p| p.contains(question)),
+        "{prompt}"
+    );
+    let turn = prompt["turn"].clone();
+    let sentence = next_matching(&rig.reply, |m| {
+        m["event"] == "sentence" && m["turn"] == turn
+    })
+    .await?;
+    assert!(
+        sentence["text"]
+            .as_str()
+            .is_some_and(|t| !t.trim().is_empty()),
+        "{sentence}"
+    );
+    let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+    assert_eq!(
+        end["stats"]["speculated"], true,
+        "the reply was not the one started at the pause: {end}"
+    );
+    assert!(end["stats"].get("dropped").is_none(), "{end}");
+    assert_eq!(rig.preemptive("kept", 1.0).await?, 1.0);
+    Ok(())
+}
+
+/// A pause whose words are not the final transcript's: the early reply is dropped (its end says so, with the tokens
+/// it cost) and the real question is answered.
+#[tokio::test]
+async fn a_reply_started_at_the_pause_is_dropped_when_the_final_transcript_differs()
+-> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    let rig = Rig::start().await?;
+    let _llm = LlmSat::start(&rig.agent, &["--max-sentences", "2"]).await?;
+    rig.hear_pause("Tell me about the weather").await?;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let question = "Tell me about the weather on the moon.";
+    rig.hear(question).await?;
+    // The early reply's end and the real turn's events, in whichever order they come, up to the real turn's end.
+    let mut events: Vec<Value> = Vec::new();
+    until("the real turn's end", PATIENCE, async {
+        loop {
+            let data = rig.reply.recv().await.context("the reply stream ended")?;
+            let event: Value = serde_json::from_slice(&data.payload)?;
+            let real_end = event["event"] == "end" && event["stats"]["dropped"] != true;
+            events.push(event);
+            if real_end {
+                return anyhow::Ok(());
+            }
+        }
+    })
+    .await??;
+    let prompt = events
+        .iter()
+        .find(|m| m["event"] == "prompt")
+        .with_context(|| format!("no prompt: {events:#?}"))?;
+    assert!(
+        prompt["prompt"]
+            .as_str()
+            .is_some_and(|p| p.contains(question)),
+        "the final question was not the one answered: {prompt}"
+    );
+    let end = events.last().context("no events")?;
+    assert_eq!(end["turn"], prompt["turn"], "{events:#?}");
+    assert!(end["stats"].get("speculated").is_none(), "{end}");
+    // The dropped reply's end may come after the real turn's.
+    let dropped = match events.iter().find(|m| m["stats"]["dropped"] == true) {
+        Some(dropped) => dropped.clone(),
+        None => {
+            next_matching(&rig.reply, |m| {
+                m["event"] == "end" && m["stats"]["dropped"] == true
+            })
+            .await?
+        }
+    };
+    assert_eq!(dropped["finish"], "cancelled", "{dropped}");
+    assert_ne!(prompt["turn"], dropped["turn"], "{prompt} {dropped}");
+    assert_eq!(rig.preemptive("cancelled", 1.0).await?, 1.0);
     Ok(())
 }
 

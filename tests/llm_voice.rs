@@ -47,6 +47,8 @@ async fn conversing_agent(dir: &DataDir) -> anyhow::Result<Agent> {
 #[derive(Debug)]
 enum Seen {
     Transcript(Value),
+    /// A transcript of a pause, before the end of the turn (`Agent.transcript.pause`).
+    Pause(Value),
     Rules(Value),
     Reply(Value),
     Avatar(Value),
@@ -66,6 +68,7 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
     let agent = conversing_agent(&dir).await?;
     let watcher = agent.client("llm-voice-test").await?;
     let transcript = watcher.subscribe(ch::TRANSCRIPT.name).await?;
+    let pause = watcher.subscribe(ch::TRANSCRIPT_PAUSE.name).await?;
     let rules = watcher.subscribe(ch::RULES.name).await?;
     let reply = watcher.subscribe(ch::CHAT_REPLY.name).await?;
     let avatar = watcher.subscribe(ch::AVATAR.name).await?;
@@ -91,6 +94,7 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
             let next = tokio::select! {
                 biased;
                 p = next_payload(&transcript) => json_message(&p?).map(Seen::Transcript),
+                p = next_payload(&pause) => json_message(&p?).map(Seen::Pause),
                 p = next_payload(&rules) => json_message(&p?).map(Seen::Rules),
                 p = next_payload(&reply) => json_message(&p?).map(Seen::Reply),
                 p = next_payload(&avatar) => json_message(&p?).map(Seen::Avatar),
@@ -124,6 +128,23 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
         .as_str()
         .context("a transcript without text")?;
     assert!(!text.trim().is_empty(), "{heard}");
+
+    // The satellite published the pause's transcript before the final one, with the same words (the question ends
+    // there), and the brain started the model on it: the turn's end says the reply was speculated and kept.
+    let final_at = position(
+        &seen,
+        |s| matches!(s, Seen::Transcript(v) if v["final"] == true),
+    )
+    .context("no final transcript")?;
+    let preview_at = position(
+        &seen,
+        |s| matches!(s, Seen::Pause(v) if v["final"] == false && v["text"] == heard["text"]),
+    )
+    .with_context(|| format!("no transcript of the pause with the final words: {seen:#?}"))?;
+    assert!(
+        preview_at < final_at,
+        "the pause's transcript came after the final one: {seen:#?}"
+    );
 
     // The rule program handed the turn over: the catch-all rule fired chat() with what was heard.
     let fired = seen
@@ -183,6 +204,10 @@ async fn an_open_spoken_question_gets_a_spoken_reply_whose_first_audio_starts_be
     assert!(
         end["stats"]["tokens"].as_u64().is_some_and(|t| t > 0),
         "{end}"
+    );
+    assert_eq!(
+        end["stats"]["speculated"], true,
+        "the reply started at the pause was not kept: {end}"
     );
     let (first_at, first) = sentences[0];
     let first_text = first["text"].as_str().context("a sentence without text")?;

@@ -59,8 +59,9 @@ enum Deed {
     Forget(String, Option<Vec<Option<Value>>>),
 }
 
-/// A running teleo-reactive program: the program, its belief store and the active rule path.
-#[derive(Debug)]
+/// A running teleo-reactive program: the program, its belief store and the active rule path. A clone is a trial
+/// run: what the program would do on a percept, without doing it (the server's preemptive replies).
+#[derive(Debug, Clone)]
 pub struct Brain {
     program: Program,
     store: BeliefStore,

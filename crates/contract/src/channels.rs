@@ -51,6 +51,13 @@ pub const SPEECH: Channel = stream("Agent.speech", "speech PCM (tts module)");
 pub const SAY: Channel = service("Agent.say", "speak a text (tts module)");
 /// Final transcripts and voice-activity events.
 pub const TRANSCRIPT: Channel = stream("Agent.transcript", "transcripts (whisper-sat relay)");
+/// The transcript of a pause, published as soon as it is decoded, before the end of the turn is decided
+/// ([`crate::transcript::TranscriptMessage`] with `"final": false`): the brain may start the model's reply on it
+/// (docs/llm.md, "Preemptive replies"). The final transcript on [`TRANSCRIPT`] follows, or not if the voice resumed.
+pub const TRANSCRIPT_PAUSE: Channel = stream(
+    "Agent.transcript.pause",
+    "transcripts of pauses, before the end of the turn (whisper-sat relay)",
+);
 /// Faces of each processed frame ([`crate::detections::Faces`]).
 pub const FACES: Channel = stream("Agent.faces", "face boxes (vision module)");
 /// Motion of each processed frame ([`crate::detections::MotionReport`]).
@@ -88,8 +95,27 @@ pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
 
 /// Every channel with a fixed name.
 pub const ALL: &[Channel] = &[
-    AUDIO, VIDEO, VIDEO_Y, AUDIO_FFT, CTRL, AVATAR, SPEECH, SAY, TRANSCRIPT, FACES, MOTION, CODES,
-    DETECTIONS, RULES, LATENCY, RECORDING, ASR_SUBMIT, CHAT, CHAT_REPLY, PLAYBACK,
+    AUDIO,
+    VIDEO,
+    VIDEO_Y,
+    AUDIO_FFT,
+    CTRL,
+    AVATAR,
+    SPEECH,
+    SAY,
+    TRANSCRIPT,
+    TRANSCRIPT_PAUSE,
+    FACES,
+    MOTION,
+    CODES,
+    DETECTIONS,
+    RULES,
+    LATENCY,
+    RECORDING,
+    ASR_SUBMIT,
+    CHAT,
+    CHAT_REPLY,
+    PLAYBACK,
 ];
 
 /// Headers of the channels whose producer is fixed.

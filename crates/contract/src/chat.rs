@@ -188,6 +188,10 @@ pub struct ChatStats {
     /// The turn was generated speculatively, before the end of the user's turn was decided.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub speculated: bool,
+    /// A speculative turn nobody adopted (the final transcript differed, or was not handed to the model): what it
+    /// generated is wasted work.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub dropped: bool,
 }
 
 /// One message on `Agent.chat.reply`.

@@ -18,7 +18,8 @@ pub struct TranscriptMessage {
     pub model: String,
     /// Inference time.
     pub processing_ms: u64,
-    /// Always true for now: no partial results are published.
+    /// True on `Agent.transcript`; false on `Agent.transcript.pause`, where the transcript of a pause goes out
+    /// before the end of the turn is decided (a preview: the final one follows unless the voice resumed).
     #[serde(rename = "final")]
     pub is_final: bool,
     /// The text was decoded during the end-of-speech hangover, from the audio the utterance had when it paused

@@ -59,6 +59,8 @@ struct Running {
     ended: Option<Result<Outcome, String>>,
     /// Sentences published so far.
     published: u32,
+    /// Started speculatively and adopted by the real turn.
+    adopted: bool,
     /// When the request came (µs, Unix clock), and when each sentence was generated: the spans of the turn.
     received_us: u64,
     sentences_us: Vec<u64>,
@@ -92,6 +94,7 @@ pub async fn run(
         next_id: 0,
         jobs: jobs_tx,
         telemetry: settings.telemetry.clone(),
+        dropped: Vec::new(),
     };
     loop {
         tokio::select! {
@@ -120,6 +123,9 @@ struct Hub {
     next_id: u64,
     jobs: std::sync::mpsc::Sender<Job>,
     telemetry: Telemetry,
+    /// Speculative turns dropped while their generation was still stopping: (job id, turn), whose end is published
+    /// when it comes, with the tokens they cost.
+    dropped: Vec<(u64, u64)>,
 }
 
 impl Hub {
@@ -138,6 +144,13 @@ impl Hub {
                     .is_some_and(|r| r.turn == cancel.cancel);
                 if let Some(running) = self.running.as_ref().filter(|_| hit) {
                     running.cancel.store(true, Ordering::Relaxed);
+                }
+                // A speculative turn nobody will adopt is done with at once.
+                if hit
+                    && self.running.as_ref().is_some_and(|r| r.request.speculative)
+                    && let Some(old) = self.running.take()
+                {
+                    self.answer_cancelled(old).await;
                 }
                 let body = serde_json::json!({ "cancelled": hit });
                 let _ = call.respond(Ok(Bytes::from(body.to_string()))).await;
@@ -158,6 +171,7 @@ impl Hub {
             running.call = Some(call);
             running.turn = request.turn;
             running.request.speculative = false;
+            running.adopted = true;
             running.request.trace = request.trace;
             let held = std::mem::take(&mut running.held);
             let ended = running.ended.take();
@@ -165,7 +179,7 @@ impl Hub {
                 self.publish_step(step).await;
             }
             if let Some(ended) = ended {
-                self.finish(ended, true).await;
+                self.finish(ended).await;
             }
             return;
         }
@@ -205,6 +219,7 @@ impl Hub {
             held: Vec::new(),
             ended: None,
             published: 0,
+            adopted: false,
             received_us: now_us(),
             sentences_us: Vec::new(),
         });
@@ -214,6 +229,10 @@ impl Hub {
     async fn answer_cancelled(&mut self, old: Running) {
         if old.request.speculative {
             debug!(turn = old.turn, "llm: a speculative reply is dropped");
+            match old.ended {
+                Some(ended) => self.publish_dropped(old.turn, ended.ok()),
+                None => self.dropped.push((old.id, old.turn)),
+            }
             return;
         }
         let stats = ChatStats::default();
@@ -252,13 +271,18 @@ impl Hub {
                 }
             }
             Report::Done(id, ended) => {
+                if let Some(at) = self.dropped.iter().position(|(job, _)| *job == id) {
+                    let (_, turn) = self.dropped.swap_remove(at);
+                    self.publish_dropped(turn, ended.ok());
+                    return;
+                }
                 let Some(running) = self.running.as_mut().filter(|r| r.id == id) else {
                     return;
                 };
                 if running.request.speculative {
                     running.ended = Some(ended);
                 } else {
-                    self.finish(ended, false).await;
+                    self.finish(ended).await;
                 }
             }
         }
@@ -286,8 +310,23 @@ impl Hub {
         self.publish(event);
     }
 
+    /// The end of a speculative turn nobody adopted: cancelled, with what it cost (`speculated`), so that the agent
+    /// can count the work preemption wasted (docs/llm.md, "Preemptive replies").
+    fn publish_dropped(&self, turn: u64, outcome: Option<Outcome>) {
+        let stats = ChatStats {
+            speculated: true,
+            dropped: true,
+            ..outcome.map(|o| o.stats).unwrap_or_default()
+        };
+        self.publish(ChatEvent::End {
+            turn,
+            finish: Finish::Cancelled,
+            stats,
+        });
+    }
+
     /// The running turn ended: its End event, then its caller's answer.
-    async fn finish(&mut self, ended: Result<Outcome, String>, adopted: bool) {
+    async fn finish(&mut self, ended: Result<Outcome, String>) {
         let Some(mut running) = self.running.take() else {
             return;
         };
@@ -297,7 +336,7 @@ impl Hub {
         match ended {
             Ok(outcome) => {
                 let mut stats = outcome.stats;
-                stats.speculated = adopted;
+                stats.speculated = running.adopted;
                 let trace = trace_of(&running.request);
                 self.record(&running, trace, &outcome, &stats);
                 self.publish(ChatEvent::End {

@@ -154,6 +154,7 @@ pub fn run(
             first_token_ms: generated.first_token.map_or(0, |d| d.as_millis() as u64),
             total_ms: started.elapsed().as_millis() as u64,
             speculated: request.speculative,
+            dropped: false,
         },
     })
 }

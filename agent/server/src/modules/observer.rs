@@ -11,6 +11,7 @@ mod spans;
 mod turns;
 
 use agent_contract::channels;
+use agent_contract::chat::ChatEvent;
 use agent_contract::detections::DetectionsMsg;
 use agent_contract::latency::TurnLatency;
 use agent_contract::rules::RuleChange;
@@ -82,6 +83,13 @@ struct Figures {
     asr_claims_retried: Family<SatelliteLabel, Counter>,
     conversation: HistogramFamily<StageLabel>,
     behind: Family<StageLabel, Gauge>,
+    preemptive: Family<OutcomeLabel, Counter>,
+    preemptive_wasted: Counter,
+}
+
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct OutcomeLabel {
+    outcome: &'static str,
 }
 
 impl Figures {
@@ -95,7 +103,20 @@ impl Figures {
             asr_claims_retried: Family::default(),
             conversation: latency_family(),
             behind: Family::default(),
+            preemptive: Family::default(),
+            preemptive_wasted: Counter::default(),
         };
+        metrics.register(
+            "agent_chat_preemptive",
+            "Replies the model started on the transcript of a pause, by outcome: kept (the final transcript adopted \
+             it) or cancelled (it did not)",
+            f.preemptive.clone(),
+        );
+        metrics.register(
+            "agent_chat_preemptive_wasted_tokens",
+            "Tokens generated for speculative replies nobody adopted",
+            f.preemptive_wasted.clone(),
+        );
         metrics.register(
             "agent_turn_stage_behind",
             "1 while a stage of the turn (vad, transcription, rule, reply) is behind on this machine: its median over \
@@ -157,6 +178,24 @@ impl Figures {
             (Stage::RuleToReplyAudio, turn.reply_us),
             (Stage::SpeechEndToReplyAudio, turn.total_us),
         ]);
+    }
+
+    /// The end of a chat turn: a speculative one was kept or wasted.
+    fn chat_end(&self, data: &Data) {
+        let Ok(ChatEvent::End { stats, .. }) = serde_json::from_slice::<ChatEvent>(&data.payload)
+        else {
+            return;
+        };
+        if !stats.speculated {
+            return;
+        }
+        let outcome = if stats.dropped { "cancelled" } else { "kept" };
+        self.preemptive
+            .get_or_create(&OutcomeLabel { outcome })
+            .inc();
+        if stats.dropped {
+            self.preemptive_wasted.inc_by(u64::from(stats.tokens));
+        }
     }
 
     fn detections(&self, data: &Data) {
@@ -312,6 +351,7 @@ impl Module for ObserverModule {
             let rules = client.subscribe(channels::RULES.name).await?;
             let speech = client.subscribe(channels::SPEECH.name).await?;
             let playback = client.subscribe(channels::PLAYBACK.name).await?;
+            let chat_reply = client.subscribe(channels::CHAT_REPLY.name).await?;
             // The last reply's speech utterance and turn, until its page says it is heard.
             let mut replied: Option<(u64, TurnDone)> = None;
             let latency = client
@@ -340,6 +380,7 @@ impl Module for ObserverModule {
                         Heard::Other => {}
                     },
                     Some(d) = detections.recv() => figures.detections(&d),
+                    Some(d) = chat_reply.recv() => figures.chat_end(&d),
                     Some(d) = playback.recv() => {
                         if let Ok(started) = serde_json::from_slice::<PlaybackStarted>(&d.payload)
                             && let Some((_, turn)) = replied.take_if(|(u, _)| *u == started.utterance)

@@ -12,11 +12,14 @@ use super::settings::Settings;
 use super::worker::Finished;
 use crate::claim::{self, CLAIM_PREFIX, ClaimHeader, PauseTurn};
 use crate::ledger::{Ledger, Pending, SAME_SPEECH_US, Standing};
-use crate::transcriber::{Outcome, TranscribeError};
-use crate::transcript::TranscriptMessage;
+use crate::stream::ClockedUtterance;
+use crate::transcriber::{Decoded, Outcome, TranscribeError};
+use crate::transcript::{TranscriptMessage, TurnVerdict};
 
 /// How long one submission of a transcript waits for the relay's answer.
 const SUBMIT_TIMEOUT: Duration = Duration::from_secs(5);
+/// How long a pause's preview waits for the relay.
+const PREVIEW_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// Takes the next claimable utterance (paused or ended) and tries to claim it. Returns it with its claim channel on
 /// success, and, when turns are judged and it is paused, the pause its header names as being decided.
@@ -98,21 +101,7 @@ pub(super) async fn finish(
     match &f.outcome {
         Ok(Outcome::Speech(d)) => {
             let turn = TraceContext::turn(&u.id);
-            let msg = TranscriptMessage {
-                utterance: u.id.clone(),
-                text: d.text.clone(),
-                start_us: u.start_us,
-                end_us: u.speech_end_us,
-                satellite: satellite.to_owned(),
-                model: model.to_owned(),
-                processing_ms: d.processing.as_millis() as u64,
-                is_final: true,
-                speculative: f.speculative,
-                full_window_retry: d.full_window_retry,
-                turn: f.turn,
-                threads: u32::try_from(d.threads).ok(),
-                trace: Some(turn.traceparent()),
-            };
+            let msg = transcript(u, d, satellite, model, f.speculative, f.turn);
             record_decode(
                 &settings.telemetry,
                 turn,
@@ -157,6 +146,51 @@ pub(super) async fn finish(
     if let Err(e) = f.claim.set_header(&header.to_json()).await {
         tracing::warn!(id = %u.id, "marking the claim done: {e}");
     }
+}
+
+/// The transcript of `u` decoded as `d`, final; a pause's preview is the same with `is_final` false.
+pub(super) fn transcript(
+    u: &ClockedUtterance,
+    d: &Decoded,
+    satellite: &str,
+    model: &str,
+    speculative: bool,
+    verdict: Option<TurnVerdict>,
+) -> TranscriptMessage {
+    TranscriptMessage {
+        utterance: u.id.clone(),
+        text: d.text.clone(),
+        start_us: u.start_us,
+        end_us: u.speech_end_us,
+        satellite: satellite.to_owned(),
+        model: model.to_owned(),
+        processing_ms: d.processing.as_millis() as u64,
+        is_final: true,
+        speculative,
+        full_window_retry: d.full_window_retry,
+        turn: verdict,
+        threads: u32::try_from(d.threads).ok(),
+        trace: Some(TraceContext::turn(&u.id).traceparent()),
+    }
+}
+
+/// Hands the transcript of a pause to the relay for `Agent.transcript.pause` (docs/asr.md, "Previews"), on a task of
+/// its own so that the loop does not wait: one try, since a preview that comes late is worth nothing.
+pub(super) fn preview(client: &Client, msg: &TranscriptMessage) {
+    let payload = match serde_json::to_vec(msg) {
+        Ok(payload) => payload,
+        Err(e) => {
+            tracing::warn!("serialising a preview: {e}");
+            return;
+        }
+    };
+    let client = client.clone();
+    let id = msg.utterance.clone();
+    tokio::spawn(async move {
+        if let Err(e) = client.call(relay::SUBMIT, payload, PREVIEW_TIMEOUT).await {
+            tracing::debug!(%id, "the pause's preview was not published: {e}");
+        }
+    });
 }
 
 /// The decode's span, under the turn's `transcription` stage (which robot-agent records from the hub's stamps): it

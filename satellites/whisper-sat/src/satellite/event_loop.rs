@@ -9,7 +9,7 @@ use flow::{Client, ClientEvent, Publisher, Subscription};
 use tokio::sync::{broadcast, mpsc};
 
 use super::audio::{self, Heard};
-use super::claiming::{finish, try_claim};
+use super::claiming::{finish, preview as preview_pause, transcript, try_claim};
 use super::error::SatelliteError;
 use super::settings::Settings;
 use super::worker::{Decode, Finished, Held, Worker};
@@ -197,6 +197,24 @@ impl Satellite {
                     Ok(Outcome::Rejected(..)) | Err(_) => Turn::Unknown,
                 };
                 tracing::debug!(id = %held.hold.id(), ?verdict, "end of turn judged");
+                // The text the turn will have if it ends at this pause, out before the end is decided: the brain
+                // may start a reply on it (docs/asr.md, "Previews").
+                if let Ok(Outcome::Speech(d)) = result
+                    && !held.hold.is_ended()
+                {
+                    let preview = TranscriptMessage {
+                        is_final: false,
+                        ..transcript(
+                            held.hold.utterance(),
+                            d,
+                            &self.settings.name,
+                            &self.model,
+                            true,
+                            Some(verdict),
+                        )
+                    };
+                    preview_pause(&self.client, &preview);
+                }
                 held.verdict = Some(verdict);
                 Some((held.hold.utterance().clone(), Some(verdict)))
             }

@@ -5,6 +5,9 @@
 //! dies, the hub removes both channels and tells everyone; the survivors race to take the role over. The relay
 //! publishes each utterance once, whatever is submitted twice.
 //!
+//! Previews (`"final": false`, the transcript of a pause before the end of the turn is decided) go out on
+//! `Agent.transcript.pause` instead, without the once-per-utterance rule: the final transcript follows them.
+//!
 //! The relay also publishes voice activity (`{"vad":"start"|"end",...}`) from its own satellite's segmenter. Every
 //! satellite segments the same stream into the same utterances, so the relay's view is everyone's, and the events go
 //! out once however many satellites run; they need no round trip through the submit service.
@@ -23,6 +26,8 @@ use crate::transcript::{TranscriptMessage, vad_message};
 /// The service that accepts transcripts for publication.
 pub const SUBMIT: &str = agent_contract::channels::ASR_SUBMIT.name;
 pub const TRANSCRIPT: &str = agent_contract::channels::TRANSCRIPT.name;
+/// Where the transcripts of pauses go before the end of the turn is decided.
+pub const PAUSE: &str = agent_contract::channels::TRANSCRIPT_PAUSE.name;
 
 /// Takes the relay role whenever it is free, until the client shuts down; never, unless `take_role`.
 pub async fn relay(
@@ -53,6 +58,18 @@ pub async fn relay(
                         continue;
                     }
                 };
+                // Previews of pauses go out beside the transcripts; a relay that cannot own their channel (a
+                // previous holder's still there) relays transcripts without them.
+                let previews = match client
+                    .publisher(PAUSE, agent_contract::channels::headers::TRANSCRIPT)
+                    .await
+                {
+                    Ok(previews) => Some(previews),
+                    Err(e) => {
+                        tracing::warn!("not publishing previews on {PAUSE}: {e}");
+                        None
+                    }
+                };
                 tracing::info!(%satellite, "relaying transcripts on {TRANSCRIPT}");
                 // Only changes from now on: the previous holder published what came before.
                 let mut changes = activity.subscribe();
@@ -76,6 +93,9 @@ pub async fn relay(
                         }
                     };
                     let reply = match serde_json::from_slice::<TranscriptMessage>(&call.payload) {
+                        Ok(t) if !t.is_final => {
+                            publish_preview(previews.as_ref(), &call.payload).await
+                        }
                         Ok(t) => {
                             let dup = published.iter().any(|(id, s, e)| {
                                 *id == t.utterance
@@ -109,6 +129,21 @@ pub async fn relay(
             }
             Err(e) => return Err(e.into()),
         }
+    }
+}
+
+/// Publishes the transcript of a pause (not deduplicated: the final transcript of the same utterance follows).
+async fn publish_preview(
+    previews: Option<&Publisher>,
+    payload: &[u8],
+) -> Result<bytes::Bytes, String> {
+    let Some(previews) = previews else {
+        return Ok(bytes::Bytes::from_static(b"\"not relayed\""));
+    };
+    // A full lane drops the preview rather than hold up the submission: a late preview is worth nothing.
+    match previews.try_publish(bytes::Bytes::copy_from_slice(payload)) {
+        Ok(_) => Ok(bytes::Bytes::from_static(b"\"published\"")),
+        Err(e) => Err(e.to_string()),
     }
 }
 

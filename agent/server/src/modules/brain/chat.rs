@@ -83,6 +83,20 @@ pub struct Chats {
     /// reply the memory keeps to what was heard.
     finished: Vec<Said>,
     memory: Memory,
+    /// A reply started on the transcript of a pause, until the final transcript adopts or drops it.
+    early: Option<Early>,
+}
+
+/// A speculative turn: what it was asked with, so that the real turn asks for exactly the same and the satellite
+/// adopts what it has generated (`llm_sat::satellite`, `same_turn`).
+#[derive(Debug, Clone, PartialEq)]
+struct Early {
+    turn: u64,
+    text: String,
+    language: String,
+    tools: Vec<Tool>,
+    force_tool: Option<String>,
+    facts: Facts,
 }
 
 impl Chats {
@@ -108,6 +122,7 @@ impl Chats {
             current: None,
             finished: Vec::new(),
             memory: Memory::default(),
+            early: None,
         }
     }
 
@@ -146,7 +161,92 @@ impl Chats {
         info!("brain: the conversation is forgotten");
     }
 
-    /// Starts a turn; one still running is cancelled first. Returns its number.
+    /// Starts a speculative turn on the transcript of a pause: the satellite generates and holds the reply back
+    /// until [`Chats::start`] asks for the same turn. Nothing starts while a turn is running (a speculative request
+    /// would cut it off). Returns its number.
+    pub fn speculate(
+        &mut self,
+        text: &str,
+        language: &str,
+        facts: Facts,
+        tools: Vec<Tool>,
+        force_tool: Option<String>,
+    ) -> Option<u64> {
+        if self.current.is_some() {
+            return None;
+        }
+        let asked = |e: &Early| {
+            e.text == text
+                && e.language == language
+                && e.tools == tools
+                && e.force_tool == force_tool
+        };
+        if self.early.as_ref().is_some_and(asked) {
+            return None;
+        }
+        if self.stale(&self.memory) && !self.memory.lines.is_empty() {
+            self.memory = Memory::default();
+        }
+        self.next_turn += 1;
+        let early = Early {
+            turn: self.next_turn,
+            text: text.to_owned(),
+            language: language.to_owned(),
+            tools,
+            force_tool,
+            facts,
+        };
+        let request = self.request(&early, true, None);
+        let turn = early.turn;
+        self.early = Some(early);
+        let client = self.client.clone();
+        let body = serde_json::to_vec(&request).unwrap_or_default();
+        tokio::spawn(async move {
+            // Answered at once (`{"speculating": true}`); the reply comes with the real turn.
+            if let Err(e) = client.call(CHAT.name, body, CANCEL_TIMEOUT).await {
+                debug!(turn, "brain: the speculative turn was not taken: {e}");
+            }
+        });
+        Some(turn)
+    }
+
+    /// The final transcript did not hand the speculative turn's text to the model: the satellite stops it.
+    pub fn drop_early(&mut self) {
+        if let Some(early) = self.early.take() {
+            info!(turn = early.turn, "brain: the speculative reply is dropped");
+            self.cancel(early.turn);
+        }
+    }
+
+    /// The request of a turn, with the conversation as it stands.
+    fn request(&self, turn: &Early, speculative: bool, reply: Option<TraceContext>) -> ChatRequest {
+        ChatRequest {
+            turn: turn.turn,
+            text: turn.text.clone(),
+            language: turn.language.clone(),
+            facts: turn.facts.clone(),
+            history: self.memory.lines.clone(),
+            tools: turn.tools.clone(),
+            force_tool: turn.force_tool.clone(),
+            speculative,
+            max_sentences: Some(self.max_sentences),
+            timeout_ms: Some(self.reply_timeout.as_millis() as u64),
+            trace: reply.map(|r| r.traceparent()),
+        }
+    }
+
+    fn cancel(&self, turn: u64) {
+        let client = self.client.clone();
+        let body = format!(r#"{{"cancel":{turn}}}"#);
+        tokio::spawn(async move {
+            if let Err(e) = client.call(CHAT.name, body, CANCEL_TIMEOUT).await {
+                debug!(turn, "brain: cancelling the chat turn failed: {e}");
+            }
+        });
+    }
+
+    /// Starts a turn; one still running is cancelled first. A speculative turn on the same words is adopted (the
+    /// request repeats its facts, so that the satellite keeps what it generated). Returns its number.
     pub fn start(
         &mut self,
         text: &str,
@@ -166,21 +266,32 @@ impl Chats {
             self.memory = Memory::default();
         }
         self.next_turn += 1;
-        let turn = self.next_turn;
-        let request = ChatRequest {
-            turn,
+        let mut asked = Early {
+            turn: self.next_turn,
             text: text.to_owned(),
             language: language.to_owned(),
-            facts: facts.clone(),
-            history: self.memory.lines.clone(),
             tools,
             force_tool,
-            speculative: false,
-            max_sentences: Some(self.max_sentences),
-            timeout_ms: Some(self.reply_timeout.as_millis() as u64),
-            trace: reply.map(|r| r.traceparent()),
+            facts,
         };
-        self.current = Some(Turn::new(turn, text, facts));
+        // Anything else speculated is superseded by this request at the satellite.
+        if let Some(early) = self.early.take() {
+            let same = Early {
+                turn: early.turn,
+                facts: early.facts.clone(),
+                ..asked.clone()
+            };
+            if same == early {
+                debug!(
+                    early = early.turn,
+                    "brain: the turn adopts the speculative reply"
+                );
+                asked.facts = early.facts;
+            }
+        }
+        let turn = asked.turn;
+        let request = self.request(&asked, false, reply);
+        self.current = Some(Turn::new(turn, text, asked.facts));
         let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);
         let body = serde_json::to_vec(&request).unwrap_or_default();
         tokio::spawn(async move {
@@ -291,13 +402,7 @@ impl Chats {
             .collect();
         let turn = current.turn;
         current.interrupted = Some(heard.clone());
-        let client = self.client.clone();
-        let body = format!(r#"{{"cancel":{turn}}}"#);
-        tokio::spawn(async move {
-            if let Err(e) = client.call(CHAT.name, body, CANCEL_TIMEOUT).await {
-                debug!(turn, "brain: cancelling the chat turn failed: {e}");
-            }
-        });
+        self.cancel(turn);
         Some((turn, heard.join(" ")))
     }
 

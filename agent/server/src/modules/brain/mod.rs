@@ -20,6 +20,7 @@ use agent_brain::{
 use agent_contract::channels;
 use agent_contract::chat::{ChatEvent, Facts, Tool};
 use agent_contract::rules::ChatStep;
+use agent_contract::transcript::TranscriptMessage;
 use flow::tick::Tick;
 use flow::{Client, Data, Publisher, Subscription};
 use tokio::sync::mpsc;
@@ -92,6 +93,10 @@ struct Mind {
     saying: Option<String>,
     /// The turn the last final transcript started (its trace context), which a chat turn's request names.
     answering: Option<flow_telemetry::TraceContext>,
+    /// Start the model on the transcript of a pause (`chat_preempt`).
+    preempt: bool,
+    /// A final transcript came since the last step: a speculative reply it did not adopt is dropped after it.
+    heard_final: bool,
     speech: Speech,
     /// Chat turns with the language-model satellite.
     chats: Chats,
@@ -108,6 +113,7 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
 
     let client = ctx.client.clone();
     let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
+    let pauses = client.subscribe(channels::TRANSCRIPT_PAUSE.name).await?;
     let detections = client.subscribe(channels::DETECTIONS.name).await?;
     let speech_out = client.subscribe(channels::SPEECH.name).await?;
     let avatar = client.subscribe(channels::AVATAR.name).await?;
@@ -134,6 +140,8 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         counters: Counters::default(),
         saying: None,
         answering: None,
+        preempt: params.chat_preempt,
+        heard_final: false,
         speech: speech.clone(),
         chats: Chats::new(
             client.clone(),
@@ -165,6 +173,10 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
             () = ctx.stopped() => break,
             data = transcripts.recv() => match data {
                 Some(data) => mind.heard(&data),
+                None => break,
+            },
+            data = pauses.recv() => match data {
+                Some(data) => mind.paused(&data),
                 None => break,
             },
             data = detections.recv() => match data {
@@ -264,6 +276,7 @@ impl Mind {
             return;
         }
         self.counters.transcripts += 1;
+        self.heard_final = true;
         self.answering = percepts::turn_trace(&data.payload);
         self.speech
             .answering(self.answering.map(|t| t.child("reply")));
@@ -272,6 +285,62 @@ impl Mind {
             None => debug!(transcript = %text, "brain: heard"),
         }
         self.perceive("heard", vec![Value::Text(text)]);
+    }
+
+    /// The transcript of a pause, before the end of the turn is decided: when the program would hand it to the
+    /// model as it stands (a trial step on a copy of the brain, which performs nothing), the model starts on it
+    /// speculatively, and the final transcript adopts that reply if it is the same (docs/llm.md, "Preemptive
+    /// replies").
+    fn paused(&mut self, data: &Data) {
+        if !self.preempt {
+            return;
+        }
+        let text = match serde_json::from_slice::<TranscriptMessage>(&data.payload) {
+            Ok(t) if !t.is_final => t.text.trim().to_owned(),
+            Ok(_) => return,
+            Err(e) => {
+                self.counters.bad_messages += 1;
+                debug!(
+                    "brain: bad message on {}: {e}",
+                    channels::TRANSCRIPT_PAUSE.name
+                );
+                return;
+            }
+        };
+        if text.is_empty()
+            || self
+                .echo
+                .echo_of(Instant::now().into_std(), &text)
+                .is_some()
+        {
+            return;
+        }
+        let now = self.now();
+        let mut trial = self.brain.clone();
+        trial.retract("listening");
+        if trial
+            .perceive(now.at, "heard", vec![Value::Text(text.clone())])
+            .is_err()
+        {
+            return;
+        }
+        let step = trial.step(&now, &self.db);
+        let chat = step.effects.iter().find_map(|effect| match effect {
+            Effect::Start(Action::Chat { text, tool })
+            | Effect::Fire(Action::Chat { text, tool }) => Some((text.clone(), tool.clone())),
+            _ => None,
+        });
+        let Some((asked, tool)) = chat else {
+            return;
+        };
+        let tools = self.tools();
+        let facts = self.facts(&now);
+        if let Some(turn) = self
+            .chats
+            .speculate(&asked, self.language.code(), facts, tools, tool)
+        {
+            debug!(turn, text = %asked, "brain: a speculative chat turn starts at the pause");
+        }
     }
 
     fn seen(&mut self, data: &Data) {
@@ -471,10 +540,9 @@ impl Mind {
         }
     }
 
-    /// Starts a chat turn for `chat(T)` or `chat(T, "Service")`.
-    fn chat(&mut self, now: &Now, text: &str, tool: Option<String>) {
-        let tools: Vec<Tool> = self
-            .brain
+    /// The services the program lets the model call.
+    fn tools(&self) -> Vec<Tool> {
+        self.brain
             .program()
             .tools()
             .iter()
@@ -483,7 +551,12 @@ impl Mind {
                 description: tool.description.clone(),
                 args: tool.args.clone(),
             })
-            .collect();
+            .collect()
+    }
+
+    /// Starts a chat turn for `chat(T)` or `chat(T, "Service")`.
+    fn chat(&mut self, now: &Now, text: &str, tool: Option<String>) {
+        let tools = self.tools();
         let facts = self.facts(now);
         let reply = self.answering.map(|t| t.child("reply"));
         let turn = self
@@ -590,6 +663,10 @@ impl Mind {
                 _ => {}
             }
             self.actuators.perform(effect).await;
+        }
+        // The final transcript's step has run: a speculative reply it did not adopt is stopped.
+        if std::mem::take(&mut self.heard_final) {
+            self.chats.drop_early();
         }
     }
 

@@ -49,12 +49,20 @@ pub struct BrainParams {
     /// Turns of the conversation a chat turn carries (and the pair database keeps), each a question and its reply.
     #[serde(default = "default_chat_memory_turns")]
     pub chat_memory_turns: usize,
+    /// Preemptive replies: the model starts on the transcript of a pause (`Agent.transcript.pause`) when the
+    /// program would hand that text to `chat`, and the reply is kept when the final transcript is the same.
+    #[serde(default = "default_true")]
+    pub chat_preempt: bool,
     /// The conversation is forgotten after this long without a chat turn.
     #[serde(default = "default_chat_forget_after_s")]
     pub chat_forget_after_s: u64,
     /// The local time zone as minutes east of UTC, for `time.*`; by default the server's own.
     #[serde(default)]
     pub utc_offset_minutes: Option<i32>,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 fn default_commands() -> BTreeMap<String, Vec<String>> {
