@@ -80,6 +80,7 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	$(TARGET_DIR)/release/asr-bench --write docs/bench-asr.md | tee $(BENCH_LOGS)/asr-bench.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/voice-latency --write docs/bench-voice-latency.md | tee $(BENCH_LOGS)/voice-latency.log
 	$(TARGET_DIR)/release/telemetry-bench | tee $(BENCH_LOGS)/telemetry-bench.log
+	$(TARGET_DIR)/release/knowledge-bench | tee $(BENCH_LOGS)/knowledge-bench.log
 	$(MAKE) python
 	satellites/python/.venv/bin/python -c 'import redis, hiredis' 2>/dev/null || satellites/python/.venv/bin/pip install -q 'redis[hiredis]>=5'
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PYTHONUNBUFFERED=1 satellites/python/.venv/bin/python bench/python/bench_python.py --write docs/bench-python.md | tee $(BENCH_LOGS)/bench_python.log

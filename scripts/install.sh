@@ -88,6 +88,10 @@ for f in "$root"/config/*; do
     put 0644 "$f" "$pkgdatadir/config/${f##*/}"
 done
 put 0644 "$root/docs/deploy.md" "$pkgdatadir/docs/deploy.md"
+# The example knowledge folder ([agent] knowledge = "knowledge/", docs/knowledge.md): edit it there for this place.
+for f in "$root"/knowledge/*; do
+    put 0644 "$f" "$pkgdatadir/knowledge/${f##*/}"
+done
 
 # The models: only the files the programs load (not the download cache or the Python environments of models/).
 mkdir -p "$destdir$pkgdatadir"

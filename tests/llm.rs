@@ -56,6 +56,12 @@ impl Rig {
     /// The agent conversing in `language`, on that language's default program, with more `[modules.brain]` keys.
     async fn start_with(language: &str, brain: &str) -> anyhow::Result<Rig> {
         let dir = DataDir::new()?;
+        // The assertions follow the model's reply: no acknowledgement of a slow one unless a test asks for it.
+        let brain = if brain.contains("chat_thinking_ms") {
+            brain.to_owned()
+        } else {
+            format!("chat_thinking_ms = 0\n{brain}")
+        };
         let program = repo().join(match language {
             "it" => "config/brain.it.tr",
             _ => "config/brain.tr",
@@ -406,8 +412,7 @@ async fn the_prompt_holds_what_the_agent_sees_and_a_code_stays_quoted() -> anyho
         rig.frame(seq, 2, Some(code)).await?;
         tokio::time::sleep(Duration::from_millis(60)).await;
     }
-    rig.hear("Tell me about the people in front of you.")
-        .await?;
+    rig.hear("Describe the two people you see, please.").await?;
     let prompt = next_chat_step(&rig, "prompt").await?;
     let text = prompt["chat"]["text"].as_str().context("no prompt text")?;
     assert!(text.contains("faces in view: 2"), "{text}");
@@ -569,6 +574,40 @@ async fn a_reply_started_at_the_pause_is_dropped_when_the_final_transcript_diffe
     assert_eq!(dropped["finish"], "cancelled", "{dropped}");
     assert_ne!(prompt["turn"], dropped["turn"], "{prompt} {dropped}");
     assert_eq!(rig.preemptive("cancelled", 1.0).await?, 1.0);
+    Ok(())
+}
+
+/// A model slow to start its reply: `chat_thinking_ms` after the user stopped, the program perceives `thinking` and
+/// says its short acknowledgement, so the user is not left in silence. The endpoint here accepts the request and
+/// never answers.
+#[tokio::test]
+async fn a_slow_reply_is_acknowledged_while_the_model_thinks() -> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    let silent = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+    let port = silent.local_addr()?.port();
+    let _held = tokio::spawn(async move {
+        let mut held = Vec::new();
+        while let Ok((conn, _)) = silent.accept().await {
+            held.push(conn);
+        }
+    });
+    let rig = Rig::start_with("en", "chat_thinking_ms = 400").await?;
+    let url = format!("http://127.0.0.1:{port}/v1");
+    let _llm = LlmSat::start_bare(&rig.agent, &["--endpoint", &url], &[]).await?;
+    rig.hear("Why is the sky blue?").await?;
+    let handed = next_matching(&rig.rules, |m| {
+        m["action"].as_str().is_some_and(|a| a.contains("chat("))
+    })
+    .await?;
+    let pondered = next_matching(&rig.rules, |m| m["rule"] == "main.ponder").await?;
+    let waited = pondered["ts_ms"].as_i64().unwrap_or(0) - handed["ts_ms"].as_i64().unwrap_or(0);
+    // Not before the wait (the final transcript here has no end of speech: it counts from its arrival).
+    assert!(
+        waited >= 400 - 5,
+        "thinking came {waited} ms after the turn was handed over: {pondered}"
+    );
+    let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    assert_eq!(caption["text"], "Let me think.", "{caption}");
     Ok(())
 }
 

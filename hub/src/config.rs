@@ -133,6 +133,10 @@ impl HttpSection {
 pub struct AgentSection {
     /// The language the agent converses in, as an ISO 639-1 code; the application checks that it knows it.
     pub language: String,
+    /// The knowledge folder the agent answers from (Markdown and text files, docs/knowledge.md); a relative path is
+    /// taken from the working directory; "" for none.
+    #[serde(default)]
+    pub knowledge: String,
 }
 
 /// `[telemetry]`: OpenTelemetry traces of each conversational turn (docs/telemetry.md).

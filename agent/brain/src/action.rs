@@ -29,6 +29,9 @@ pub enum Action {
     /// Forget the language model's memory of the conversation.
     #[serde(rename = "forget_conversation")]
     ForgetConversation,
+    /// Answer `text` from the knowledge folder: the host says its best passage (docs/knowledge.md), or asserts
+    /// `failed("recall", reason)` when the folder holds nothing confident about it.
+    Recall { text: String },
 }
 
 impl fmt::Display for Action {
@@ -50,6 +53,7 @@ impl fmt::Display for Action {
                 tool: Some(tool),
             } => write!(f, "chat({text:?}, {tool:?})"),
             Action::ForgetConversation => f.write_str("forget_conversation"),
+            Action::Recall { text } => write!(f, "recall({text:?})"),
         }
     }
 }

@@ -327,7 +327,7 @@ impl<'a> Checker<'a> {
                         *pos,
                         format!(
                             "unknown action or procedure `{name}`; actions are say, publish, call, run, set, \
-                             cancel, remember, forget, chat and forget_conversation"
+                             cancel, remember, forget, chat, forget_conversation and recall"
                         ),
                     ));
                 };

@@ -527,6 +527,7 @@ fn instantiate(action: &ActionExpr, scope: &Scope<'_>) -> Result<Option<Deed>, S
             tool: if args.len() > 1 { Some(text(1)?) } else { None },
         }),
         Primitive::ForgetConversation => Deed::Act(Action::ForgetConversation),
+        Primitive::Recall => Deed::Act(Action::Recall { text: text(0)? }),
         Primitive::Remember | Primitive::Forget => {
             let (name, fact_args) = match &args[0] {
                 Expr::Call(name, fact_args, _) => (name.clone(), Some(fact_args)),

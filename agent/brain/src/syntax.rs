@@ -191,6 +191,8 @@ pub enum Primitive {
     Chat,
     /// `forget_conversation`: the host forgets the language model's chat memory.
     ForgetConversation,
+    /// `recall(T)`: say the knowledge folder's best passage for `T`.
+    Recall,
 }
 
 impl Primitive {
@@ -206,6 +208,7 @@ impl Primitive {
             "forget" => Primitive::Forget,
             "chat" => Primitive::Chat,
             "forget_conversation" => Primitive::ForgetConversation,
+            "recall" => Primitive::Recall,
             _ => return None,
         })
     }
@@ -222,13 +225,18 @@ impl Primitive {
             Primitive::Forget => "forget",
             Primitive::Chat => "chat",
             Primitive::ForgetConversation => "forget_conversation",
+            Primitive::Recall => "recall",
         }
     }
 
     /// The fewest and the most arguments the primitive takes.
     pub fn arity(self) -> (usize, usize) {
         match self {
-            Primitive::Say | Primitive::Run | Primitive::Remember | Primitive::Forget => (1, 1),
+            Primitive::Say
+            | Primitive::Run
+            | Primitive::Remember
+            | Primitive::Forget
+            | Primitive::Recall => (1, 1),
             Primitive::Publish | Primitive::Call | Primitive::Set => (2, 2),
             Primitive::Cancel | Primitive::ForgetConversation => (0, 0),
             // The optional second argument names the tool the model must call.
@@ -247,6 +255,7 @@ impl Primitive {
                 | Primitive::Forget
                 | Primitive::Chat
                 | Primitive::ForgetConversation
+                | Primitive::Recall
         )
     }
 }

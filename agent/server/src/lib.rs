@@ -30,7 +30,10 @@ pub fn application(config: &Config) -> anyhow::Result<Application> {
         .hop;
     let browser = browser::BrowserLink::from_config(config, fft_hop, shutdown.subscribe())
         .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
-    let modules: Vec<Box<dyn Module>> = modules::builtin(language)
+    let knowledge = Some(config.agent.knowledge.trim())
+        .filter(|dir| !dir.is_empty())
+        .map(std::path::PathBuf::from);
+    let modules: Vec<Box<dyn Module>> = modules::builtin(language, knowledge)
         .into_iter()
         .chain(std::iter::once(browser.module()))
         .collect();

@@ -1,5 +1,7 @@
 //! The built-in modules and the switch that picks them from the configuration.
 
+use std::path::PathBuf;
+
 use agent_brain::Language;
 
 use flow_hub::module::Module;
@@ -19,10 +21,13 @@ pub mod vision_worker;
 /// The built-in modules besides the browser link, in start order (the server starts those enabled), conversing
 /// in `language`. The TTS module starts before any other publisher of avatar commands: it owns
 /// `Agent.avatar` (the behaviour controllers publish through it).
-pub fn builtin(language: Language) -> Vec<Box<dyn Module>> {
+pub fn builtin(language: Language, knowledge: Option<PathBuf>) -> Vec<Box<dyn Module>> {
     vec![
         Box::new(tts::TtsModule { language }),
-        Box::new(brain::BrainModule { language }),
+        Box::new(brain::BrainModule {
+            language,
+            knowledge,
+        }),
         Box::new(vision::VisionModule),
         Box::new(video_y::VideoY),
         Box::new(audio_fft::AudioFft),

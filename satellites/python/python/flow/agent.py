@@ -57,6 +57,7 @@ RULES = _name("rules")
 ASR_SUBMIT = _name("asr.submit")
 CHAT = _name("chat")
 CHAT_REPLY = _name("chat.reply")
+TRANSCRIPT_PAUSE = _name("transcript.pause")
 
 
 class Record:

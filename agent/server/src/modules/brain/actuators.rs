@@ -111,7 +111,7 @@ impl Actuators {
                 }
             }
             // The module itself performs chat turns (they need its percepts and memory).
-            Action::Chat { .. } | Action::ForgetConversation => {}
+            Action::Chat { .. } | Action::ForgetConversation | Action::Recall { .. } => {}
             Action::Set { key, value } => {
                 let client = self.client.clone();
                 let (key, value) = (key.clone(), serde_json::to_value(value).unwrap_or_default());
@@ -143,6 +143,7 @@ impl Actuators {
             | Action::Set { .. }
             | Action::Cancel
             | Action::Chat { .. }
+            | Action::Recall { .. }
             | Action::ForgetConversation => {}
         }
     }

@@ -161,6 +161,13 @@ impl Chats {
         info!("brain: the conversation is forgotten");
     }
 
+    /// A turn is running and none of its reply has come yet (no sentence, no end, not interrupted).
+    pub fn awaiting_reply(&self) -> bool {
+        self.current
+            .as_ref()
+            .is_some_and(|t| t.said.is_empty() && t.interrupted.is_none() && !t.has_ended())
+    }
+
     /// Starts a speculative turn on the transcript of a pause: the satellite generates and holds the reply back
     /// until [`Chats::start`] asks for the same turn. Nothing starts while a turn is running (a speculative request
     /// would cut it off). Returns its number.

@@ -7,11 +7,13 @@ mod chat;
 mod params;
 mod percepts;
 mod program_file;
+mod shelf;
 mod speech;
 mod turn;
 mod wire;
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use agent_brain::{
@@ -33,12 +35,15 @@ use flow_hub::module::{Module, ModuleContext, ModuleFuture};
 use params::BrainParams;
 use percepts::{Hearing, Percept};
 use program_file::{ProgramFile, Reload};
+use shelf::Shelf;
 use speech::{PlayoutClock, Speech};
 
-/// The built-in brain module (`[modules.brain]`), conversing in the agent's language.
+/// The built-in brain module (`[modules.brain]`), conversing in the agent's language, answering from the knowledge
+/// folder (`[agent] knowledge`) when there is one.
 #[derive(Debug, Default)]
 pub struct BrainModule {
     pub language: Language,
+    pub knowledge: Option<PathBuf>,
 }
 
 impl Module for BrainModule {
@@ -48,6 +53,12 @@ impl Module for BrainModule {
 
     fn check(&self, params: &serde_json::Value) -> anyhow::Result<()> {
         let params = BrainParams::from_json(params)?;
+        if let Some(dir) = &self.knowledge
+            && dir.exists()
+            && !dir.is_dir()
+        {
+            anyhow::bail!("[agent] knowledge: {} is not a folder", dir.display());
+        }
         let capabilities = Capabilities {
             commands: params.commands.keys().cloned().collect(),
         };
@@ -58,7 +69,7 @@ impl Module for BrainModule {
     }
 
     fn run(self: Box<Self>, ctx: ModuleContext) -> ModuleFuture {
-        Box::pin(run(ctx, self.language))
+        Box::pin(run(ctx, self.language, self.knowledge))
     }
 }
 
@@ -97,12 +108,23 @@ struct Mind {
     preempt: bool,
     /// A final transcript came since the last step: a speculative reply it did not adopt is dropped after it.
     heard_final: bool,
+    /// When the last final transcript's speech ended, and `chat_thinking_ms`: a chat turn without a sentence by then
+    /// asserts `thinking` (`Mind::ponder`), and it holds until the reply comes.
+    speech_ended: Option<Instant>,
+    think_after: Option<Duration>,
+    thinking: bool,
     speech: Speech,
+    /// The knowledge folder's index.
+    shelf: Shelf,
     /// Chat turns with the language-model satellite.
     chats: Chats,
 }
 
-async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
+async fn run(
+    mut ctx: ModuleContext,
+    language: Language,
+    knowledge: Option<PathBuf>,
+) -> anyhow::Result<()> {
     let params = BrainParams::from_json(&ctx.params)?;
     let capabilities = Capabilities {
         commands: params.commands.keys().cloned().collect(),
@@ -110,6 +132,14 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     let mut file = ProgramFile::new(params.program(language), capabilities);
     let program = file.load()?;
     info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
+
+    let folder_language = match language {
+        Language::It => agent_knowledge::Language::It,
+        Language::En => agent_knowledge::Language::En,
+    };
+    let (shelf, mut shelf_updates) = Shelf::open(knowledge, folder_language)
+        .await
+        .map_err(|e| anyhow::anyhow!("[agent] knowledge: {e:#}"))?;
 
     let client = ctx.client.clone();
     let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
@@ -142,7 +172,12 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
         answering: None,
         preempt: params.chat_preempt,
         heard_final: false,
+        speech_ended: None,
+        think_after: (params.chat_thinking_ms > 0)
+            .then(|| Duration::from_millis(params.chat_thinking_ms)),
+        thinking: false,
         speech: speech.clone(),
+        shelf,
         chats: Chats::new(
             client.clone(),
             speech,
@@ -201,6 +236,7 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
                 }
             }
             Some(outcome) = outcomes.recv() => mind.outcome(outcome),
+            Some(update) = shelf_updates.next() => mind.shelf.swap(update),
             tick = ticks.recv() => {
                 if matches!(tick, Ok(Tick::OneSec)) {
                     mind.each_second(&ctx).await;
@@ -231,7 +267,32 @@ impl Mind {
             .next_wakeup(now.into_std())
             .map(Instant::from_std);
         let speech_end = self.playout.speaking_until(now);
-        [brain, speech_end].into_iter().flatten().min()
+        [brain, speech_end, self.think_at()]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    /// When `thinking` is due: a chat turn waits for its first sentence and the program perceives `thinking`.
+    fn think_at(&self) -> Option<Instant> {
+        if self.thinking || !self.chats.awaiting_reply() {
+            return None;
+        }
+        self.brain.program().decl("thinking")?;
+        Some(self.speech_ended? + self.think_after?)
+    }
+
+    /// Asserts `thinking` once the model's reply is late, and retracts it when the reply (or its end) comes.
+    fn ponder(&mut self) {
+        let now = Instant::now();
+        if self.think_at().is_some_and(|at| at <= now) {
+            info!("brain: the model's reply is late: thinking");
+            self.thinking = true;
+            self.perceive("thinking", Vec::new());
+        } else if self.thinking && !self.chats.awaiting_reply() {
+            self.thinking = false;
+            self.brain.retract("thinking");
+        }
     }
 
     fn perceive(&mut self, name: &str, args: Vec<Value>) {
@@ -277,6 +338,7 @@ impl Mind {
         }
         self.counters.transcripts += 1;
         self.heard_final = true;
+        self.speech_ended = Some(percepts::speech_end(&data.payload).unwrap_or_else(Instant::now));
         self.answering = percepts::turn_trace(&data.payload);
         self.speech
             .answering(self.answering.map(|t| t.child("reply")));
@@ -284,7 +346,15 @@ impl Mind {
             Some(turn) => debug!(transcript = %text, trace_id = %turn.trace, "brain: heard"),
             None => debug!(transcript = %text, "brain: heard"),
         }
+        self.know(&text);
         self.perceive("heard", vec![Value::Text(text)]);
+    }
+
+    /// `known(text)` when the knowledge folder holds a passage sure enough for `recall` (programs that declare it).
+    fn know(&mut self, text: &str) {
+        if self.brain.program().decl("known").is_some() && self.shelf.recall(text).is_some() {
+            self.perceive("known", vec![Value::Text(text.to_owned())]);
+        }
     }
 
     /// The transcript of a pause, before the end of the turn is decided: when the program would hand it to the
@@ -318,6 +388,14 @@ impl Mind {
         let now = self.now();
         let mut trial = self.brain.clone();
         trial.retract("listening");
+        if trial.program().decl("known").is_some()
+            && self.shelf.recall(&text).is_some()
+            && trial
+                .perceive(now.at, "known", vec![Value::Text(text.clone())])
+                .is_err()
+        {
+            return;
+        }
         if trial
             .perceive(now.at, "heard", vec![Value::Text(text.clone())])
             .is_err()
@@ -334,7 +412,7 @@ impl Mind {
             return;
         };
         let tools = self.tools();
-        let facts = self.facts(&now);
+        let facts = self.facts(&now, &asked);
         if let Some(turn) = self
             .chats
             .speculate(&asked, self.language.code(), facts, tools, tool)
@@ -499,7 +577,7 @@ impl Mind {
     }
 
     /// What the agent perceives now, for a chat turn.
-    fn facts(&self, now: &Now) -> Facts {
+    fn facts(&self, now: &Now, question: &str) -> Facts {
         let store = self.brain.store();
         let fresh = |name: &str, window: Duration| {
             store
@@ -536,7 +614,7 @@ impl Mind {
                 .named(agent_brain::SAID)
                 .next()
                 .and_then(|fact| text(fact.args.first())),
-            passages: Vec::new(),
+            passages: self.shelf.passages(question),
         }
     }
 
@@ -557,15 +635,50 @@ impl Mind {
     /// Starts a chat turn for `chat(T)` or `chat(T, "Service")`.
     fn chat(&mut self, now: &Now, text: &str, tool: Option<String>) {
         let tools = self.tools();
-        let facts = self.facts(now);
+        let facts = self.facts(now, text);
         let reply = self.answering.map(|t| t.child("reply"));
+        let passages: Vec<String> = facts
+            .passages
+            .iter()
+            .map(|p| passage_line(&p.file, "", &p.text))
+            .collect();
         let turn = self
             .chats
             .start(text, self.language.code(), facts, tools, tool, reply);
+        for passage in passages {
+            self.chat_trace(turn, "passage", passage);
+        }
         match reply {
             Some(reply) => info!(turn, trace_id = %reply.trace, "brain: a chat turn starts"),
             None => debug!(turn, text, "brain: a chat turn starts"),
         }
+    }
+
+    /// `recall(T)`: says the knowledge folder's passage for `T`, or asserts `failed("recall", reason)` so that the
+    /// program can hand the question on. The trace names the file and heading the answer came from.
+    async fn recall(&mut self, text: &str) {
+        let Some(hit) = self.shelf.recall(text) else {
+            debug!(text, "brain: nothing in the knowledge folder answers it");
+            self.perceive(
+                "failed",
+                vec![
+                    Value::Text("recall".into()),
+                    Value::Text("nothing in the knowledge folder answers it".into()),
+                ],
+            );
+            return;
+        };
+        info!(file = %hit.file, heading = %hit.heading, "brain: recalled from the knowledge folder");
+        self.chat_trace(
+            0,
+            "passage",
+            passage_line(&hit.file, &hit.heading, &hit.text),
+        );
+        self.echo.said(Instant::now().into_std(), &hit.text);
+        self.saying = Some(hit.text.clone());
+        self.actuators
+            .perform(Effect::Fire(Action::Say { text: hit.text }))
+            .await;
     }
 
     fn outcome(&mut self, outcome: Outcome) {
@@ -614,6 +727,7 @@ impl Mind {
 
     /// Re-evaluates the program and performs what changed.
     async fn step(&mut self) {
+        self.ponder();
         let now = self.now();
         // `speaking` follows the play-out of the agent's speech.
         let speaking = self
@@ -660,6 +774,11 @@ impl Mind {
                     self.chats.forget();
                     continue;
                 }
+                Action::Recall { text } => {
+                    let text = text.clone();
+                    self.recall(&text).await;
+                    continue;
+                }
                 _ => {}
             }
             self.actuators.perform(effect).await;
@@ -695,5 +814,14 @@ impl Mind {
             "last_reload_error": c.last_reload_error,
             "outcomes_dropped": self.actuators.dropped_outcomes,
         })
+    }
+}
+
+/// A passage as the trace shows it: where it came from, then its words.
+fn passage_line(file: &str, heading: &str, text: &str) -> String {
+    if heading.is_empty() {
+        format!("{file}: {text}")
+    } else {
+        format!("{file} ({heading}): {text}")
     }
 }

@@ -49,6 +49,10 @@ pub struct BrainParams {
     /// Turns of the conversation a chat turn carries (and the pair database keeps), each a question and its reply.
     #[serde(default = "default_chat_memory_turns")]
     pub chat_memory_turns: usize,
+    /// `thinking` is asserted when a chat turn has no sentence this long after the end of the user's speech (the
+    /// program may say a short acknowledgement, docs/brain.md); 0 never asserts it (tests that time the answer).
+    #[serde(default = "default_chat_thinking_ms")]
+    pub chat_thinking_ms: u64,
     /// Preemptive replies: the model starts on the transcript of a pause (`Agent.transcript.pause`) when the
     /// program would hand that text to `chat`, and the reply is kept when the final transcript is the same.
     #[serde(default = "default_true")]
@@ -59,6 +63,10 @@ pub struct BrainParams {
     /// The local time zone as minutes east of UTC, for `time.*`; by default the server's own.
     #[serde(default)]
     pub utc_offset_minutes: Option<i32>,
+}
+
+fn default_chat_thinking_ms() -> u64 {
+    400
 }
 
 fn default_true() -> bool {

@@ -68,6 +68,22 @@ pub fn hearing(payload: &[u8]) -> Result<Hearing, String> {
     }
 }
 
+/// When the speech of a final transcript ended (its `end_us`, on the hub's clock), as an instant of this process;
+/// `None` for plain text or a message without it.
+pub fn speech_end(payload: &[u8]) -> Option<tokio::time::Instant> {
+    #[derive(serde::Deserialize)]
+    struct Ended {
+        end_us: u64,
+    }
+    let ended: Ended = serde_json::from_slice(payload).ok()?;
+    let now_us = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .ok()?
+        .as_micros() as u64;
+    let ago = std::time::Duration::from_micros(now_us.saturating_sub(ended.end_us));
+    tokio::time::Instant::now().checked_sub(ago)
+}
+
 /// The turn a final transcript starts, from the `traceparent` it carries (docs/telemetry.md); `None` for plain text,
 /// a message without one, or one that does not parse (that turn is then not traced).
 pub fn turn_trace(payload: &[u8]) -> Option<TraceContext> {

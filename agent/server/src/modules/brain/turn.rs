@@ -47,6 +47,11 @@ pub struct Turn {
 }
 
 impl Turn {
+    /// Its `end` event or its call's answer came.
+    pub fn has_ended(&self) -> bool {
+        self.ended || self.answer.is_some()
+    }
+
     pub fn new(turn: u64, text: &str, facts: Facts) -> Turn {
         Turn {
             turn,
