@@ -66,8 +66,8 @@ impl Rig {
             speech,
             rules,
         };
-        // Both the brain and the TTS module follow transcripts; the brain follows detections.
-        rig.until_subscribers(ch::TRANSCRIPT.name, 2).await?;
+        // The brain, the TTS module and the observer follow transcripts; the brain follows detections.
+        rig.until_subscribers(ch::TRANSCRIPT.name, 3).await?;
         rig.until_subscribers(ch::DETECTIONS.name, 1).await?;
         Ok(rig)
     }
@@ -341,7 +341,11 @@ async fn the_program_file_is_reloaded_and_a_broken_edit_keeps_the_old_one() -> a
     rig.hear("hello").await?;
     assert_eq!(rig.next_caption().await?, "Hi! Nice to hear from you.");
 
-    // A mistake on line 34: the error names the place, and the previous version keeps answering.
+    // A mistake on the `converse` rule's line: the error names the place, and the previous version keeps answering.
+    let line = 1 + program
+        .lines()
+        .position(|l| l.contains("converse:   heard(T) & words(T) > 0"))
+        .context("the default program has no converse rule")?;
     let broken: String = program
         .replace("Hello! How can I help you?", "Hi! Nice to hear from you.")
         .replace(
@@ -353,10 +357,11 @@ async fn the_program_file_is_reloaded_and_a_broken_edit_keeps_the_old_one() -> a
         .output
         .wait_for("does not load, the previous one keeps running", 1, PATIENCE)
         .await?;
-    let errors = rig.agent.output.matching("brain.tr:34:");
+    let place = format!("brain.tr:{line}:");
+    let errors = rig.agent.output.matching(&place);
     if errors.is_empty() {
         bail!(
-            "no error naming brain.tr:34:\n{}",
+            "no error naming {place}\n{}",
             rig.agent.output.lines().join("\n")
         );
     }

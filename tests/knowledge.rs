@@ -34,7 +34,9 @@ impl Rig {
             folder.display().to_string(),
             repo().join("config/brain.tr").display().to_string()
         );
-        let agent = Agent::start_configured(&dir, &config, "brain: the knowledge folder is indexed").await?;
+        let agent =
+            Agent::start_configured(&dir, &config, "brain: the knowledge folder is indexed")
+                .await?;
         let user = agent.client("knowledge-test").await?;
         let rules = user.subscribe(ch::RULES.name).await?;
         let avatar = user.subscribe(ch::AVATAR.name).await?;
@@ -45,15 +47,19 @@ impl Rig {
         let _pauses = user
             .publisher(ch::TRANSCRIPT_PAUSE.name, ch::headers::TRANSCRIPT)
             .await?;
-        until("the brain's subscription to the transcripts", PATIENCE, async {
-            while !user
-                .channel(ch::TRANSCRIPT_PAUSE.name)
-                .await
-                .is_ok_and(|info| info.stats.subscribers >= 1)
-            {
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        })
+        until(
+            "the brain's subscription to the transcripts",
+            PATIENCE,
+            async {
+                while !user
+                    .channel(ch::TRANSCRIPT_PAUSE.name)
+                    .await
+                    .is_ok_and(|info| info.stats.subscribers >= 1)
+                {
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+            },
+        )
         .await?;
         Ok(Rig {
             _dir: dir,
@@ -91,7 +97,8 @@ async fn next_matching(
 }
 
 #[tokio::test]
-async fn a_question_the_folder_answers_is_said_from_its_passage_with_no_model() -> anyhow::Result<()> {
+async fn a_question_the_folder_answers_is_said_from_its_passage_with_no_model() -> anyhow::Result<()>
+{
     let folder = repo().join("knowledge");
     let question = "Where are the recordings stored?";
     let expected = Knowledge::open(&folder, Language::En)?
@@ -106,7 +113,10 @@ async fn a_question_the_folder_answers_is_said_from_its_passage_with_no_model() 
     assert_eq!(fired["rule"], "main.converse > answer.know", "{fired}");
     let traced = next_matching(&rig.rules, PATIENCE, |m| m["chat"]["step"] == "passage").await?;
     let line = traced["chat"]["text"].as_str().unwrap_or_default();
-    assert!(line.starts_with(&format!("{} (", expected.file)), "{traced}");
+    assert!(
+        line.starts_with(&format!("{} (", expected.file)),
+        "{traced}"
+    );
     let caption = next_matching(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert_eq!(caption["text"], expected.text.as_str(), "{caption}");
     Ok(())
@@ -116,7 +126,8 @@ async fn a_question_the_folder_answers_is_said_from_its_passage_with_no_model() 
 async fn a_file_added_to_the_folder_is_found_without_a_restart() -> anyhow::Result<()> {
     let folder = tempfile::tempdir()?;
     let rig = Rig::start(folder.path()).await?;
-    let answer = "The lab is open from nine in the morning to five in the afternoon, Monday to Friday.";
+    let answer =
+        "The lab is open from nine in the morning to five in the afternoon, Monday to Friday.";
     std::fs::write(
         folder.path().join("opening.md"),
         format!("# Opening hours\n\n{answer}\n"),
@@ -145,7 +156,8 @@ async fn a_knowledge_path_that_is_a_file_stops_the_agent_naming_it() -> anyhow::
     let file = dir.path().join("not-a-folder.md");
     std::fs::write(&file, "# Not a folder\n")?;
     let config = format!("[agent]\nknowledge = {:?}\n", file.display().to_string());
-    let started = Agent::start_configured(&dir, &config, "brain: the knowledge folder is indexed").await;
+    let started =
+        Agent::start_configured(&dir, &config, "brain: the knowledge folder is indexed").await;
     let Err(e) = started else {
         anyhow::bail!("the agent started with a file as its knowledge folder");
     };

@@ -37,7 +37,7 @@ fn repo() -> PathBuf {
 async fn conversing_agent(dir: &DataDir) -> anyhow::Result<Agent> {
     let program = repo().join("config/brain.tr");
     let config = format!(
-        "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
+        "[modules.brain]\nprogram = {:?}\nchat_thinking_ms = 0\n[modules.vision]\nenabled = false\n",
         program.display().to_string()
     );
     Agent::start_configured(dir, &config, "brain: program loaded").await

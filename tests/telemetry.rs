@@ -51,7 +51,7 @@ fn repo() -> PathBuf {
 async fn agent(dir: &DataDir, telemetry: &str, env: &[(&str, &str)]) -> anyhow::Result<Agent> {
     let program = repo().join("config/brain.tr");
     let config = format!(
-        "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n{telemetry}",
+        "[modules.brain]\nprogram = {:?}\nchat_thinking_ms = 0\n[modules.vision]\nenabled = false\n{telemetry}",
         program.display().to_string()
     );
     let opts = AgentOptions {

@@ -76,7 +76,7 @@ impl Rig {
         std::fs::write(
             &config,
             format!(
-                "[modules.brain]\nprogram = {:?}\n[modules.vision]\nenabled = false\n",
+                "[modules.brain]\nprogram = {:?}\nchat_thinking_ms = 0\n[modules.vision]\nenabled = false\n",
                 program.display().to_string()
             ),
         )?;

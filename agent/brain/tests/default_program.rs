@@ -439,5 +439,34 @@ fn the_trace_names_the_transcript_even_though_the_rule_forgets_it() {
     let path: Vec<String> = trace.path.iter().map(ToString::to_string).collect();
     assert_eq!(path, ["main.converse", "answer.time"]);
     assert_eq!(trace.because[0].fact, r#"heard("What time is it?")"#);
-    assert_eq!(trace.updates, ["remember(greeted)", "forget(heard)"]);
+    assert_eq!(
+        trace.updates,
+        [
+            "remember(greeted)",
+            "forget(asked)",
+            r#"remember(asked("What time is it?"))"#,
+            "forget(heard)"
+        ]
+    );
+}
+
+#[test]
+fn what_was_asked_is_answered_from_the_last_question() {
+    let mut sim = assistant();
+    sim.advance(ms(1000));
+    assert_eq!(
+        says(&sim.hear("What did I just ask you?")),
+        ["You haven't asked me anything yet."]
+    );
+    sim.hear("What time is it?");
+    sim.advance(ms(1000));
+    assert_eq!(
+        says(&sim.hear("What did I just ask?")),
+        ["You asked: What time is it?"]
+    );
+    // The follow-up itself is not a question to remember.
+    assert_eq!(
+        says(&sim.hear("What was my question?")),
+        ["You asked: What time is it?"]
+    );
 }

@@ -5,11 +5,19 @@
 const SOFT_LIMIT: usize = 200;
 /// Text without any space is cut here (a run-away token stream must not grow the buffer without end).
 const HARD_LIMIT: usize = 400;
-/// The reply's first sentence is cut at a clause (`,` `;` `:` and whitespace) once it has this many words: the
-/// first audio then starts while the rest of that sentence is generated. Later sentences wait for their end.
-const FIRST_CLAUSE_WORDS: usize = 6;
+/// The reply's first sentence is cut at its first natural break once it has this many words: the first audio then
+/// starts while the rest of that sentence is generated. Later sentences wait for their end. A break is a clause's
+/// punctuation (`,` `;` `:` and whitespace, not a comma before a number: "5 December, 2026") or the space before a
+/// word that opens a clause ("because", "but", "which"...).
+const FIRST_CLAUSE_WORDS: usize = 3;
 /// Characters that end a clause.
 const CLAUSE_ENDS: [char; 3] = [',', ';', ':'];
+/// Words that open a clause: the first sentence may be cut before them ("The sky is blue | because air scatters
+/// light"). Not "and", "or", "that", "to": they join words as often as clauses ("red and blue").
+const CLAUSE_OPENERS: [&str; 17] = [
+    "because", "but", "although", "though", "while", "which", "whereas", "unless", "however",
+    "perché", "poiché", "ma", "però", "mentre", "quindi", "sebbene", "benché",
+];
 /// Characters that end a sentence when whitespace follows them.
 const TERMINALS: [char; 4] = ['.', '!', '?', '…'];
 /// Characters that may close a sentence after its terminal: `"Yes."` and `**Done.**` end where the closer does.
@@ -174,20 +182,17 @@ impl Sentences {
                     Verdict::NotEnd => {}
                 }
             }
-            if !self.started && CLAUSE_ENDS.contains(&c) {
-                match self.pending.get(i + 1) {
-                    None => return Cut::Wait,
-                    Some(after)
-                        if after.is_whitespace()
-                            && words(&self.pending[..i]) >= FIRST_CLAUSE_WORDS =>
-                    {
+            if !self.started {
+                match self.clause_break(i) {
+                    Some(Some((end, resume))) => {
                         return Cut::At {
-                            end: i + 1,
-                            resume: i + 1,
+                            end,
+                            resume,
                             clause: true,
                         };
                     }
-                    Some(_) => {}
+                    None => return Cut::Wait,
+                    Some(None) => {}
                 }
             }
             if c.is_whitespace() && i >= SOFT_LIMIT {
@@ -199,6 +204,48 @@ impl Sentences {
             }
         }
         Cut::Wait
+    }
+
+    /// Whether the first sentence may be cut at `at`: `Some(Some((end, resume)))` where it is cut, `Some(None)` if
+    /// not there, `None` while the characters that decide have not arrived.
+    fn clause_break(&self, at: usize) -> Option<Option<(usize, usize)>> {
+        let cs = &self.pending;
+        let c = cs[at];
+        if CLAUSE_ENDS.contains(&c) {
+            let after = *cs.get(at + 1)?;
+            if !after.is_whitespace() || words(&cs[..at]) < FIRST_CLAUSE_WORDS {
+                return Some(None);
+            }
+            // "5 December, 2026", "1, 2, 3": a number after the comma belongs with what came before.
+            let next = *cs[at + 1..].iter().find(|c| !c.is_whitespace())?;
+            if c == ',' && next.is_ascii_digit() {
+                return Some(None);
+            }
+            return Some(Some((at + 1, at + 1)));
+        }
+        if !c.is_whitespace() || cs.get(at + 1).is_some_and(|c| c.is_whitespace()) {
+            return Some(None);
+        }
+        // The space before a word: is the word one that opens a clause?
+        let rest = &cs[at + 1..];
+        let length = rest.iter().take_while(|c| c.is_alphabetic()).count();
+        let word: String = rest[..length]
+            .iter()
+            .flat_map(|c| c.to_lowercase())
+            .collect();
+        if length == rest.len() {
+            // The word may still grow: wait only if it could become an opener.
+            let could = !word.is_empty() && CLAUSE_OPENERS.iter().any(|o| o.starts_with(&word));
+            return if could { None } else { Some(None) };
+        }
+        let closed = rest[length].is_whitespace() || rest[length] == ',';
+        if closed
+            && CLAUSE_OPENERS.contains(&word.as_str())
+            && words(&cs[..at]) >= FIRST_CLAUSE_WORDS
+        {
+            return Some(Some((at, at + 1)));
+        }
+        Some(None)
     }
 
     fn verdict(&self, at: usize) -> Verdict {
@@ -823,7 +870,8 @@ mod tests {
     }
 
     #[test]
-    fn the_first_sentence_is_cut_at_a_clause_once_it_has_six_words_and_the_cap_counts_sentences() {
+    fn the_first_sentence_is_cut_at_a_clause_once_it_has_three_words_and_the_cap_counts_sentences()
+    {
         let mut split = Sentences::new(2);
         let mut out =
             split.push("Well, the sky looks blue to us, because air scatters blue light. ");
@@ -838,6 +886,93 @@ mod tests {
             ]
         );
         assert!(split.capped());
+    }
+
+    /// The first chunk handed out for `text` (a reply of SmolLM2-135M), and the rest.
+    fn first_chunk(text: &str, language: &str) -> Vec<String> {
+        let mut split = Sentences::new(0).in_language(language);
+        let mut out = Vec::new();
+        for piece in text.split_inclusive(' ') {
+            out.extend(split.push(piece));
+        }
+        out.extend(split.finish());
+        out
+    }
+
+    #[test]
+    fn the_first_chunk_ends_at_the_first_natural_break_after_three_words() {
+        // Replies the model gave in bench/llm/conversation.toml's set.
+        assert_eq!(
+            first_chunk(
+                "The sky appears blue because of a process called Rayleigh scattering. It is light.",
+                "en"
+            ),
+            [
+                "The sky appears blue",
+                "because of a process called Rayleigh scattering.",
+                "It is light."
+            ]
+        );
+        assert_eq!(
+            first_chunk(
+                "People laugh for many reasons, but one of them is joy.",
+                "en"
+            ),
+            ["People laugh for many reasons,", "but one of them is joy."]
+        );
+        assert_eq!(
+            first_chunk(
+                "The moon is so bright because it reflects the light of the sun.",
+                "en"
+            ),
+            [
+                "The moon is so bright",
+                "because it reflects the light of the sun."
+            ]
+        );
+        assert_eq!(
+            first_chunk("Il cielo è blu perché la luce si diffonde.", "it"),
+            ["Il cielo è blu", "perché la luce si diffonde."]
+        );
+    }
+
+    #[test]
+    fn the_first_chunk_is_not_cut_mid_phrase() {
+        // Too early: fewer than three words before the break.
+        assert_eq!(
+            first_chunk("Yes, I can see you.", "en"),
+            ["Yes, I can see you."]
+        );
+        assert_eq!(first_chunk("Well, but why?", "en"), ["Well, but why?"]);
+        // "and" joins words as often as clauses: red | and blue would be ugly.
+        assert_eq!(
+            first_chunk("I like red and blue and green a lot.", "en"),
+            ["I like red and blue and green a lot."]
+        );
+        // A number after a comma belongs with what came before it.
+        assert_eq!(
+            first_chunk("Today is December 5, 2026, a Saturday.", "en"),
+            ["Today is December 5, 2026,", "a Saturday."]
+        );
+        // An opener must be a whole word: "butter" is not "but", "whichever" not "which".
+        assert_eq!(
+            first_chunk("I would like butter whichever bread it is.", "en"),
+            ["I would like butter whichever bread it is."]
+        );
+        // Only the first sentence is cut early.
+        assert_eq!(
+            first_chunk("Hello there! The sky is blue because of the air.", "en"),
+            ["Hello there!", "The sky is blue because of the air."]
+        );
+    }
+
+    #[test]
+    fn an_opener_still_being_written_waits_for_its_end() {
+        let mut split = Sentences::new(0);
+        assert!(split.push("The sky is blue bec").is_empty());
+        assert!(split.push("ause").is_empty(), "the word is not over");
+        assert_eq!(split.push(" air"), ["The sky is blue"]);
+        assert_eq!(split.finish().as_deref(), Some("because air"));
     }
 
     fn split_char_by_char(text: &str) -> Vec<String> {

@@ -131,15 +131,6 @@ async fn run(
     };
     let mut file = ProgramFile::new(params.program(language), capabilities);
     let program = file.load()?;
-    info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
-
-    let folder_language = match language {
-        Language::It => agent_knowledge::Language::It,
-        Language::En => agent_knowledge::Language::En,
-    };
-    let (shelf, mut shelf_updates) = Shelf::open(knowledge, folder_language)
-        .await
-        .map_err(|e| anyhow::anyhow!("[agent] knowledge: {e:#}"))?;
 
     let client = ctx.client.clone();
     let transcripts = client.subscribe(channels::TRANSCRIPT.name).await?;
@@ -148,6 +139,15 @@ async fn run(
     let speech_out = client.subscribe(channels::SPEECH.name).await?;
     let avatar = client.subscribe(channels::AVATAR.name).await?;
     let chat_reply = client.subscribe(channels::CHAT_REPLY.name).await?;
+    // Subscribed before anything is said to be ready, so that no transcript published after it is missed.
+    info!(program = %file.path().display(), rules = program.rule_count(), "brain: program loaded");
+    let folder_language = match language {
+        Language::It => agent_knowledge::Language::It,
+        Language::En => agent_knowledge::Language::En,
+    };
+    let (shelf, mut shelf_updates) = Shelf::open(knowledge, folder_language)
+        .await
+        .map_err(|e| anyhow::anyhow!("[agent] knowledge: {e:#}"))?;
     let (chat_done_tx, mut chat_done) = mpsc::channel(DONE_QUEUE);
     let speech = Speech::start(client.clone());
     let rules = client
