@@ -627,6 +627,45 @@ async fn a_passage_of_the_knowledge_folder_reaches_the_model_quoted() -> anyhow:
     Ok(())
 }
 
+/// "Say that again" after the model's answer repeats that answer (the host records the reply as what it said last),
+/// not the last thing a rule said.
+#[tokio::test]
+async fn say_that_again_repeats_the_models_reply() -> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    let rig = Rig::start().await?;
+    let _llm = LlmSat::start(&rig.agent, &["--max-sentences", "1"]).await?;
+    rig.hear("Why is the sky blue?").await?;
+    let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+    let turn = prompt["turn"].clone();
+    let mut spoken: Vec<String> = Vec::new();
+    until("the reply's end", PATIENCE, async {
+        loop {
+            let data = rig.reply.recv().await.context("the reply stream ended")?;
+            let event: Value = serde_json::from_slice(&data.payload)?;
+            if event["turn"] != turn {
+                continue;
+            }
+            if event["event"] == "sentence" {
+                spoken.push(event["text"].as_str().unwrap_or_default().to_owned());
+            }
+            if event["event"] == "end" {
+                return anyhow::Ok(());
+            }
+        }
+    })
+    .await??;
+    anyhow::ensure!(!spoken.is_empty(), "the model said nothing");
+    let reply = spoken.join(" ");
+    // Its captions, then the repetition's.
+    for _ in &spoken {
+        next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    }
+    rig.hear("Say that again, please.").await?;
+    let again = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    assert_eq!(again["text"], reply.as_str(), "{again}");
+    Ok(())
+}
+
 /// A model slow to start its reply: `chat_thinking_ms` after the user stopped, the program perceives `thinking` and
 /// says its short acknowledgement, so the user is not left in silence. The endpoint here accepts the request and
 /// never answers.

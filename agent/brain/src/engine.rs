@@ -157,6 +157,14 @@ impl Brain {
         Ok(before != after)
     }
 
+    /// Records `text` as what the agent said last (`said`), for what the host says outside the rules' `say`: a
+    /// language model's reply, a recalled passage. "Say that again" then repeats it.
+    pub fn said(&mut self, at: Instant, text: &str) {
+        let fresh = self.program.fresh(SAID);
+        self.store
+            .assert(at, SAID, vec![Value::Text(text.to_owned())], false, fresh);
+    }
+
     /// Removes every fact of a percept (the agent stopped speaking).
     pub fn retract(&mut self, name: &str) -> bool {
         let had = self.store.named(name).next().is_some();

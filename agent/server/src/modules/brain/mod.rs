@@ -502,11 +502,17 @@ impl Mind {
                 return;
             }
         };
-        if let ChatEvent::Sentence { text, .. } = &event
+        if let ChatEvent::Sentence { text, index, .. } = &event
             && self.chats.running() == Some(event.turn())
         {
             self.echo.said(Instant::now().into_std(), text);
-            self.saying = Some(text.clone());
+            // What the agent said last is the reply so far, for "say that again".
+            let reply = match (index, self.saying.as_deref()) {
+                (0, _) | (_, None) => text.clone(),
+                (_, Some(before)) => format!("{before} {text}"),
+            };
+            self.brain.said(Instant::now().into_std(), &reply);
+            self.saying = Some(reply);
         }
         let playout_end = self.playout.speaking_until(Instant::now());
         for next in self.chats.event(event, playout_end).await {
@@ -675,6 +681,7 @@ impl Mind {
             passage_line(&hit.file, &hit.heading, &hit.text),
         );
         self.echo.said(Instant::now().into_std(), &hit.text);
+        self.brain.said(Instant::now().into_std(), &hit.text);
         self.saying = Some(hit.text.clone());
         self.actuators
             .perform(Effect::Fire(Action::Say { text: hit.text }))

@@ -68,12 +68,21 @@ impl Shelf {
             "brain: the knowledge folder is indexed"
         );
         let again = dir.clone();
-        let watch = agent_knowledge::watch(&dir, move || {
+        let watched = agent_knowledge::watch(&dir, move || {
             // The watcher's own thread indexes, at background priority: the turn goes first.
             let _ = flow::priority::lower_this_thread(flow::priority::BACKGROUND_NICE);
             // A full queue already holds a newer index to swap in, or one about to be replaced.
             let _ = tx.try_send(Knowledge::open(&again, language));
-        })?;
+        });
+        // The folder is indexed; without a watch (the machine's inotify instances used up) it is only not indexed
+        // again, which is no reason to stop answering.
+        let watch = match watched {
+            Ok(watch) => Some(watch),
+            Err(e) => {
+                warn!(folder = %dir.display(), "brain: the knowledge folder is not watched, a change needs a restart: {e}");
+                None
+            }
+        };
         let shelf = Shelf {
             current: Arc::new(knowledge),
         };
@@ -81,7 +90,7 @@ impl Shelf {
             shelf,
             Updates {
                 updates,
-                _watch: Some(watch),
+                _watch: watch,
             },
         ))
     }
