@@ -86,6 +86,8 @@ async fn beside_two_busy_loops_both_questions_are_heard_whole_and_answered_aloud
     let waited = tokio::time::timeout(PATIENCE, async {
         loop {
             let next = tokio::select! {
+                // A transcript before the rule it fired when both are waiting (the busy loops delay this test).
+                biased;
                 p = next_payload(&transcript) => json_message(&p?)
                     .filter(|v| v["final"] == true)
                     .and_then(|v| v["text"].as_str().map(|t| Seen::Transcript(words(t)))),
@@ -160,14 +162,16 @@ async fn a_stage_over_its_budget_is_named_in_the_log_in_metrics_and_in_the_turns
     let wav = dir.path().join("three-questions.wav");
     let question = say(RULE_QUESTION, dir.path())?;
     let mut samples = silence(500);
-    for _ in 0..3 {
+    // Four questions for three measured turns: the observer has been seen to miss one turn in a run (issue 49's
+    // closing note; under investigation), and this test is about the stage being named, not about that.
+    for _ in 0..4 {
         samples.extend_from_slice(&question);
         samples.extend(silence(4000));
     }
     write_wav(&wav, &samples)?;
     let publishing = tokio::spawn(run(agent.microphone(&wav, 1500)?, b"", PATIENCE));
 
-    // Three turns: the first two are not judged yet, the third names the stage.
+    // Three turns measured: the first two are not judged yet, the third names the stage.
     let mut turns = Vec::new();
     let deadline = tokio::time::Instant::now() + PATIENCE;
     while turns.len() < 3 {

@@ -363,6 +363,9 @@ impl Module for ObserverModule {
             let mut pace = Pace::new(observer_params(&ctx.params)?.budgets_ms);
             loop {
                 tokio::select! {
+                    // In this order when several are ready (a loaded machine wakes the observer late): a turn's
+                    // transcript before the rule it fired, or the turn is not matched.
+                    biased;
                     _ = ctx.stopped() => return Ok(()),
                     Some(d) = transcripts.recv() => match heard(&d.payload) {
                         Heard::VadEnd { utterance, at_ms } => {
