@@ -28,6 +28,8 @@ struct Pair {
     utterance: Option<u64>,
     applied_ms: f64,
     measured_ms: f64,
+    /// The receiver's jitter buffer over the stretch (none before its first reading).
+    buffer_ms: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -227,11 +229,12 @@ async fn speak_and_match(query: &str, engine: &str) -> anyhow::Result<Playback> 
     );
     for p in &state.pairs {
         println!(
-            "utterance {:?}: visemes shifted {:.1} ms, sound delayed {:.1} ms (off by {:+.1} ms)",
+            "utterance {:?}: visemes shifted {:.1} ms, sound delayed {:.1} ms (off by {:+.1} ms; jitter buffer {:?} ms)",
             p.utterance,
             p.applied_ms,
             p.measured_ms,
-            p.applied_ms - p.measured_ms
+            p.applied_ms - p.measured_ms,
+            p.buffer_ms.map(|b| b.round())
         );
     }
     println!(

@@ -217,10 +217,11 @@ export class DelayEstimator {
 
   /**
    * Matches the last `MATCH_FRAMES` frames received, up to frame `upTo`, against what was sent; returns the delay
-   * found (seconds) and the match's score, or null when the stretch holds no speech to match, or it matched too
+   * found (seconds), the match's score and the receiver's jitter buffer over the stretch (seconds, null without a
+   * reading), or null when the stretch holds no speech to match, or it matched too
    * poorly. A stretch is matched once: the next match needs a stretch that has moved on by half its length.
    * @param {number} upTo
-   * @returns {{delayS: number, score: number} | null}
+   * @returns {{delayS: number, score: number, bufferedS: number | null} | null}
    */
   match(upTo) {
     if (upTo - this.lastMatched < MATCH_FRAMES / 2) return null;
@@ -245,7 +246,7 @@ export class DelayEstimator {
       this.measured.shift();
       this.fixed.shift();
     }
-    return { delayS, score: found.score };
+    return { delayS, score: found.score, bufferedS: buffered };
   }
 
   /**

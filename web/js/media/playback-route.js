@@ -15,13 +15,16 @@
 import { DelayEstimator, FRAME_S, MATCH_FRAMES } from "./playback-delay.js";
 
 /**
- * The delay assumed for the loopback before a stretch of speech is matched: about what headless Chromium's
- * loopback measures (90-95 ms in tests/playback.rs: frames, jitter buffer and the probe's input).
+ * The delay assumed for the loopback before a stretch of speech is matched, where WebRTC sizes the receiver's jitter
+ * buffer: the middle of what tests/playback.rs measured for the first stretch across runs (45 ms in CI, 90-100 ms
+ * on a quiet machine). The buffer's reading is not used for this guess: read during the silence before the first
+ * utterance it overstated the buffer the first stretch then had (55 ms read, about 21 ms held, in CI), which put
+ * the mouth 45 ms behind the sound.
  */
-const LOOPBACK_INITIAL_DELAY_S = 0.09;
+const LOOPBACK_INITIAL_DELAY_S = 0.07;
 /**
- * The part of that delay the receiver's jitter buffer does not explain (the Opus frame, the element's output and the
- * probe's input), assumed until a stretch of speech is matched: 85-95 ms measured with the buffer at 54-64 ms in
+ * The part of the delay a held jitter buffer does not explain (the Opus frame, the element's output and the probe's
+ * input), assumed with `?playbackbuffer=N` until a stretch of speech is matched: 24-44 ms measured in
  * tests/playback.rs.
  */
 const LOOPBACK_FIXED_GUESS_S = 0.035;
@@ -61,12 +64,13 @@ export class LoopbackRoute {
     this.receiver = parts.receiver;
     this.element = parts.element;
     this.ctx = parts.ctx;
-    this.estimator = new DelayEstimator(LOOPBACK_INITIAL_DELAY_S, LOOPBACK_FIXED_GUESS_S);
+    // A held buffer's reading is its target from the start; a buffer WebRTC sizes moves once speech flows.
+    this.estimator = new DelayEstimator(LOOPBACK_INITIAL_DELAY_S, parts.held ? LOOPBACK_FIXED_GUESS_S : null);
     this.packetsReceived = 0;
     /** The receiver's cumulative jitter-buffer figures at the last reading, for the mean since. */
     this.lastBuffer = null;
     /**
-     * Recent measurements: [{utterance, appliedMs, measuredMs, score}], the shift in effect when the middle of the
+     * Recent measurements: [{utterance, appliedMs, measuredMs, bufferMs, score}], the shift in effect when the middle of the
      * matched stretch was heard, and the delay its sound took; what the sync test compares.
      */
     this.pairs = [];
@@ -91,6 +95,7 @@ export class LoopbackRoute {
         utterance: tag.utterance ?? null,
         appliedMs: (tag.appliedS ?? 0) * 1000,
         measuredMs: m.delayS * 1000,
+        bufferMs: m.bufferedS === null ? null : m.bufferedS * 1000,
         score: m.score,
       });
       if (this.pairs.length > 32) this.pairs.shift();
@@ -149,7 +154,7 @@ export class LoopbackRoute {
       await ctx.audioWorklet.addModule(new URL("./envelope-probe-worklet.js", import.meta.url));
       const probe = new AudioWorkletNode(ctx, "envelope-probe", { numberOfInputs: 1, numberOfOutputs: 0 });
       ctx.createMediaStreamSource(stream).connect(probe);
-      return new LoopbackRoute({ ctx, input, sender, receiver, element, probe });
+      return new LoopbackRoute({ ctx, input, sender, receiver, element, probe, held: bufferMs !== null });
     } catch (e) {
       close();
       throw e;
