@@ -55,7 +55,7 @@ fn quality(options: &Options) -> anyhow::Result<()> {
     let started = Instant::now();
     let knowledge = Knowledge::open(&options.folder, Language::En)?;
     let open_ms = ms(started);
-    let sets = questions::load(&options.questions_file)?;
+    let sets = agent_bench::knowledge_set::load(&options.questions_file)?;
     let s = questions::score(&knowledge, &sets);
     let share = |n: usize, of: usize| 100.0 * n as f64 / of.max(1) as f64;
     println!(

@@ -1,31 +1,8 @@
 //! The question sets about the example folder (`questions.toml`): how often the right passage is in the top 3, how
 //! often best() gives the passage with the key fact, and how often it answers an off-topic question.
 
+use agent_bench::knowledge_set::{Sets, has_fact};
 use agent_knowledge::Knowledge;
-use anyhow::Context;
-
-/// `questions.toml`.
-#[derive(Debug, serde::Deserialize)]
-pub struct Sets {
-    pub on_topic: Vec<OnTopic>,
-    pub off_topic: Vec<String>,
-}
-
-/// A question the folder answers.
-#[derive(Debug, serde::Deserialize)]
-pub struct OnTopic {
-    pub question: String,
-    /// The file whose passage answers it.
-    pub file: String,
-    /// Text the answering passage contains (compared without case).
-    pub fact: String,
-}
-
-pub fn load(path: &std::path::Path) -> anyhow::Result<Sets> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
 
 /// The figures of one run over the sets.
 #[derive(Debug, Default)]
@@ -44,10 +21,6 @@ pub struct Scores {
     pub right_coverages: Vec<f64>,
     /// The coverage of each off-topic question's candidate (none when nothing matched at all).
     pub off_coverages: Vec<f64>,
-}
-
-fn has_fact(text: &str, fact: &str) -> bool {
-    text.to_lowercase().contains(&fact.to_lowercase())
 }
 
 /// Runs every question, printing the misses.

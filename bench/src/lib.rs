@@ -1,7 +1,8 @@
 //! Shared benchmark plumbing: a process's CPU time from /proc, percentiles of samples, the raw-TCP baseline's
-//! sockets ([`raw_tcp`]), and the [`summary`] blocks of docs/benchmarks.md that `bench-summary` rewrites from the
-//! benches' output.
+//! sockets ([`raw_tcp`]), the knowledge folder's questions ([`knowledge_set`]), and the [`summary`] blocks of
+//! docs/benchmarks.md that `bench-summary` rewrites from the benches' output.
 
+pub mod knowledge_set;
 pub mod raw_tcp;
 pub mod summary;
 

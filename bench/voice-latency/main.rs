@@ -15,7 +15,8 @@
 //! Options: `--runs N` (default 20), `--threads N` (satellite inference threads, default 2), `--hangover-ms N`
 //! (default: the satellite's), `--satellite-arg ARG` (repeatable: passed on to `whisper-sat run`, to measure another
 //! setting), `--chat-runs N` (open questions, default 20; 0 skips the chat phase), `--llm-threads N` (llm-sat's
-//! generation threads, default 2), `--beside-runs N` (questions per condition of the beside phase, default 6; 0 skips
+//! generation threads, default 2), `--knowledge-runs N` (questions about the example knowledge folder, default 30, 0
+//! skips; `knowledge.rs`), `--beside-runs N` (questions per condition of the beside phase, default 6; 0 skips
 //! it), `--write PATH` (a Markdown report).
 //!
 //! The beside phase (`beside.rs`) says rule questions (and open ones for the model, with llm-sat) quiet, with the agent's page open in headless Chromium, beside
@@ -26,6 +27,7 @@ mod barge_in;
 mod beside;
 mod chat;
 mod chat_report;
+mod knowledge;
 mod report;
 mod rig;
 mod speech_clip;
@@ -95,6 +97,10 @@ struct Options {
     /// llm-sat's generation threads.
     #[arg(long, default_value_t = 2)]
     llm_threads: u32,
+    /// Questions about the example knowledge folder typed to the agent with llm-sat beside it (at most the 30 of
+    /// bench/knowledge/questions.toml; 0 skips the knowledge phase, which needs the chat phase's llm-sat).
+    #[arg(long, default_value_t = 30)]
+    knowledge_runs: usize,
     /// Rule questions per condition of the beside phase: quiet, the page open, two busy loops (0 skips it).
     #[arg(long, default_value_t = 6)]
     beside_runs: usize,
@@ -308,6 +314,20 @@ async fn main() -> anyhow::Result<()> {
     } else {
         None
     };
+    let knowledge_figures = if llm_pid.is_some() && opts.knowledge_runs > 0 {
+        let sets = agent_bench::knowledge_set::load(&agent_bench::knowledge_set::default_path())?;
+        let questions = &sets.on_topic[..opts.knowledge_runs.min(sets.on_topic.len())];
+        println!(
+            "knowledge: {} questions about the example folder, typed as final transcripts",
+            questions.len()
+        );
+        let transcript = mic_client
+            .publisher(ch::TRANSCRIPT.name, ch::headers::TRANSCRIPT)
+            .await?;
+        Some(knowledge::measure(&mut watcher, &transcript, questions).await?)
+    } else {
+        None
+    };
     drop(say_tx);
     mic.await.context("the microphone task")??;
     figures.hop = hop;
@@ -322,11 +342,18 @@ async fn main() -> anyhow::Result<()> {
     if let Some(chat) = &chat_figures {
         chat.print(&chat_setup);
     }
+    if let Some(knowledge) = &knowledge_figures {
+        knowledge.print();
+    }
     if let Some(path) = &opts.write {
         let mut markdown = figures.markdown(&opts_summary(&opts));
         if let Some(chat) = &chat_figures {
             markdown.push('\n');
             markdown.push_str(&chat.markdown(&chat_setup));
+        }
+        if let Some(knowledge) = &knowledge_figures {
+            markdown.push('\n');
+            markdown.push_str(&knowledge.markdown());
         }
         report::write_figures(path, &markdown)?;
         println!("wrote {}", path.display());

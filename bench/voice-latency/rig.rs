@@ -71,12 +71,15 @@ impl Rig {
             .with_context(|| format!("creating {}", data_dir.display()))?;
         // The shipped brain program (found from the source tree, whatever the working directory); no camera in
         // this benchmark, so the vision module would only idle.
+        // The example knowledge folder, as `make run` has it.
         let program = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/brain.tr");
+        let knowledge = Path::new(env!("CARGO_MANIFEST_DIR")).join("../knowledge");
         let config = data_dir.join("bench.toml");
         std::fs::write(
             &config,
             format!(
-                "[modules.brain]\nprogram = {:?}\nchat_thinking_ms = 0\n[modules.vision]\nenabled = false\n",
+                "[agent]\nknowledge = {:?}\n[modules.brain]\nprogram = {:?}\nchat_thinking_ms = 0\n[modules.vision]\nenabled = false\n",
+                knowledge.display().to_string(),
                 program.display().to_string()
             ),
         )?;

@@ -10,6 +10,7 @@ use flow::{Client, Subscription};
 use serde_json::Value;
 
 use crate::chat_report::ChatRunFigures;
+use crate::knowledge::Answer;
 use crate::report::{Decode, RunFigures};
 use crate::speech_clip::Ending;
 
@@ -102,6 +103,8 @@ impl Watcher {
         let mut first_sentence: Option<(Value, Instant, String)> = None;
         let mut base: Option<RunFigures> = None;
         let mut ended: Option<(Instant, Value)> = None;
+        // Speculative turns started at a pause and dropped: their tokens are wasted work.
+        let mut dropped: Vec<u64> = Vec::new();
         loop {
             let Ok(next) = tokio::time::timeout_at(deadline.into(), self.next()).await else {
                 bail!(
@@ -124,6 +127,10 @@ impl Watcher {
                     {
                         let text = v["text"].as_str().unwrap_or_default().to_owned();
                         first_sentence = Some((v["turn"].clone(), at, text));
+                    }
+                    // A dropped speculative turn published nothing but its end.
+                    Some("end") if v["stats"]["dropped"] == true => {
+                        dropped.push(v["stats"]["tokens"].as_u64().unwrap_or(0));
                     }
                     Some("end") if prompts.iter().any(|(turn, _)| *turn == v["turn"]) => {
                         match &first_sentence {
@@ -165,7 +172,69 @@ impl Watcher {
                     *end,
                     stats,
                     text.clone(),
+                    dropped,
                 ));
+            }
+        }
+    }
+
+    /// Follows one question typed as a final transcript: the rule trace that heard it, the `passage` steps that
+    /// follow, and what was said: the recalled passage, the model's sentences up to its turn's end, or the rule's
+    /// own actions. Gives up at `deadline`.
+    pub async fn follow_answer(
+        &mut self,
+        question: &str,
+        deadline: Instant,
+    ) -> anyhow::Result<Answer> {
+        let mut answer = Answer::default();
+        let mut turn: Option<Value> = None;
+        let mut sentences: Vec<String> = Vec::new();
+        loop {
+            let Ok(next) = tokio::time::timeout_at(deadline.into(), self.next()).await else {
+                bail!(
+                    "no whole answer in time; action {:?}, passages {}, sentences {:?}",
+                    answer.action,
+                    answer.passages.len(),
+                    sentences
+                );
+            };
+            match next?.1 {
+                Seen::Rules(v) if v["chat"]["step"] == "passage" && !answer.action.is_empty() => {
+                    let text = v["chat"]["text"].as_str().unwrap_or_default().to_owned();
+                    answer.passages.push(text);
+                }
+                // A chat step's trace is not a rule's.
+                Seen::Rules(v)
+                    if v["chat"].is_null() && answer.action.is_empty() && heard(&v, question) =>
+                {
+                    answer.action = v["action"].as_str().unwrap_or_default().to_owned();
+                }
+                Seen::Reply(v) if answer.by_model() => match v["event"].as_str() {
+                    Some("prompt") if turn.is_none() => turn = Some(v["turn"].clone()),
+                    Some("sentence") if turn.as_ref() == Some(&v["turn"]) => {
+                        sentences.push(v["text"].as_str().unwrap_or_default().to_owned());
+                    }
+                    Some("end") if turn.as_ref() == Some(&v["turn"]) => {
+                        answer.spoken = sentences.join(" ");
+                        return Ok(answer);
+                    }
+                    _ => {}
+                },
+                _ => {}
+            }
+            if answer.recalled()
+                && let Some(passage) = answer.passages.first()
+            {
+                // `file (heading): text`: what was said is the text.
+                answer.spoken = passage
+                    .split_once("): ")
+                    .map_or(passage.as_str(), |(_, text)| text)
+                    .to_owned();
+                return Ok(answer);
+            }
+            if !answer.action.is_empty() && !answer.recalled() && !answer.by_model() {
+                answer.spoken = answer.action.clone();
+                return Ok(answer);
             }
         }
     }
