@@ -58,6 +58,13 @@ pub struct Candidate {
     pub matched: usize,
 }
 
+impl Candidate {
+    /// Sure enough to be said as the answer ([`Knowledge::best`]).
+    pub fn is_confident(&self) -> bool {
+        confidence::is_confident(self.coverage, self.matched)
+    }
+}
+
 /// A folder's passages and their index, read-only: share it behind an `Arc` and swap in a new one when
 /// [`watch`] reports a change.
 pub struct Knowledge {
@@ -163,7 +170,7 @@ impl Knowledge {
     /// (`confidence.rs`, docs/knowledge.md).
     pub fn best(&self, question: &str) -> Option<Hit> {
         self.candidate(question)
-            .filter(|c| confidence::is_confident(c.coverage, c.matched))
+            .filter(Candidate::is_confident)
             .map(|c| c.hit)
     }
 

@@ -87,16 +87,34 @@ pub struct Chats {
     early: Option<Early>,
 }
 
+/// What a turn asks the model: the words, the language, the tools it may call (and the one it must), and what the
+/// agent perceives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ask {
+    pub text: String,
+    pub language: String,
+    pub tools: Vec<Tool>,
+    pub force_tool: Option<String>,
+    pub facts: Facts,
+}
+
+impl Ask {
+    /// The same question, whatever the facts said then: a speculative turn asked with these words is adopted with
+    /// its own facts.
+    fn same_words(&self, other: &Ask) -> bool {
+        self.text == other.text
+            && self.language == other.language
+            && self.tools == other.tools
+            && self.force_tool == other.force_tool
+    }
+}
+
 /// A speculative turn: what it was asked with, so that the real turn asks for exactly the same and the satellite
 /// adopts what it has generated (`llm_sat::satellite`, `same_turn`).
 #[derive(Debug, Clone, PartialEq)]
 struct Early {
     turn: u64,
-    text: String,
-    language: String,
-    tools: Vec<Tool>,
-    force_tool: Option<String>,
-    facts: Facts,
+    ask: Ask,
 }
 
 impl Chats {
@@ -171,37 +189,15 @@ impl Chats {
     /// Starts a speculative turn on the transcript of a pause: the satellite generates and holds the reply back
     /// until [`Chats::start`] asks for the same turn. Nothing starts while a turn is running (a speculative request
     /// would cut it off). Returns its number.
-    pub fn speculate(
-        &mut self,
-        text: &str,
-        language: &str,
-        facts: Facts,
-        tools: Vec<Tool>,
-        force_tool: Option<String>,
-    ) -> Option<u64> {
-        if self.current.is_some() {
+    pub fn speculate(&mut self, ask: Ask) -> Option<u64> {
+        if self.current.is_some() || self.early.as_ref().is_some_and(|e| e.ask.same_words(&ask)) {
             return None;
         }
-        let asked = |e: &Early| {
-            e.text == text
-                && e.language == language
-                && e.tools == tools
-                && e.force_tool == force_tool
-        };
-        if self.early.as_ref().is_some_and(asked) {
-            return None;
-        }
-        if self.stale(&self.memory) && !self.memory.lines.is_empty() {
-            self.memory = Memory::default();
-        }
+        self.forget_if_stale();
         self.next_turn += 1;
         let early = Early {
             turn: self.next_turn,
-            text: text.to_owned(),
-            language: language.to_owned(),
-            tools,
-            force_tool,
-            facts,
+            ask,
         };
         let request = self.request(&early, true, None);
         let turn = early.turn;
@@ -225,16 +221,24 @@ impl Chats {
         }
     }
 
+    /// A conversation idle longer than `forget_after` is not the one the next question continues.
+    fn forget_if_stale(&mut self) {
+        if self.stale(&self.memory) && !self.memory.lines.is_empty() {
+            self.memory = Memory::default();
+        }
+    }
+
     /// The request of a turn, with the conversation as it stands.
     fn request(&self, turn: &Early, speculative: bool, reply: Option<TraceContext>) -> ChatRequest {
+        let ask = &turn.ask;
         ChatRequest {
             turn: turn.turn,
-            text: turn.text.clone(),
-            language: turn.language.clone(),
-            facts: turn.facts.clone(),
+            text: ask.text.clone(),
+            language: ask.language.clone(),
+            facts: ask.facts.clone(),
             history: self.memory.lines.clone(),
-            tools: turn.tools.clone(),
-            force_tool: turn.force_tool.clone(),
+            tools: ask.tools.clone(),
+            force_tool: ask.force_tool.clone(),
             speculative,
             max_sentences: Some(self.max_sentences),
             timeout_ms: Some(self.reply_timeout.as_millis() as u64),
@@ -254,51 +258,32 @@ impl Chats {
 
     /// Starts a turn; one still running is cancelled first. A speculative turn on the same words is adopted (the
     /// request repeats its facts, so that the satellite keeps what it generated). Returns its number.
-    pub fn start(
-        &mut self,
-        text: &str,
-        language: &str,
-        facts: Facts,
-        tools: Vec<Tool>,
-        force_tool: Option<String>,
-        reply: Option<TraceContext>,
-    ) -> u64 {
+    pub fn start(&mut self, ask: Ask, reply: Option<TraceContext>) -> u64 {
         // A turn still running (or waiting for its answer) is cut off here: the memory keeps what was heard of it.
         self.interrupt(Instant::now());
         // (`interrupt` has just marked it, so its outcome is the interrupted reply without the model's text.)
         if let Some(old) = self.current.take() {
             self.remember(old.outcome());
         }
-        if self.stale(&self.memory) && !self.memory.lines.is_empty() {
-            self.memory = Memory::default();
-        }
+        self.forget_if_stale();
         self.next_turn += 1;
         let mut asked = Early {
             turn: self.next_turn,
-            text: text.to_owned(),
-            language: language.to_owned(),
-            tools,
-            force_tool,
-            facts,
+            ask,
         };
         // Anything else speculated is superseded by this request at the satellite.
-        if let Some(early) = self.early.take() {
-            let same = Early {
-                turn: early.turn,
-                facts: early.facts.clone(),
-                ..asked.clone()
-            };
-            if same == early {
-                debug!(
-                    early = early.turn,
-                    "brain: the turn adopts the speculative reply"
-                );
-                asked.facts = early.facts;
-            }
+        if let Some(early) = self.early.take()
+            && early.ask.same_words(&asked.ask)
+        {
+            debug!(
+                early = early.turn,
+                "brain: the turn adopts the speculative reply"
+            );
+            asked.ask.facts = early.ask.facts;
         }
         let turn = asked.turn;
         let request = self.request(&asked, false, reply);
-        self.current = Some(Turn::new(turn, text, asked.facts));
+        self.current = Some(Turn::new(turn, &asked.ask.text, asked.ask.facts));
         let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);
         let body = serde_json::to_vec(&request).unwrap_or_default();
         tokio::spawn(async move {

@@ -30,7 +30,7 @@ use tokio::time::Instant;
 use tracing::{debug, info, warn};
 
 use actuators::{Actuators, OUTCOME_QUEUE, Outcome};
-use chat::{Chats, DONE_QUEUE, Next};
+use chat::{Ask, Chats, DONE_QUEUE, Next};
 use flow_hub::module::{Module, ModuleContext, ModuleFuture};
 use params::BrainParams;
 use percepts::{Hearing, Percept};
@@ -413,10 +413,13 @@ impl Mind {
         };
         let tools = self.tools();
         let facts = self.facts(&now, &asked);
-        if let Some(turn) = self
-            .chats
-            .speculate(&asked, self.language.code(), facts, tools, tool)
-        {
+        if let Some(turn) = self.chats.speculate(Ask {
+            text: asked.clone(),
+            language: self.language.code().to_owned(),
+            tools,
+            force_tool: tool,
+            facts,
+        }) {
             debug!(turn, text = %asked, "brain: a speculative chat turn starts at the pause");
         }
     }
@@ -648,9 +651,16 @@ impl Mind {
             .iter()
             .map(|p| passage_line(&p.file, "", &p.text))
             .collect();
-        let turn = self
-            .chats
-            .start(text, self.language.code(), facts, tools, tool, reply);
+        let turn = self.chats.start(
+            Ask {
+                text: text.to_owned(),
+                language: self.language.code().to_owned(),
+                tools,
+                force_tool: tool,
+                facts,
+            },
+            reply,
+        );
         for passage in passages {
             self.chat_trace(turn, "passage", passage);
         }

@@ -2,11 +2,14 @@
 //! on the watcher's thread whenever the folder changes (the brain swaps the new index in between two steps), and
 //! asked for the passages of a chat turn's facts and for what `recall(T)` says.
 
+use std::cell::RefCell;
 use std::path::PathBuf;
 use std::sync::Arc;
 
 use agent_contract::chat::Passage;
-use agent_knowledge::{FolderWatch, Hit, Knowledge, KnowledgeError, Language, MIN_COVERAGE};
+use agent_knowledge::{
+    Candidate, FolderWatch, Hit, Knowledge, KnowledgeError, Language, MIN_COVERAGE,
+};
 use tokio::sync::mpsc;
 use tracing::{info, warn};
 
@@ -17,6 +20,9 @@ const UPDATES: usize = 2;
 #[derive(Debug)]
 pub struct Shelf {
     current: Arc<Knowledge>,
+    /// The last question searched and its candidate: one question is asked for up to three times (the `known`
+    /// percept, then `recall(T)` or a chat turn's facts; the pause's trial step before them).
+    last: RefCell<Option<(String, Option<Candidate>)>>,
 }
 
 /// The indexes the watcher makes, for the brain's loop to swap in.
@@ -46,9 +52,7 @@ impl Shelf {
     ) -> anyhow::Result<(Shelf, Updates)> {
         let (tx, updates) = mpsc::channel(UPDATES);
         let Some(dir) = dir else {
-            let shelf = Shelf {
-                current: Arc::new(Knowledge::empty(language)),
-            };
+            let shelf = Shelf::holding(Knowledge::empty(language));
             return Ok((
                 shelf,
                 Updates {
@@ -83,9 +87,7 @@ impl Shelf {
                 None
             }
         };
-        let shelf = Shelf {
-            current: Arc::new(knowledge),
-        };
+        let shelf = Shelf::holding(knowledge);
         Ok((
             shelf,
             Updates {
@@ -93,6 +95,25 @@ impl Shelf {
                 _watch: watch,
             },
         ))
+    }
+
+    fn holding(knowledge: Knowledge) -> Shelf {
+        Shelf {
+            current: Arc::new(knowledge),
+            last: RefCell::new(None),
+        }
+    }
+
+    /// The passage that best covers `question`, searched once per question.
+    fn candidate(&self, question: &str) -> Option<Candidate> {
+        if let Some((asked, candidate)) = self.last.borrow().as_ref()
+            && asked == question
+        {
+            return candidate.clone();
+        }
+        let candidate = self.current.candidate(question);
+        *self.last.borrow_mut() = Some((question.to_owned(), candidate.clone()));
+        candidate
     }
 
     /// Swaps a new index in; a folder that no longer opens keeps the previous index (logged).
@@ -104,7 +125,7 @@ impl Shelf {
                     passages = knowledge.passages(),
                     "brain: the knowledge folder changed and is indexed again"
                 );
-                self.current = Arc::new(knowledge);
+                *self = Shelf::holding(knowledge);
             }
             Err(e) => warn!(
                 "brain: the changed knowledge folder does not open, the previous index stays: {e}"
@@ -114,7 +135,9 @@ impl Shelf {
 
     /// The passage sure enough to be said for `question`, if any.
     pub fn recall(&self, question: &str) -> Option<Hit> {
-        self.current.best(question)
+        self.candidate(question)
+            .filter(Candidate::is_confident)
+            .map(|c| c.hit)
     }
 
     /// The passages a chat turn's facts carry: the best one when it covers enough of the question
@@ -122,8 +145,7 @@ impl Shelf {
     /// for more). Only that one, since every token of the prompt costs the small model time before its first word,
     /// and none for a question the folder is not about.
     pub fn passages(&self, question: &str) -> Vec<Passage> {
-        self.current
-            .candidate(question)
+        self.candidate(question)
             .filter(|c| c.coverage >= MIN_COVERAGE)
             .map(|c| Passage {
                 file: c.hit.file,
