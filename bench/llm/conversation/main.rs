@@ -22,6 +22,7 @@ use anyhow::Context;
 use clap::Parser;
 use llm_sat::engine::{Engine, EngineOptions};
 use llm_sat::generator::{Flow, Generator, Limits, Message, Speaker};
+use llm_sat::prompt::Renderings;
 use llm_sat::turn::{self, Step, TurnLimits};
 use serde::Deserialize;
 
@@ -127,6 +128,8 @@ struct Done {
 struct Memory {
     lines: Vec<ChatMessage>,
     turns: usize,
+    /// How llm-sat rendered each question, as its generator thread keeps it.
+    renderings: Renderings,
 }
 
 impl Memory {
@@ -222,11 +225,18 @@ fn score(engine: &mut Engine, set: &Set, args: &Args) -> anyhow::Result<()> {
         let mut memory = Memory {
             lines: Vec::new(),
             turns: args.memory,
+            renderings: Renderings::default(),
         };
         let mut previous: Option<String> = None;
         for turn in &conversation.turn {
             let facts = facts_of(set, conversation, turn);
-            let done = ask(engine, &memory, &turn.ask, facts.clone(), args.show_prompt)?;
+            let done = ask(
+                engine,
+                &mut memory,
+                &turn.ask,
+                facts.clone(),
+                args.show_prompt,
+            )?;
             let verdict = judge(set, turn, &done.reply, previous.as_deref());
             total += 1;
             if verdict.is_ok() {
@@ -324,7 +334,7 @@ fn judge(set: &Set, turn: &Turn, reply: &str, previous: Option<&str>) -> Result<
 /// One turn through llm-sat's own path.
 fn ask(
     engine: &mut Engine,
-    memory: &Memory,
+    memory: &mut Memory,
     question: &str,
     facts: Facts,
     show_prompt: bool,
@@ -345,13 +355,20 @@ fn ask(
     let cancel = AtomicBool::new(false);
     let started = Instant::now();
     let mut first_chunk = None;
-    let outcome = turn::run(engine, &request, LIMITS, &cancel, &mut |step| match step {
-        Step::Prompt(prompt) if show_prompt => println!("{prompt}"),
-        Step::Sentence(text) if first_chunk.is_none() => {
-            first_chunk = Some((started.elapsed().as_millis() as u64, text));
-        }
-        _ => {}
-    })?;
+    let outcome = turn::run(
+        engine,
+        &mut memory.renderings,
+        &request,
+        LIMITS,
+        &cancel,
+        &mut |step| match step {
+            Step::Prompt(prompt) if show_prompt => println!("{prompt}"),
+            Step::Sentence(text) if first_chunk.is_none() => {
+                first_chunk = Some((started.elapsed().as_millis() as u64, text));
+            }
+            _ => {}
+        },
+    )?;
     Ok(Done {
         reply: outcome.sentences.join(" "),
         generated: outcome.generated,
@@ -368,6 +385,7 @@ fn latency(engine: &mut Engine, set: &Set, args: &Args) -> anyhow::Result<()> {
     let mut memory = Memory {
         lines: Vec::new(),
         turns: args.memory,
+        renderings: Renderings::default(),
     };
     let (mut new_tokens, mut first_tokens, mut first_chunks) = (Vec::new(), Vec::new(), Vec::new());
     let mut prompts = Vec::new();
@@ -379,7 +397,13 @@ fn latency(engine: &mut Engine, set: &Set, args: &Args) -> anyhow::Result<()> {
             date: "Saturday 5 December".into(),
             ..Facts::default()
         };
-        let done = ask(engine, &memory, question, facts.clone(), args.show_prompt)?;
+        let done = ask(
+            engine,
+            &mut memory,
+            question,
+            facts.clone(),
+            args.show_prompt,
+        )?;
         println!(
             "  {:>2} {question:?} -> {:?}{}",
             n + 1,

@@ -462,6 +462,7 @@ fn generate_loop(
     jobs: &std::sync::mpsc::Receiver<Job>,
     reports: &mpsc::Sender<Report>,
 ) {
+    let mut renderings = crate::prompt::Renderings::default();
     while let Ok(job) = jobs.recv() {
         if job.cancel.load(Ordering::Relaxed) {
             let _ = reports.blocking_send(Report::Done(job.id, Err("cancelled".into())));
@@ -473,6 +474,7 @@ fn generate_loop(
         };
         let outcome = turn::run(
             generator.as_mut(),
+            &mut renderings,
             &job.request,
             limits,
             &job.cancel,

@@ -51,8 +51,10 @@ pub enum TurnError {
 }
 
 /// Runs `request` on `generator`; `step` receives the prompt, each sentence as soon as it is complete, and a call.
+/// `renderings` keeps how each question was asked, for the prompts of the turns after it.
 pub fn run(
     generator: &mut dyn Generator,
+    renderings: &mut prompt::Renderings,
     request: &ChatRequest,
     mut limits: TurnLimits,
     cancel: &AtomicBool,
@@ -66,7 +68,7 @@ pub fn run(
     if let Some(ms) = request.timeout_ms {
         limits.timeout = limits.timeout.min(Duration::from_millis(ms));
     }
-    let chat = prompt::chat(request, limits.offer_tools);
+    let chat = prompt::chat(request, limits.offer_tools, renderings);
     step(Step::Prompt(generator.render(&chat)?));
     let forced = request
         .force_tool
