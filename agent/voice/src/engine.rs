@@ -9,6 +9,8 @@
 //!   for the consumer instead of dropping; it is faster than real time anyway. A consumer that stops reading
 //!   must drop its [`Utterance`] (or keep draining after cancelling), which ends the wait.
 
+mod piper_speech;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -22,7 +24,6 @@ use crate::espeak::{Espeak, Flow, Parameter, SynthOutcome};
 use crate::piper::{PiperConfig, PiperVoice};
 use crate::sentence::split_sentences;
 use crate::timeline::{PhonemeMark, SpeechChunk, TimelineBuilder, VisemeCue};
-use crate::viseme::Viseme;
 use crate::voice::{Engine, VoiceSettings};
 
 /// How the engine is started.
@@ -223,11 +224,28 @@ struct Request {
     out: mpsc::Sender<SpeechEvent>,
 }
 
+/// What the engine thread counts, read through [`Synthesizer::stats`].
+#[derive(Debug, Default)]
+struct Counters {
+    piper_runs: AtomicU64,
+    piper_cache_hits: AtomicU64,
+}
+
+/// The engine's counts since it started.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SpeechStats {
+    /// Runs of the Piper network: one per sentence, two for a first sentence spoken in two parts.
+    pub piper_runs: u64,
+    /// Sentences the Piper voice played from its cache, without the network.
+    pub piper_cache_hits: u64,
+}
+
 /// A handle to the engine thread; cheap to clone. The thread and espeak-ng stop when the last handle is
 /// dropped and the queued utterances are done.
 #[derive(Debug, Clone)]
 pub struct Synthesizer {
     requests: mpsc::Sender<Request>,
+    counters: Arc<Counters>,
     sample_rate: u32,
     piper: bool,
     next_id: Arc<AtomicU64>,
@@ -265,6 +283,8 @@ impl Synthesizer {
         let chunk_ms = config.chunk_ms;
         let piper_config = config.piper.clone();
         let piper = piper_config.is_some();
+        let counters = Arc::new(Counters::default());
+        let engine_counters = Arc::clone(&counters);
         std::thread::Builder::new()
             .name("espeak-engine".into())
             .spawn(move || {
@@ -293,6 +313,7 @@ impl Synthesizer {
                                 espeak,
                                 piper: voice,
                                 chunk_ms,
+                                counters: engine_counters,
                             },
                             request_rx,
                         );
@@ -310,6 +331,7 @@ impl Synthesizer {
         tracing::info!(sample_rate, chunk_ms, piper, "speech engine started");
         Ok(Synthesizer {
             requests,
+            counters,
             sample_rate,
             piper,
             next_id: Arc::new(AtomicU64::new(1)),
@@ -326,6 +348,14 @@ impl Synthesizer {
     /// Whether a Piper voice is loaded, so that [`Engine::Piper`] requests can be spoken.
     pub fn has_piper(&self) -> bool {
         self.piper
+    }
+
+    /// What the engine has done since it started.
+    pub fn stats(&self) -> SpeechStats {
+        SpeechStats {
+            piper_runs: self.counters.piper_runs.load(Ordering::Relaxed),
+            piper_cache_hits: self.counters.piper_cache_hits.load(Ordering::Relaxed),
+        }
     }
 
     /// Queues `text` to be spoken with `voice`; the returned utterance streams the result.
@@ -370,6 +400,7 @@ struct Engines {
     espeak: Espeak,
     piper: Option<PiperVoice>,
     chunk_ms: u32,
+    counters: Arc<Counters>,
 }
 
 /// The engine thread's loop: one utterance at a time until every handle is gone.
@@ -381,7 +412,13 @@ fn run_engine(mut engines: Engines, mut requests: mpsc::Receiver<Request>) {
             (Engine::Piper, Some(piper)) => {
                 // Phonemising switches espeak-ng's voice: the next espeak-ng utterance sets its own again.
                 current = None;
-                speak_piper(&mut engines.espeak, piper, engines.chunk_ms, &request)
+                piper_speech::speak_piper(
+                    &mut engines.espeak,
+                    piper,
+                    engines.chunk_ms,
+                    &engines.counters,
+                    &request,
+                )
             }
             (Engine::Piper, None) => Err(VoiceError::PiperUnavailable),
         };
@@ -482,110 +519,4 @@ fn speak_one(
         tracing::debug!(unmapped = ?builder.unmapped, "phonemes without a viseme kept the previous shape");
     }
     Ok((builder.written(), request.cancel.is_cancelled()))
-}
-
-/// Speaks one request with the Piper voice: espeak-ng phonemises each sentence with the voice's espeak voice, the
-/// network speaks it in one run, and the audio goes out in `chunk_ms` pieces carrying the cues that fall in them.
-/// Cancellation is checked before every sentence and every chunk.
-fn speak_piper(
-    espeak: &mut Espeak,
-    piper: &mut PiperVoice,
-    chunk_ms: u32,
-    request: &Request,
-) -> Result<(u64, bool), VoiceError> {
-    if request.cancel.is_cancelled() {
-        return Ok((0, true));
-    }
-    espeak.set_voice(&piper.file.espeak_voice)?;
-    let rate = piper.file.sample_rate;
-    let chunk_samples = (u64::from(rate) * u64::from(chunk_ms) / 1000).max(1) as usize;
-    // espeak-ng's default rate is the voice's natural pace; other rates stretch or squeeze the phonemes.
-    let length = 175.0 / request.voice.rate_wpm as f32;
-    let gain = request.voice.volume as f32 / 100.0;
-    let mut written = 0u64;
-    let mut last_viseme = None;
-    let mut unknown = Vec::new();
-    let send = |event: SpeechEvent| request.out.blocking_send(event).is_ok();
-    for (index, sentence) in split_sentences(&request.text).into_iter().enumerate() {
-        if request.cancel.is_cancelled() {
-            return Ok((written, true));
-        }
-        let clauses = espeak.text_to_phonemes(sentence)?;
-        let spoken = piper.speak(
-            clauses
-                .iter()
-                .map(|c| (c.ipa.as_str(), c.consumed.as_str())),
-            length,
-            gain,
-        )?;
-        unknown.extend(spoken.unknown);
-        let start = written;
-        let end = start + spoken.pcm.len() as u64;
-        let mut cues: Vec<VisemeCue> = Vec::with_capacity(spoken.cues.len() + 1);
-        for (at, viseme) in spoken
-            .cues
-            .into_iter()
-            .chain(std::iter::once((end - start, Viseme::Sil)))
-        {
-            if last_viseme != Some(viseme) {
-                cues.push(VisemeCue {
-                    sample: start + at.min(end - start),
-                    viseme,
-                });
-                last_viseme = Some(viseme);
-            }
-        }
-        let mut marks: Vec<PhonemeMark> = spoken
-            .phonemes
-            .into_iter()
-            .map(|(at, phoneme)| PhonemeMark {
-                sample: start + at,
-                ipa: phoneme.to_string(),
-                espeak_ms: at * 1000 / u64::from(rate.max(1)),
-            })
-            .collect();
-        let mut pieces: Vec<&[i16]> = spoken.pcm.chunks(chunk_samples).collect();
-        if pieces.is_empty() && !cues.is_empty() {
-            pieces.push(&[]);
-        }
-        let count = pieces.len();
-        for (position, piece) in pieces.into_iter().enumerate() {
-            if request.cancel.is_cancelled() {
-                return Ok((written, true));
-            }
-            let chunk_start = written;
-            let chunk_end = chunk_start + piece.len() as u64;
-            let inside = |sample: u64| position + 1 == count || sample < chunk_end;
-            let cue_count = cues.iter().take_while(|c| inside(c.sample)).count();
-            let mark_count = marks.iter().take_while(|m| inside(m.sample)).count();
-            let chunk = SpeechChunk {
-                sentence: index,
-                sentence_start: start,
-                start_sample: chunk_start,
-                pcm: piece.to_vec(),
-                cues: cues.drain(..cue_count).collect(),
-                phonemes: marks.drain(..mark_count).collect(),
-            };
-            if !send(SpeechEvent::Chunk(chunk)) {
-                return Ok((written, true));
-            }
-            written = chunk_end;
-        }
-        let sentence_end = SpeechEvent::SentenceEnd {
-            sentence: index,
-            text: sentence.to_owned(),
-            start_sample: start,
-            end_sample: written,
-        };
-        if !send(sentence_end) {
-            return Ok((written, true));
-        }
-    }
-    if !unknown.is_empty() {
-        tracing::debug!(
-            ?unknown,
-            "phonemes the Piper voice has no id or mouth shape for"
-        );
-    }
-    Ok((written, request.cancel.is_cancelled()))
 }

@@ -20,7 +20,9 @@ mod voice;
 
 pub use checksum::{MAKE_TARGET, file_sha256, listed_sha256};
 pub use data_path::{DATA_PATH_ENV, locate_data};
-pub use engine::{CancelToken, Recording, SpeechEvent, Synthesizer, SynthesizerConfig, Utterance};
+pub use engine::{
+    CancelToken, Recording, SpeechEvent, SpeechStats, Synthesizer, SynthesizerConfig, Utterance,
+};
 pub use error::VoiceError;
 pub use piper::{PiperConfig, RUNTIME_FILE, VOICE_FILE, VOICE_JSON_FILE};
 pub use sentence::split_sentences;

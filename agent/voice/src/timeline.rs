@@ -53,6 +53,9 @@ pub struct SpeechChunk {
     /// carry a cue exactly at its end).
     pub cues: Vec<VisemeCue>,
     pub phonemes: Vec<PhonemeMark>,
+    /// Which run of the Piper network within the sentence made this chunk: 0, and 1 for the rest of a first
+    /// sentence spoken in two parts (always 0 for espeak-ng).
+    pub part: u32,
 }
 
 impl SpeechChunk {
@@ -120,6 +123,7 @@ impl TimelineBuilder {
         if !pcm.is_empty() {
             self.loudest_rms = self.loudest_rms.max(rms(pcm));
             self.held.push(SpeechChunk {
+                part: 0,
                 sentence: self.sentence,
                 sentence_start: self.sentence_start,
                 start_sample: self.written,
@@ -157,6 +161,7 @@ impl TimelineBuilder {
         if self.held.is_empty() && (!self.cues.is_empty() || !self.marks.is_empty()) {
             // Cues with no audio after them still have to reach the consumer; an empty chunk carries them.
             self.held.push(SpeechChunk {
+                part: 0,
                 sentence: self.sentence,
                 sentence_start: self.sentence_start,
                 start_sample: end,

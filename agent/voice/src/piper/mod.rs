@@ -6,7 +6,10 @@
 //! `make model-voice` exposes) gives every phoneme's start in samples.
 
 mod align;
+mod cache;
+mod join;
 mod network;
+mod parts;
 mod phonemes;
 mod voice_file;
 
@@ -16,7 +19,10 @@ use crate::checksum;
 use crate::error::VoiceError;
 use crate::viseme::Viseme;
 
+pub(crate) use cache::{Key, SentenceCache};
+pub(crate) use join::{append, end_part, start_part};
 pub(crate) use network::Network;
+pub(crate) use parts::first_break;
 pub(crate) use voice_file::VoiceFile;
 
 /// Samples per frame of Piper's medium and high voices (the hop of their spectrogram).
@@ -42,6 +48,12 @@ pub struct PiperConfig {
     /// ONNX Runtime threads inside one run. One by default: the agent shares its cores with whisper-sat, and on
     /// two busy cores a second spinning thread made each run two to three times slower (docs/voice.md).
     pub threads: usize,
+    /// The first sentence of an utterance is cut at its first natural break after this many words, and its first
+    /// part spoken while the rest is synthesised (`piper::parts`); 0 speaks every sentence in one run.
+    pub first_part_words: usize,
+    /// Seconds of spoken sentences kept to be played again without the network (fixed replies, greetings);
+    /// 0 keeps none.
+    pub cache_seconds: u32,
 }
 
 /// The repository root, found from this crate's manifest directory (agent/voice).
@@ -69,6 +81,8 @@ impl Default for PiperConfig {
             noise_w: None,
             length_scale: None,
             threads: 1,
+            first_part_words: 3,
+            cache_seconds: 60,
         }
     }
 }
@@ -90,6 +104,20 @@ impl PiperConfig {
         check("noise_scale", self.noise_scale, 0.0..=2.0)?;
         check("noise_w", self.noise_w, 0.0..=2.0)?;
         check("length_scale", self.length_scale, 0.25..=4.0)?;
+        if self.first_part_words > 50 {
+            return Err(VoiceError::InvalidSetting {
+                name: "first_part_words",
+                value: self.first_part_words.to_string(),
+                reason: "must be within 0-50".into(),
+            });
+        }
+        if self.cache_seconds > 3600 {
+            return Err(VoiceError::InvalidSetting {
+                name: "cache_seconds",
+                value: self.cache_seconds.to_string(),
+                reason: "must be within 0-3600".into(),
+            });
+        }
         if !(1..=16).contains(&self.threads) {
             return Err(VoiceError::InvalidSetting {
                 name: "threads",
@@ -130,12 +158,14 @@ pub(crate) struct Sentence {
     pub unknown: Vec<char>,
 }
 
-/// A loaded voice: configuration plus network.
+/// A loaded voice: configuration plus network, and the sentences it spoke last.
 #[derive(Debug)]
 pub(crate) struct PiperVoice {
     pub file: VoiceFile,
     network: Network,
     scales: [f32; 3],
+    pub first_part_words: usize,
+    pub cache: SentenceCache,
 }
 
 impl PiperVoice {
@@ -150,24 +180,30 @@ impl PiperVoice {
             config.length_scale.unwrap_or(length_scale),
             config.noise_w.unwrap_or(noise_w),
         ];
+        let cache = SentenceCache::new(config.cache_seconds as usize * file.sample_rate as usize);
         Ok(PiperVoice {
             file,
             network,
             scales,
+            first_part_words: config.first_part_words,
+            cache,
         })
     }
 
-    /// Speaks one sentence given espeak-ng's clauses for it. `length` multiplies the length scale (the request's
-    /// rate), `gain` the samples (volume / 100) after they are scaled to full range, as Piper does.
+    /// Speaks one sentence (or part of one) given espeak-ng's clauses for it, in one run of the network.
+    /// `length` multiplies the length scale (the request's rate), `gain` the samples (volume / 100) after they are
+    /// scaled to full range, as Piper does, by at most `scale` when it is given: the later parts of a sentence keep
+    /// its first part's loudness unless they would clip. Returns the sentence and the scale its samples got.
     pub(crate) fn speak<'a>(
         &mut self,
         clauses: impl IntoIterator<Item = (&'a str, &'a str)>,
         length: f32,
         gain: f32,
-    ) -> Result<Sentence, VoiceError> {
+        scale: Option<f32>,
+    ) -> Result<(Sentence, Option<f32>), VoiceError> {
         let phonemes = phonemes::sentence_phonemes(clauses);
         if phonemes.iter().all(|c| c.is_whitespace()) {
-            return Ok(Sentence::default());
+            return Ok((Sentence::default(), scale));
         }
         let (ids, owners, mut unknown) = phonemes::to_ids(&self.file, &phonemes);
         let [noise_scale, length_scale, noise_w] = self.scales;
@@ -185,9 +221,9 @@ impl PiperVoice {
                 "the durations do not add up to the audio"
             );
         }
-        let pcm = to_pcm(&output.audio, gain);
+        let (pcm, used) = to_pcm(&output.audio, gain, scale);
         align::close_at_silence(&mut cues, &pcm);
-        Ok(Sentence {
+        let sentence = Sentence {
             pcm,
             cues,
             phonemes: spans
@@ -195,18 +231,27 @@ impl PiperVoice {
                 .filter_map(|s| s.phoneme.map(|p| (s.start, p)))
                 .collect(),
             unknown,
-        })
+        };
+        Ok((sentence, used))
     }
 }
 
-/// Scales the audio to full range (Piper's default), applies the gain and converts it to s16.
-fn to_pcm(audio: &[f32], gain: f32) -> Vec<i16> {
+/// Scales the audio to full range (Piper's default) or by `cap` if that is lower, applies the gain and converts it
+/// to s16. Returns the samples and the scale used (`None` for silence, which sets no loudness).
+fn to_pcm(audio: &[f32], gain: f32, cap: Option<f32>) -> (Vec<i16>, Option<f32>) {
     let peak = audio.iter().fold(0.0f32, |m, s| m.max(s.abs()));
-    let scale = if peak < 1e-8 { 0.0 } else { gain / peak };
-    audio
+    let full = (peak >= 1e-8).then(|| gain / peak);
+    let scale = match (full, cap) {
+        (Some(full), Some(cap)) => Some(full.min(cap)),
+        (full, None) => full,
+        (None, cap) => cap,
+    };
+    let factor = scale.unwrap_or(0.0);
+    let pcm = audio
         .iter()
-        .map(|s| ((s * scale).clamp(-1.0, 1.0) * 32767.0) as i16)
-        .collect()
+        .map(|s| ((s * factor).clamp(-1.0, 1.0) * 32767.0) as i16)
+        .collect();
+    (pcm, scale)
 }
 
 #[cfg(test)]
@@ -237,8 +282,31 @@ mod tests {
 
     #[test]
     fn pcm_is_scaled_to_full_range_times_the_gain() {
-        assert_eq!(to_pcm(&[0.0, 0.25, -0.5], 1.0), vec![0, 16383, -32767]);
-        assert_eq!(to_pcm(&[0.0, 0.25, -0.5], 0.5), vec![0, 8191, -16383]);
-        assert_eq!(to_pcm(&[0.0, 0.0], 1.0), vec![0, 0]);
+        assert_eq!(
+            to_pcm(&[0.0, 0.25, -0.5], 1.0, None),
+            (vec![0, 16383, -32767], Some(2.0))
+        );
+        assert_eq!(
+            to_pcm(&[0.0, 0.25, -0.5], 0.5, None),
+            (vec![0, 8191, -16383], Some(1.0))
+        );
+        assert_eq!(to_pcm(&[0.0, 0.0], 1.0, None), (vec![0, 0], None));
+    }
+
+    #[test]
+    fn a_later_part_keeps_the_first_parts_scale_unless_it_would_clip() {
+        // Quieter than the first part: the first part's scale, not its own full range.
+        assert_eq!(
+            to_pcm(&[0.25, -0.25], 1.0, Some(2.0)),
+            (vec![16383, -16383], Some(2.0))
+        );
+        // Louder: scaled down to full range instead of clipping.
+        assert_eq!(
+            to_pcm(&[1.0, -0.5], 1.0, Some(2.0)),
+            (vec![32767, -16383], Some(1.0))
+        );
+        // A silent first part sets nothing.
+        assert_eq!(to_pcm(&[0.5], 1.0, None).1, Some(2.0));
+        assert_eq!(to_pcm(&[0.0], 1.0, Some(2.0)), (vec![0], Some(2.0)));
     }
 }

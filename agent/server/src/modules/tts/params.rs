@@ -78,6 +78,11 @@ pub struct PiperParams {
     pub length_scale: Option<f32>,
     /// ONNX Runtime threads for one sentence, 1-16 (default 1).
     pub threads: Option<usize>,
+    /// The first sentence of a reply is cut at its first natural break after this many words and its first part
+    /// played while the rest is synthesised, 0-50 (default 3; 0: whole sentences).
+    pub first_part_words: Option<usize>,
+    /// Seconds of spoken sentences kept to be played again without the network, 0-3600 (default 60).
+    pub cache_seconds: Option<u32>,
 }
 
 impl PiperParams {
@@ -93,6 +98,8 @@ impl PiperParams {
             noise_w: self.noise_w,
             length_scale: self.length_scale,
             threads: self.threads.unwrap_or(defaults.threads),
+            first_part_words: self.first_part_words.unwrap_or(defaults.first_part_words),
+            cache_seconds: self.cache_seconds.unwrap_or(defaults.cache_seconds),
         }
     }
 }
