@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use agent_bench::knowledge_set::{OnTopic, has_fact};
 use flow::Publisher;
 
+use crate::answer::Answer;
 use crate::watch::Watcher;
 
 /// A recalled passage is said at once; a model's reply of three sentences fits well within this.
@@ -16,28 +17,6 @@ const ANSWER_PATIENCE: Duration = Duration::from_secs(60);
 /// The targets: the right passage in the facts, and the key fact in the spoken answer.
 const PASSAGE_TARGET: f64 = 0.90;
 const FACT_TARGET: f64 = 0.70;
-
-/// How one question was answered, as the hub showed it.
-#[derive(Debug, Default)]
-pub struct Answer {
-    /// The action of the rule that heard the question (`recall(...)`, `chat(...)`, `say(...)`).
-    pub action: String,
-    /// The `passage` steps of the trace: `file (heading): text` for a recall, `file: text` in a chat turn's facts.
-    pub passages: Vec<String>,
-    /// What the agent said: the recalled passage, the model's sentences, or the rule's own `say`.
-    pub spoken: String,
-}
-
-impl Answer {
-    /// The rule's actions (`a; b; c`) handed the question to the model.
-    pub fn by_model(&self) -> bool {
-        self.action.contains("chat(")
-    }
-    /// A rule said the knowledge folder's passage.
-    pub fn recalled(&self) -> bool {
-        self.action.contains("recall(")
-    }
-}
 
 /// Everything the phase measured.
 #[derive(Debug, Default)]

@@ -23,6 +23,7 @@
 //! two busy loops, and beside them at the systemd units' priority, and reports each condition's voice to voice and
 //! the words lost.
 
+mod answer;
 mod barge_in;
 mod beside;
 mod chat;

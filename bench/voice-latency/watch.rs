@@ -9,8 +9,8 @@ use bytes::Bytes;
 use flow::{Client, Subscription};
 use serde_json::Value;
 
+use crate::answer::Answer;
 use crate::chat_report::ChatRunFigures;
-use crate::knowledge::Answer;
 use crate::report::{Decode, RunFigures};
 use crate::speech_clip::Ending;
 
