@@ -92,6 +92,11 @@ export class SpeechPlayer {
     const fresh = this.playhead < now;
     if (fresh) {
       this.switchRoute();
+      // The shift takes the route's delay at once while nothing is heard. Drawing follows it too (heardTime), but
+      // an idle page draws no frames: without this, the first utterance through a route opened while the page was
+      // at rest started at the shift of the route before (0) and slewed towards the right one while it was heard
+      // (tests/playback.rs saw the first stretch's visemes 80 ms ahead of the sound).
+      if (now >= this.lastEnd + this.shift.s) this.shift.follow(now, this.routeDelayS, false);
       this.quietUntil = now + JITTER_S + this.shift.s;
     }
     const ctxOut = this.output(ctx);
