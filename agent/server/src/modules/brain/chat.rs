@@ -85,6 +85,11 @@ pub struct Chats {
     memory: Memory,
     /// A reply started on the transcript of a pause, until the final transcript adopts or drops it.
     early: Option<Early>,
+    /// The call that asked for the last speculative turn, until the satellite has it: the next turn's request waits
+    /// for it, so that the satellite cannot take the real turn first and then see it superseded by the
+    /// speculative one (a final transcript right after the pause's, on a loaded machine, did that: the real turn
+    /// ended cancelled at once and the held reply was never adopted).
+    speculating: Option<tokio::task::JoinHandle<()>>,
 }
 
 /// What a turn asks the model: the words, the language, the tools it may call (and the one it must), and what the
@@ -141,6 +146,7 @@ impl Chats {
             finished: Vec::new(),
             memory: Memory::default(),
             early: None,
+            speculating: None,
         }
     }
 
@@ -204,12 +210,12 @@ impl Chats {
         self.early = Some(early);
         let client = self.client.clone();
         let body = serde_json::to_vec(&request).unwrap_or_default();
-        tokio::spawn(async move {
+        self.speculating = Some(tokio::spawn(async move {
             // Answered at once (`{"speculating": true}`); the reply comes with the real turn.
             if let Err(e) = client.call(CHAT.name, body, CANCEL_TIMEOUT).await {
                 debug!(turn, "brain: the speculative turn was not taken: {e}");
             }
-        });
+        }));
         Some(turn)
     }
 
@@ -286,7 +292,13 @@ impl Chats {
         self.current = Some(Turn::new(turn, &asked.ask.text, asked.ask.facts));
         let (client, done, timeout) = (self.client.clone(), self.done.clone(), self.timeout);
         let body = serde_json::to_vec(&request).unwrap_or_default();
+        let speculating = self.speculating.take();
         tokio::spawn(async move {
+            // The speculative call is answered at once (or fails within CANCEL_TIMEOUT); how it ended does not
+            // matter here, only that it reached the satellite first.
+            if let Some(speculating) = speculating {
+                let _ = speculating.await;
+            }
             let result = match client.call(CHAT.name, body, timeout).await {
                 Ok(answer) => serde_json::from_slice::<ChatAnswer>(&answer)
                     .map_err(|e| format!("the model's answer is malformed: {e}")),
