@@ -576,6 +576,59 @@ async fn collect_pcm(
     Ok(pcm)
 }
 
+/// The TTS module's Piper counters at `/api/status` (reported every second), once `done` accepts them.
+async fn piper_counts(rig: &Rig, done: impl Fn(u64, u64) -> bool) -> anyhow::Result<(u64, u64)> {
+    until("the TTS module's Piper counters", PATIENCE, async {
+        loop {
+            let status = http::get_json(rig.agent.http, "/api/status", rig.agent.token()).await?;
+            let tts = &status["modules"]["tts"];
+            if let (Some(runs), Some(hits)) =
+                (tts["piper_runs"].as_u64(), tts["piper_cache_hits"].as_u64())
+                && done(runs, hits)
+            {
+                return anyhow::Ok((runs, hits));
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    })
+    .await?
+}
+
+/// Issue 48 through the real TTS module: a fixed reply said again plays from the Piper voice's cache (the same
+/// samples, no run of the network: counted at `/api/status`), and a long first sentence with a break is spoken in
+/// two runs whose audio reaches `Agent.speech` without a gap in its offsets.
+#[tokio::test]
+async fn a_fixed_reply_said_again_comes_from_the_cache_and_a_long_first_sentence_in_two_parts()
+-> anyhow::Result<()> {
+    let rig = Rig::start_with("[modules.tts]\nengine = \"piper\"\n").await?;
+    rig.agent
+        .output
+        .wait_for("engine=Piper", 1, PATIENCE)
+        .await
+        .context("the TTS module did not start the Piper voice")?;
+    let greeting = "Nice to see you. Ask me anything.";
+    let first = rig.speak(greeting).await?;
+    let first_pcm = collect_pcm(&rig.speech, first, QUIET).await?;
+    // Two short sentences, no break in the first: one run each.
+    let (runs, hits) = piper_counts(&rig, |runs, _| runs >= 2).await?;
+    assert_eq!((runs, hits), (2, 0));
+    let again = rig.speak(greeting).await?;
+    let again_pcm = collect_pcm(&rig.speech, again, QUIET).await?;
+    let (runs, hits) = piper_counts(&rig, |_, hits| hits >= 2).await?;
+    assert_eq!((runs, hits), (2, 2), "the greeting ran the network again");
+    assert!(again_pcm == first_pcm, "the cache played other samples");
+    // "You can ask me the time," then the rest: two runs for one sentence, one stream of samples.
+    let long = rig
+        .speak("You can ask me the time, or what I see in front of me right now.")
+        .await?;
+    let long_pcm = collect_pcm(&rig.speech, long, QUIET).await?;
+    let (runs, hits) = piper_counts(&rig, |runs, _| runs >= 4).await?;
+    assert_eq!((runs, hits), (4, 2));
+    let seconds = long_pcm.len() as f64 / RATE;
+    assert!((2.0..8.0).contains(&seconds), "{seconds} s of speech");
+    Ok(())
+}
+
 #[tokio::test]
 async fn an_italian_agent_speaks_with_espeak_ngs_italian_voice() -> anyhow::Result<()> {
     let dir = DataDir::new()?;

@@ -265,6 +265,10 @@ impl Tts {
                 "behaviour_events_dropped".into(),
                 self.behaviour.dropped().into(),
             );
+            // The Piper voice's network runs and the sentences its cache played instead (docs/voice.md).
+            let stats = self.synth.stats();
+            object.insert("piper_runs".into(), stats.piper_runs.into());
+            object.insert("piper_cache_hits".into(), stats.piper_cache_hits.into());
         }
         status
     }
