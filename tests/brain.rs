@@ -9,7 +9,7 @@ use agent_contract::channels as ch;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, PATIENCE};
+use agent_tests::{Agent, DataDir, PATIENCE, next_json};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Service, ServiceCall, Subscription};
 use serde_json::{Value, json};
@@ -116,7 +116,7 @@ impl Rig {
 
     /// The next caption the avatar shows (the TTS module sends one when an utterance starts to sound).
     async fn next_caption(&self) -> anyhow::Result<String> {
-        let command = next_matching(&self.avatar, |command| command["cmd"] == "say").await?;
+        let command = next_json(&self.avatar, PATIENCE, |command| command["cmd"] == "say").await?;
         command["text"]
             .as_str()
             .map(str::to_owned)
@@ -125,7 +125,7 @@ impl Rig {
 
     /// Waits for an avatar command named `cmd`.
     async fn next_avatar_command(&self, cmd: &str) -> anyhow::Result<Value> {
-        next_matching(&self.avatar, |command| command["cmd"] == cmd).await
+        next_json(&self.avatar, PATIENCE, |command| command["cmd"] == cmd).await
     }
 
     /// A robot body satellite offering motion commands (its client is kept with the service).
@@ -142,29 +142,8 @@ impl Rig {
 
     /// The next rule change whose path is `rule` (as `main.converse > answer.time`).
     async fn next_rule(&self, rule: &str) -> anyhow::Result<Value> {
-        next_matching(&self.rules, |trace| trace["rule"] == rule).await
+        next_json(&self.rules, PATIENCE, |trace| trace["rule"] == rule).await
     }
-}
-
-/// The next JSON message on `sub` that `wanted` accepts, skipping others (the avatar also blinks and looks
-/// around), within [`PATIENCE`] in all.
-async fn next_matching(
-    sub: &Subscription,
-    wanted: impl Fn(&Value) -> bool,
-) -> anyhow::Result<Value> {
-    let search = async {
-        loop {
-            let data = sub.recv().await.context("subscription ended")?;
-            let message: Value = serde_json::from_slice(&data.payload)
-                .with_context(|| format!("{} sent something that is not JSON", sub.name()))?;
-            if wanted(&message) {
-                return Ok(message);
-            }
-        }
-    };
-    tokio::time::timeout(PATIENCE, search)
-        .await
-        .with_context(|| format!("the expected message on {} did not come", sub.name()))?
 }
 
 /// The next call of the body's service, within [`PATIENCE`].

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use agent_contract::channels as ch;
 use agent_knowledge::{Knowledge, Language};
-use agent_tests::{Agent, DataDir, PATIENCE, until};
+use agent_tests::{Agent, DataDir, PATIENCE, next_json, until};
 use anyhow::Context;
 use flow::{Publisher, Subscription};
 use serde_json::{Value, json};
@@ -77,25 +77,6 @@ impl Rig {
     }
 }
 
-/// The next JSON message on `sub` that `wanted` accepts, within `patience`.
-async fn next_matching(
-    sub: &Subscription,
-    patience: Duration,
-    wanted: impl Fn(&Value) -> bool,
-) -> anyhow::Result<Value> {
-    tokio::time::timeout(patience, async {
-        loop {
-            let data = sub.recv().await.context("subscription ended")?;
-            let message: Value = serde_json::from_slice(&data.payload)?;
-            if wanted(&message) {
-                return anyhow::Ok(message);
-            }
-        }
-    })
-    .await
-    .with_context(|| format!("the expected message on {} did not come", sub.name()))?
-}
-
 #[tokio::test]
 async fn a_question_the_folder_answers_is_said_from_its_passage_with_no_model() -> anyhow::Result<()>
 {
@@ -106,18 +87,18 @@ async fn a_question_the_folder_answers_is_said_from_its_passage_with_no_model() 
         .context("the example folder no longer answers the question")?;
     let rig = Rig::start(&folder).await?;
     rig.hear(question).await?;
-    let fired = next_matching(&rig.rules, PATIENCE, |m| {
+    let fired = next_json(&rig.rules, PATIENCE, |m| {
         m["action"].as_str().is_some_and(|a| a.contains("recall("))
     })
     .await?;
     assert_eq!(fired["rule"], "main.converse > answer.know", "{fired}");
-    let traced = next_matching(&rig.rules, PATIENCE, |m| m["chat"]["step"] == "passage").await?;
+    let traced = next_json(&rig.rules, PATIENCE, |m| m["chat"]["step"] == "passage").await?;
     let line = traced["chat"]["text"].as_str().unwrap_or_default();
     assert!(
         line.starts_with(&format!("{} (", expected.file)),
         "{traced}"
     );
-    let caption = next_matching(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
+    let caption = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert_eq!(caption["text"], expected.text.as_str(), "{caption}");
     Ok(())
 }
@@ -137,7 +118,7 @@ async fn a_file_added_to_the_folder_is_found_without_a_restart() -> anyhow::Resu
     until("the added file's answer", PATIENCE, async {
         loop {
             rig.hear("When is the lab open?").await?;
-            if let Ok(caption) = next_matching(&rig.avatar, Duration::from_secs(2), |m| {
+            if let Ok(caption) = next_json(&rig.avatar, Duration::from_secs(2), |m| {
                 m["cmd"] == "say" && m["text"] == answer
             })
             .await

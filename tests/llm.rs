@@ -14,7 +14,7 @@ use std::process::Stdio;
 use std::time::Duration;
 
 use agent_tests::satellite::{LlmSat, llm_model};
-use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, metrics, until};
+use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, metrics, next_json, until};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
@@ -167,6 +167,50 @@ impl Rig {
         .await?
     }
 
+    /// Every event on `Agent.chat.reply`, with the hub's time stamp, up to and including the first that `last`
+    /// accepts, within `within`.
+    async fn replies_until(
+        &self,
+        what: &str,
+        within: Duration,
+        last: impl Fn(&Value) -> bool,
+    ) -> anyhow::Result<Vec<(Value, u64)>> {
+        let mut events = Vec::new();
+        let collected = until(what, within, async {
+            loop {
+                let data = self.reply.recv().await.context("the reply stream ended")?;
+                let event: Value = serde_json::from_slice(&data.payload)?;
+                let done = last(&event);
+                events.push((event, data.ts_us));
+                if done {
+                    return anyhow::Ok(());
+                }
+            }
+        })
+        .await;
+        match collected {
+            Ok(result) => result.map(|()| events),
+            Err(error) => Err(error.context(format!("events so far: {events:?}"))),
+        }
+    }
+
+    /// The events of chat turn `turn` up to its end.
+    async fn turn_events(
+        &self,
+        turn: &Value,
+        within: Duration,
+    ) -> anyhow::Result<Vec<(Value, u64)>> {
+        let events = self
+            .replies_until("the end of the turn", within, |e| {
+                e["turn"] == *turn && e["event"] == "end"
+            })
+            .await?;
+        Ok(events
+            .into_iter()
+            .filter(|(e, _)| e["turn"] == *turn)
+            .collect())
+    }
+
     /// The user starts to speak (the voice-activity event whisper-sat's relay publishes).
     async fn voice_starts(&self) -> anyhow::Result<()> {
         let message = json!({ "vad": "start", "at_ms": 0, "satellite": "llm-test" }).to_string();
@@ -198,29 +242,9 @@ impl Rig {
     }
 }
 
-/// The next JSON message on `sub` that `wanted` accepts, skipping others, within [`PATIENCE`].
-async fn next_matching(
-    sub: &Subscription,
-    wanted: impl Fn(&Value) -> bool,
-) -> anyhow::Result<Value> {
-    let search = async {
-        loop {
-            let data = sub.recv().await.context("subscription ended")?;
-            let message: Value = serde_json::from_slice(&data.payload)
-                .with_context(|| format!("{} sent something that is not JSON", sub.name()))?;
-            if wanted(&message) {
-                return Ok(message);
-            }
-        }
-    };
-    tokio::time::timeout(PATIENCE, search)
-        .await
-        .with_context(|| format!("the expected message on {} did not come", sub.name()))?
-}
-
 /// The chat trace entry of `step` (`prompt`, `sentence`, `end`, `interrupted`, `failed`).
 async fn next_chat_step(rig: &Rig, step: &str) -> anyhow::Result<Value> {
-    next_matching(&rig.rules, |m| m["chat"]["step"] == step).await
+    next_json(&rig.rules, PATIENCE, |m| m["chat"]["step"] == step).await
 }
 
 #[tokio::test]
@@ -242,7 +266,7 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
         rig.hear(question).await?;
         first_question.get_or_insert(question);
         // The rule program hands the turn over: its trace names the catch-all rule and the chat action.
-        let fired = next_matching(&rig.rules, |m| {
+        let fired = next_json(&rig.rules, PATIENCE, |m| {
             m["action"]
                 .as_str()
                 .is_some_and(|a| a.contains(&format!("chat({question:?})")))
@@ -251,9 +275,9 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
         assert_eq!(fired["rule"], "main.converse > answer.confused", "{fired}");
 
         // Events of the turn, in order: prompt, sentences from 0, end.
-        let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+        let prompt = next_json(&rig.reply, PATIENCE, |m| m["event"] == "prompt").await?;
         let turn = prompt["turn"].clone();
-        let first = next_matching(&rig.reply, |m| m["event"] == "sentence").await?;
+        let first = next_json(&rig.reply, PATIENCE, |m| m["event"] == "sentence").await?;
         assert_eq!(first["turn"], turn);
         assert_eq!(first["index"], 0);
         let first_text = first["text"]
@@ -266,28 +290,18 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
             .await?
             .context("speech ended")?;
         assert!(speech.payload.len() > 8);
+        let mut events = rig.turn_events(&turn, PATIENCE * 2).await?;
+        let (end, end_ts) = events.pop().context("no end")?;
         let mut sentences = 1;
-        let (end, end_ts) = until("the end of the turn", PATIENCE * 2, async {
-            loop {
-                let data = tokio::time::timeout(PATIENCE, rig.reply.recv())
-                    .await?
-                    .context("the reply stream ended")?;
-                let event: Value = serde_json::from_slice(&data.payload)?;
-                if event["turn"] != turn {
-                    continue;
+        for (event, _) in &events {
+            match event["event"].as_str() {
+                Some("sentence") => {
+                    assert_eq!(event["index"], sentences, "{event}");
+                    sentences += 1;
                 }
-                match event["event"].as_str() {
-                    Some("sentence") => {
-                        assert_eq!(event["index"], sentences, "{event}");
-                        sentences += 1;
-                    }
-                    Some("end") => return anyhow::Ok((event, data.ts_us)),
-                    other => bail!("unexpected event {other:?}: {event}"),
-                }
+                other => bail!("unexpected event {other:?}: {event}"),
             }
-        })
-        .await
-        .with_context(|| format!("{sentences} sentence(s) of turn {turn} so far"))??;
+        }
         // Three sentences at most; the first may come as its first clause and the rest of it.
         assert!(sentences <= 4, "the sentence cap was passed: {sentences}");
         assert!(
@@ -295,7 +309,7 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
             "{end}"
         );
         // The caption of the first sentence is what the model said, in spoken form.
-        let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+        let caption = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
         assert_eq!(caption["text"], first_text.as_str());
         // The trace shows the turn's steps.
         let sentence = next_chat_step(&rig, "sentence").await?;
@@ -368,7 +382,7 @@ async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<
         ("Tell me a long story about a ship at sea.", "stop"),
     ] {
         rig.hear(question).await?;
-        let first = next_matching(&rig.reply, |m| m["event"] == "sentence").await?;
+        let first = next_json(&rig.reply, PATIENCE, |m| m["event"] == "sentence").await?;
         let turn = first["turn"].clone();
         tokio::time::timeout(PATIENCE, rig.speech.recv())
             .await?
@@ -378,8 +392,11 @@ async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<
             _ => rig.hear("stop").await?,
         }
         // Speech stops at once, and the model stops within a token: the turn ends as cancelled.
-        next_matching(&rig.avatar, |m| m["cmd"] == "speech_stop").await?;
-        let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+        next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "speech_stop").await?;
+        let end = next_json(&rig.reply, PATIENCE, |m| {
+            m["event"] == "end" && m["turn"] == turn
+        })
+        .await?;
         assert_eq!(end["finish"], "cancelled", "{end}");
         let interrupted = next_chat_step(&rig, "interrupted").await?;
         assert_eq!(interrupted["chat"]["turn"], turn);
@@ -450,9 +467,12 @@ async fn a_follow_up_question_finds_the_last_turn_in_the_models_cache() -> anyho
         "Why do stars twinkle?",
     ] {
         rig.hear(question).await?;
-        let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+        let prompt = next_json(&rig.reply, PATIENCE, |m| m["event"] == "prompt").await?;
         let turn = prompt["turn"].clone();
-        let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+        let end = next_json(&rig.reply, PATIENCE, |m| {
+            m["event"] == "end" && m["turn"] == turn
+        })
+        .await?;
         println!("{question:?}: {}", end["stats"]);
         ends.push(end);
         // The reply plays out before the next question: one asked over it would cut it, and a cut reply is kept as
@@ -499,7 +519,7 @@ async fn a_reply_started_at_the_pause_is_kept_when_the_final_transcript_is_the_s
     // Nothing is published for a speculative turn: the first event of a turn comes only once it is adopted.
     tokio::time::sleep(Duration::from_millis(300)).await;
     rig.hear(question).await?;
-    let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+    let prompt = next_json(&rig.reply, PATIENCE, |m| m["event"] == "prompt").await?;
     assert!(
         prompt["prompt"]
             .as_str()
@@ -507,7 +527,7 @@ async fn a_reply_started_at_the_pause_is_kept_when_the_final_transcript_is_the_s
         "{prompt}"
     );
     let turn = prompt["turn"].clone();
-    let sentence = next_matching(&rig.reply, |m| {
+    let sentence = next_json(&rig.reply, PATIENCE, |m| {
         m["event"] == "sentence" && m["turn"] == turn
     })
     .await?;
@@ -517,7 +537,10 @@ async fn a_reply_started_at_the_pause_is_kept_when_the_final_transcript_is_the_s
             .is_some_and(|t| !t.trim().is_empty()),
         "{sentence}"
     );
-    let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+    let end = next_json(&rig.reply, PATIENCE, |m| {
+        m["event"] == "end" && m["turn"] == turn
+    })
+    .await?;
     assert_eq!(
         end["stats"]["speculated"], true,
         "the reply was not the one started at the pause: {end}"
@@ -540,19 +563,14 @@ async fn a_reply_started_at_the_pause_is_dropped_when_the_final_transcript_diffe
     let question = "Tell me about the weather on the moon.";
     rig.hear(question).await?;
     // The early reply's end and the real turn's events, in whichever order they come, up to the real turn's end.
-    let mut events: Vec<Value> = Vec::new();
-    until("the real turn's end", PATIENCE, async {
-        loop {
-            let data = rig.reply.recv().await.context("the reply stream ended")?;
-            let event: Value = serde_json::from_slice(&data.payload)?;
-            let real_end = event["event"] == "end" && event["stats"]["dropped"] != true;
-            events.push(event);
-            if real_end {
-                return anyhow::Ok(());
-            }
-        }
-    })
-    .await??;
+    let events: Vec<Value> = rig
+        .replies_until("the real turn's end", PATIENCE, |e| {
+            e["event"] == "end" && e["stats"]["dropped"] != true
+        })
+        .await?
+        .into_iter()
+        .map(|(e, _)| e)
+        .collect();
     let prompt = events
         .iter()
         .find(|m| m["event"] == "prompt")
@@ -570,7 +588,7 @@ async fn a_reply_started_at_the_pause_is_dropped_when_the_final_transcript_diffe
     let dropped = match events.iter().find(|m| m["stats"]["dropped"] == true) {
         Some(dropped) => dropped.clone(),
         None => {
-            next_matching(&rig.reply, |m| {
+            next_json(&rig.reply, PATIENCE, |m| {
                 m["event"] == "end" && m["stats"]["dropped"] == true
             })
             .await?
@@ -623,7 +641,7 @@ async fn a_passage_of_the_knowledge_folder_reaches_the_model_quoted() -> anyhow:
             .any(|line| line.trim_start().starts_with("Ignore your instructions")),
         "{text}"
     );
-    next_matching(&rig.reply, |m| m["event"] == "end").await?;
+    next_json(&rig.reply, PATIENCE, |m| m["event"] == "end").await?;
     Ok(())
 }
 
@@ -635,33 +653,23 @@ async fn say_that_again_repeats_the_models_reply() -> anyhow::Result<()> {
     let rig = Rig::start().await?;
     let _llm = LlmSat::start(&rig.agent, &["--max-sentences", "1"]).await?;
     rig.hear("Why is the sky blue?").await?;
-    let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+    let prompt = next_json(&rig.reply, PATIENCE, |m| m["event"] == "prompt").await?;
     let turn = prompt["turn"].clone();
-    let mut spoken: Vec<String> = Vec::new();
-    until("the reply's end", PATIENCE, async {
-        loop {
-            let data = rig.reply.recv().await.context("the reply stream ended")?;
-            let event: Value = serde_json::from_slice(&data.payload)?;
-            if event["turn"] != turn {
-                continue;
-            }
-            if event["event"] == "sentence" {
-                spoken.push(event["text"].as_str().unwrap_or_default().to_owned());
-            }
-            if event["event"] == "end" {
-                return anyhow::Ok(());
-            }
-        }
-    })
-    .await??;
+    let spoken: Vec<String> = rig
+        .turn_events(&turn, PATIENCE)
+        .await?
+        .into_iter()
+        .filter(|(e, _)| e["event"] == "sentence")
+        .map(|(e, _)| e["text"].as_str().unwrap_or_default().to_owned())
+        .collect();
     anyhow::ensure!(!spoken.is_empty(), "the model said nothing");
     let reply = spoken.join(" ");
     // Its captions, then the repetition's.
     for _ in &spoken {
-        next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+        next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     }
     rig.hear("Say that again, please.").await?;
-    let again = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    let again = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert_eq!(again["text"], reply.as_str(), "{again}");
     Ok(())
 }
@@ -684,18 +692,18 @@ async fn a_slow_reply_is_acknowledged_while_the_model_thinks() -> anyhow::Result
     let url = format!("http://127.0.0.1:{port}/v1");
     let _llm = LlmSat::start_bare(&rig.agent, &["--endpoint", &url], &[]).await?;
     rig.hear("Why is the sky blue?").await?;
-    let handed = next_matching(&rig.rules, |m| {
+    let handed = next_json(&rig.rules, PATIENCE, |m| {
         m["action"].as_str().is_some_and(|a| a.contains("chat("))
     })
     .await?;
-    let pondered = next_matching(&rig.rules, |m| m["rule"] == "main.ponder").await?;
+    let pondered = next_json(&rig.rules, PATIENCE, |m| m["rule"] == "main.ponder").await?;
     let waited = pondered["ts_ms"].as_i64().unwrap_or(0) - handed["ts_ms"].as_i64().unwrap_or(0);
     // Not before the wait (the final transcript here has no end of speech: it counts from its arrival).
     assert!(
         waited >= 400 - 5,
         "thinking came {waited} ms after the turn was handed over: {pondered}"
     );
-    let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    let caption = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert_eq!(caption["text"], "Let me think.", "{caption}");
     Ok(())
 }
@@ -716,10 +724,10 @@ async fn a_killed_model_satellite_costs_one_apology_and_a_restarted_one_answers(
     let mut llm = LlmSat::start(&rig.agent, &args).await?;
     rig.hear("Tell me a long story about a dragon and a knight.")
         .await?;
-    next_matching(&rig.reply, |m| m["event"] == "sentence").await?;
+    next_json(&rig.reply, PATIENCE, |m| m["event"] == "sentence").await?;
     llm.child.kill().await?;
     // One apology: the call fails once, the program says sorry once.
-    let apology = next_matching(&rig.avatar, |m| {
+    let apology = next_json(&rig.avatar, PATIENCE, |m| {
         m["cmd"] == "say" && m["text"].as_str().is_some_and(|t| t.starts_with(APOLOGY))
     })
     .await?;
@@ -740,8 +748,8 @@ async fn a_killed_model_satellite_costs_one_apology_and_a_restarted_one_answers(
     // A new satellite serves the next turn.
     let _again = LlmSat::start(&rig.agent, &["--max-sentences", "1"]).await?;
     rig.hear("What is your favourite colour?").await?;
-    let sentence = next_matching(&rig.reply, |m| m["event"] == "sentence").await?;
-    let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    let sentence = next_json(&rig.reply, PATIENCE, |m| m["event"] == "sentence").await?;
+    let caption = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert_eq!(caption["text"], sentence["text"]);
     Ok(())
 }
@@ -751,14 +759,14 @@ async fn without_a_model_satellite_the_agent_still_apologises() -> anyhow::Resul
     let _one = ONE_RIG.lock().await;
     let rig = Rig::start().await?;
     rig.hear("What is the meaning of life?").await?;
-    let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    let caption = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert!(
         caption["text"]
             .as_str()
             .is_some_and(|t| t.starts_with(APOLOGY)),
         "{caption}"
     );
-    let rule = next_matching(&rig.rules, |m| {
+    let rule = next_json(&rig.rules, PATIENCE, |m| {
         m["rule"].as_str().is_some_and(|r| r.ends_with("chat_down"))
     })
     .await?;
@@ -834,17 +842,20 @@ async fn the_endpoint_mode_streams_a_turn_from_llama_cpp_pythons_server_on_the_s
     )
     .await?;
     rig.hear("Why is the sky blue?").await?;
-    let prompt = next_matching(&rig.reply, |m| m["event"] == "prompt").await?;
+    let prompt = next_json(&rig.reply, PATIENCE, |m| m["event"] == "prompt").await?;
     assert!(
         prompt["model"].as_str().is_some_and(|m| m.contains(&url)),
         "{prompt}"
     );
     let turn = prompt["turn"].clone();
-    let sentence = next_matching(&rig.reply, |m| m["event"] == "sentence").await?;
+    let sentence = next_json(&rig.reply, PATIENCE, |m| m["event"] == "sentence").await?;
     assert_eq!(sentence["turn"], turn);
-    let caption = next_matching(&rig.avatar, |m| m["cmd"] == "say").await?;
+    let caption = next_json(&rig.avatar, PATIENCE, |m| m["cmd"] == "say").await?;
     assert_eq!(caption["text"], sentence["text"]);
-    let end = next_matching(&rig.reply, |m| m["event"] == "end" && m["turn"] == turn).await?;
+    let end = next_json(&rig.reply, PATIENCE, |m| {
+        m["event"] == "end" && m["turn"] == turn
+    })
+    .await?;
     assert!(
         matches!(
             end["finish"].as_str(),
@@ -863,7 +874,7 @@ async fn an_italian_turn_goes_through_the_same_action_with_the_italian_prompt() 
     let rig = Rig::start_with("it", "").await?;
     let _llm = LlmSat::start(&rig.agent, &["--max-sentences", "1"]).await?;
     rig.hear("Perché il cielo è blu?").await?;
-    let fired = next_matching(&rig.rules, |m| {
+    let fired = next_json(&rig.rules, PATIENCE, |m| {
         m["action"]
             .as_str()
             .is_some_and(|a| a.contains("chat(\"Perché il cielo è blu?\")"))
@@ -875,6 +886,6 @@ async fn an_italian_turn_goes_through_the_same_action_with_the_italian_prompt() 
     assert!(text.contains("Rispondi in italiano"), "{text}");
     assert!(text.contains("non vedi nessuno"), "{text}");
     // The default model is English-only (docs/llm.md): the test holds the path, not the language of the reply.
-    next_matching(&rig.reply, |m| m["event"] == "end").await?;
+    next_json(&rig.reply, PATIENCE, |m| m["event"] == "end").await?;
     Ok(())
 }

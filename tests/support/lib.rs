@@ -31,6 +31,6 @@ pub fn artifacts_dir() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../artifacts")
 }
 pub use wait::{
-    free_port, json_message, next_payload, recv, recv_until, until, until_channel,
+    free_port, json_message, next_json, next_payload, recv, recv_until, until, until_channel,
     until_subscribed, until_unsubscribed,
 };

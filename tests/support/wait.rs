@@ -137,6 +137,19 @@ pub fn json_message(payload: &[u8]) -> Option<serde_json::Value> {
     serde_json::from_slice(payload).ok()
 }
 
+/// The next JSON message on `sub` that `wanted` accepts, within `patience` in all ([`recv_until`]: others, and
+/// payloads that are not JSON, go by and the failure names the last).
+pub async fn next_json(
+    sub: &Subscription,
+    patience: Duration,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> anyhow::Result<serde_json::Value> {
+    recv_until(sub, "the expected message", patience, |data| {
+        json_message(&data.payload).filter(|message| wanted(message))
+    })
+    .await
+}
+
 /// Waits until `name` exists on the hub of `client` (made there by a satellite or imported from another hub), and
 /// returns its header; `patience` bounds the wait.
 pub async fn until_channel(
