@@ -11,7 +11,7 @@ use agent_knowledge::{Knowledge, Language};
 use agent_tests::{Agent, DataDir, PATIENCE, next_json, until};
 use anyhow::Context;
 use flow::{Publisher, Subscription};
-use serde_json::{Value, json};
+use serde_json::json;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")

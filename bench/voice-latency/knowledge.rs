@@ -9,7 +9,6 @@ use std::time::{Duration, Instant};
 use agent_bench::knowledge_set::{OnTopic, has_fact};
 use flow::Publisher;
 
-use crate::answer::Answer;
 use crate::watch::Watcher;
 
 /// A recalled passage is said at once; a model's reply of three sentences fits well within this.

@@ -9,11 +9,12 @@
 //!   for the consumer instead of dropping; it is faster than real time anyway. A consumer that stops reading
 //!   must drop its [`Utterance`] (or keep draining after cancelling), which ends the wait.
 
+mod job;
 mod piper_speech;
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use tokio::sync::mpsc;
@@ -23,8 +24,11 @@ use crate::error::VoiceError;
 use crate::espeak::{Espeak, Flow, Parameter, SynthOutcome};
 use crate::piper::{PiperConfig, PiperVoice};
 use crate::sentence::split_sentences;
-use crate::timeline::{PhonemeMark, SpeechChunk, TimelineBuilder, VisemeCue};
+use crate::timeline::{PhonemeMark, TimelineBuilder, VisemeCue};
 use crate::voice::{Engine, VoiceSettings};
+
+pub use job::{CancelToken, SpeechEvent};
+use job::{Counters, Request};
 
 /// How the engine is started.
 #[derive(Debug, Clone)]
@@ -52,46 +56,6 @@ impl Default for SynthesizerConfig {
             chunk_queue: 64,
             piper: None,
         }
-    }
-}
-
-/// What an utterance produces, in order: chunks and sentence ends, then exactly one `Finished` or `Failed`.
-#[derive(Debug, Clone, PartialEq)]
-pub enum SpeechEvent {
-    Chunk(SpeechChunk),
-    /// Sentence `sentence` is complete; its audio spans `start_sample..end_sample`.
-    SentenceEnd {
-        sentence: usize,
-        text: String,
-        start_sample: u64,
-        end_sample: u64,
-    },
-    /// The utterance ended; `cancelled` when it was stopped before its end.
-    Finished {
-        total_samples: u64,
-        cancelled: bool,
-    },
-    /// espeak-ng failed (unknown voice, synthesis error); nothing more follows.
-    Failed {
-        message: String,
-    },
-}
-
-/// Stops an utterance: before it starts, between sentences, or inside a sentence at the next buffer.
-#[derive(Debug, Clone, Default)]
-pub struct CancelToken(Arc<AtomicBool>);
-
-impl CancelToken {
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    pub fn cancel(&self) {
-        self.0.store(true, Ordering::Release);
-    }
-
-    pub fn is_cancelled(&self) -> bool {
-        self.0.load(Ordering::Acquire)
     }
 }
 
@@ -217,20 +181,6 @@ impl Recording {
     }
 }
 
-struct Request {
-    text: String,
-    voice: VoiceSettings,
-    cancel: CancelToken,
-    out: mpsc::Sender<SpeechEvent>,
-}
-
-/// What the engine thread counts, read through [`Synthesizer::stats`].
-#[derive(Debug, Default)]
-struct Counters {
-    piper_runs: AtomicU64,
-    piper_cache_hits: AtomicU64,
-}
-
 /// The engine's counts since it started.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SpeechStats {
@@ -251,15 +201,6 @@ pub struct Synthesizer {
     next_id: Arc<AtomicU64>,
     queue_capacity: usize,
     chunk_queue: usize,
-}
-
-impl std::fmt::Debug for Request {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Request")
-            .field("text", &self.text)
-            .field("voice", &self.voice)
-            .finish_non_exhaustive()
-    }
 }
 
 impl Synthesizer {

@@ -7,7 +7,7 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-use super::{Counters, Request, SpeechEvent};
+use super::job::{Counters, Request, SpeechEvent};
 use crate::error::VoiceError;
 use crate::espeak::Espeak;
 use crate::piper::{self, Key, PiperVoice, Sentence};

@@ -6,7 +6,7 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use super::Sentence;
+use super::spoken::Sentence;
 
 /// What a sentence was spoken with, besides the voice.
 #[derive(Debug, Clone, PartialEq)]

@@ -3,7 +3,7 @@
 //! milliseconds, so the samples on both sides of a join meet at zero (no click) and the pause is that of a
 //! comma, not of a new sentence (no gap). Cues and phonemes move with the samples they belong to.
 
-use super::Sentence;
+use super::spoken::Sentence;
 use crate::viseme::Viseme;
 
 /// Below this level (about -40 dBFS) a sample is silence.

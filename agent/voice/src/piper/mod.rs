@@ -11,18 +11,19 @@ mod join;
 mod network;
 mod parts;
 mod phonemes;
+mod spoken;
 mod voice_file;
 
 use std::path::{Path, PathBuf};
 
 use crate::checksum;
 use crate::error::VoiceError;
-use crate::viseme::Viseme;
 
 pub(crate) use cache::{Key, SentenceCache};
 pub(crate) use join::{append, end_part, start_part};
 pub(crate) use network::Network;
 pub(crate) use parts::first_break;
+pub(crate) use spoken::Sentence;
 pub(crate) use voice_file::VoiceFile;
 
 /// Samples per frame of Piper's medium and high voices (the hop of their spectrogram).
@@ -144,18 +145,6 @@ impl PiperConfig {
         }
         checksum::verify(&self.runtime, None, "ONNX Runtime library")
     }
-}
-
-/// One sentence spoken by the voice.
-#[derive(Debug, Clone, Default)]
-pub(crate) struct Sentence {
-    pub pcm: Vec<i16>,
-    /// Viseme cues, in samples from the sentence's start.
-    pub cues: Vec<(u64, Viseme)>,
-    /// Every phoneme with its start in samples.
-    pub phonemes: Vec<(u64, char)>,
-    /// Phonemes without an id in the voice, or without a mouth shape.
-    pub unknown: Vec<char>,
 }
 
 /// A loaded voice: configuration plus network, and the sentences it spoke last.
