@@ -322,6 +322,15 @@ async fn main() -> anyhow::Result<()> {
             "knowledge: {} questions about the example folder, typed as final transcripts",
             questions.len()
         );
+        // whisper-sat owns Agent.transcript: it goes, and its channel with it, before the questions are typed.
+        rig.stop_satellite().await?;
+        let gone = tokio::time::timeout(Duration::from_secs(30), async {
+            while mic_client.channel(ch::TRANSCRIPT.name).await.is_ok() {
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        })
+        .await;
+        gone.context("Agent.transcript stayed after whisper-sat stopped")?;
         let transcript = mic_client
             .publisher(ch::TRANSCRIPT.name, ch::headers::TRANSCRIPT)
             .await?;

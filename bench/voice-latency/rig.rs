@@ -169,6 +169,15 @@ impl Rig {
         self.satellite = Some(child);
         Ok(())
     }
+    /// Stops `whisper-sat`, so that another publisher may own `Agent.transcript` (the knowledge phase types its
+    /// questions as final transcripts: a channel has one owner).
+    pub async fn stop_satellite(&mut self) -> anyhow::Result<()> {
+        if let Some(mut child) = self.satellite.take() {
+            child.kill().await.context("stopping whisper-sat")?;
+        }
+        Ok(())
+    }
+
     /// Starts `llm-sat` with the default model (`make model-llm`) and `threads` generation threads; returns its
     /// process id (for its peak memory at the end).
     pub fn start_llm_sat(&mut self, bins: &Path, threads: u32) -> anyhow::Result<u32> {
