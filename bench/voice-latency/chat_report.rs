@@ -35,6 +35,8 @@ pub struct ChatRunFigures {
     pub kept_early: bool,
     /// The tokens of each speculative turn dropped during the run (started on words the final transcript changed).
     pub dropped_tokens: Vec<u64>,
+    /// The knowledge folder's passages the turn's facts quoted (the trace's `passage` steps): the files.
+    pub passages: Vec<String>,
 }
 
 /// One figure of a run, in milliseconds.
@@ -67,7 +69,13 @@ impl ChatRunFigures {
             sentence,
             kept_early: stats["speculated"] == true,
             dropped_tokens,
+            passages: Vec::new(),
         }
+    }
+
+    /// The same run, with the knowledge passages its facts quoted.
+    pub fn with_passages(self, passages: Vec<String>) -> ChatRunFigures {
+        ChatRunFigures { passages, ..self }
     }
 
     pub fn voice_to_voice(&self) -> f64 {
@@ -97,7 +105,7 @@ impl ChatRunFigures {
     /// One line for the progress output.
     pub fn line(&self) -> String {
         format!(
-            "v2v {:>6.1} ms = transcript {:>5.1} + prompt {:>5.1} + first sentence {:>6.1} (prompt {} tokens, {} cached; first token {} ms) + tts {:>4.1}; reply {} tokens in {:.0} ms{}{}   \"{}\" -> \"{}\"",
+            "v2v {:>6.1} ms = transcript {:>5.1} + prompt {:>5.1} + first sentence {:>6.1} (prompt {} tokens, {} cached; first token {} ms) + tts {:>4.1}; reply {} tokens in {:.0} ms{}{}{}   \"{}\" -> \"{}\"",
             self.voice_to_voice(),
             self.transcript(),
             self.prompt(),
@@ -120,6 +128,11 @@ impl ChatRunFigures {
                     "; dropped early replies of {:?} tokens",
                     self.dropped_tokens
                 )
+            },
+            if self.passages.is_empty() {
+                String::new()
+            } else {
+                format!("; passage from {}", self.passages.join(", "))
             },
             self.base.text,
             self.sentence
@@ -204,6 +217,12 @@ impl ChatFigures {
             quantile(&first_token, 0.95),
             quantile(&prompt_tokens, 0.5),
             quantile(&cached, 0.5)
+        ));
+        let with_passage = self.runs.iter().filter(|r| !r.passages.is_empty()).count();
+        lines.push(format!(
+            "SUMMARY voice_to_voice_chat_knowledge_passages: {with_passage} of {} open questions carried a passage of the knowledge folder in their facts ({:.0}%)",
+            self.runs.len(),
+            100.0 * with_passage as f64 / self.runs.len().max(1) as f64
         ));
         let kept = self.runs.iter().filter(|r| r.kept_early).count();
         let dropped: Vec<u64> = self

@@ -105,6 +105,8 @@ impl Watcher {
         let mut ended: Option<(Instant, Value)> = None;
         // Speculative turns started at a pause and dropped: their tokens are wasted work.
         let mut dropped: Vec<u64> = Vec::new();
+        // The knowledge folder's passages quoted in the facts (the trace's `passage` steps).
+        let mut passages: Vec<String> = Vec::new();
         loop {
             let Ok(next) = tokio::time::timeout_at(deadline.into(), self.next()).await else {
                 bail!(
@@ -154,7 +156,15 @@ impl Watcher {
                         base = hearing.figures(at);
                     }
                 }
-                other => hearing.take(at, other),
+                other => {
+                    if let Seen::Rules(v) = &other
+                        && v["chat"]["step"] == "passage"
+                    {
+                        let text = v["chat"]["text"].as_str().unwrap_or_default();
+                        passages.push(text.split(':').next().unwrap_or_default().to_owned());
+                    }
+                    hearing.take(at, other)
+                }
             }
             // The spoken reply's first PCM and the turn's end may come in either order (one sentence ends the turn
             // at once).
@@ -173,7 +183,8 @@ impl Watcher {
                     stats,
                     text.clone(),
                     dropped,
-                ));
+                )
+                .with_passages(passages));
             }
         }
     }
