@@ -231,6 +231,13 @@ async fn run(
                 None => break,
             },
             Some(done) = chat_done.recv() => {
+                // llm-sat publishes a turn's events before it answers the call, so they are queued by now: taken
+                // first, since the select picks at random among ready branches, and on a loaded machine the
+                // answer could end the turn before its prompt was seen (tests/llm.rs's Italian turn lost its
+                // prompt trace once in a fresh-clone run).
+                while let Some(data) = chat_reply.try_recv() {
+                    mind.chat_event(&data).await;
+                }
                 for next in mind.chats.done(done) {
                     mind.chat_next(next).await;
                 }
