@@ -198,7 +198,16 @@ pub fn chat(request: &ChatRequest, offer_tools: bool, renderings: &mut Rendering
         };
         chat.push(Message { speaker, content });
     }
-    let now = rendered(&request.facts, before.filter(|_| whole), w);
+    // What the agent said last is the reply just before this question when the model gave it: already in the
+    // conversation, so not said again as a fact (some 40-60 tokens a turn the model would read before its answer).
+    let mut current = request.facts.clone();
+    if let (Some(said), Some(last)) = (&current.last_said, request.history.last())
+        && last.role == Role::Assistant
+        && same_reply(said, &last.text)
+    {
+        current.last_said = None;
+    }
+    let now = rendered(&current, before.filter(|_| whole), w);
     renderings.keep(
         Renderings::key(&request.language, &request.text, &request.facts),
         now.clone(),
@@ -224,6 +233,22 @@ pub fn chat(request: &ChatRequest, offer_tools: bool, renderings: &mut Rendering
         content: request.text.clone(),
     });
     chat
+}
+
+/// Whether what the agent said last is the model's reply in the conversation (the same words, or one the start of
+/// the other: a reply cut short is kept as heard).
+fn same_reply(said: &str, reply: &str) -> bool {
+    let words = |t: &str| -> Vec<String> {
+        t.split_whitespace()
+            .map(|w| {
+                w.trim_matches(|c: char| !c.is_alphanumeric())
+                    .to_lowercase()
+            })
+            .filter(|w| !w.is_empty())
+            .collect()
+    };
+    let (said, reply) = (words(said), words(reply));
+    !said.is_empty() && !reply.is_empty() && (said.starts_with(&reply) || reply.starts_with(&said))
 }
 
 /// `- Robot.command: turns the robot's head (action: turn; direction: left, right)`.
@@ -430,6 +455,28 @@ mod tests {
             facts: None,
             generated: None,
         }
+    }
+
+    #[test]
+    fn what_the_agent_said_last_is_not_a_fact_when_it_is_the_reply_just_before() {
+        let mut later = request("and why?");
+        later.facts.last_said = Some("The sky is blue. Light scatters.".into());
+        later.history = vec![
+            line(Role::User, "why is the sky blue"),
+            line(Role::Assistant, "The sky is blue. Light scatters."),
+        ];
+        let chat_of = |r: &ChatRequest| chat(r, false, &mut Renderings::default());
+        let facts = &chat_of(&later)[3];
+        assert_eq!(facts.speaker, Speaker::System);
+        assert!(!facts.content.contains("you last said"), "{facts:?}");
+        // A rule's words after the reply (the time, say) are not in the conversation: they stay a fact.
+        later.facts.last_said = Some("It is ten past four.".into());
+        assert!(chat_of(&later)[3].content.contains("you last said"));
+        // A reply cut short is the start of what was said.
+        later.facts.last_said = Some("The sky is blue.".into());
+        assert!(!chat_of(&later)[3].content.contains("you last said"));
+        assert!(same_reply("Hello there!", "hello there"));
+        assert!(!same_reply("", "hello"));
     }
 
     #[test]
