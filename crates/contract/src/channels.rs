@@ -35,6 +35,12 @@ const fn service(name: &'static str, doc: &'static str) -> Channel {
 
 /// The microphone: s16le mono PCM at 22050 Hz in 20 ms chunks, from the page holding the role (or any satellite).
 pub const AUDIO: Channel = stream("Agent.audio", "microphone PCM (browser link)");
+/// The microphone less the agent's own voice (the echo module, docs/voice.md): `Agent.audio`'s format, in whole
+/// 10 ms frames; whisper satellites listen here when it exists. Only while someone subscribes.
+pub const AUDIO_CLEAN: Channel = stream(
+    "Agent.audio.clean",
+    "microphone PCM less the agent's echo (echo module)",
+);
 /// The camera: 640x360 JPEG frames at up to 15 fps.
 pub const VIDEO: Channel = stream("Agent.video", "camera JPEG frames (browser link)");
 /// The camera in grey (the Y plane as JPEG), only while someone subscribes.
@@ -96,6 +102,7 @@ pub const ASR_PRESENCE_PREFIX: &str = "Agent.asr.sat.";
 /// Every channel with a fixed name.
 pub const ALL: &[Channel] = &[
     AUDIO,
+    AUDIO_CLEAN,
     VIDEO,
     VIDEO_Y,
     AUDIO_FFT,
@@ -123,6 +130,8 @@ pub mod headers {
     /// `Agent.audio` from the page.
     pub const AUDIO: &str =
         r#"{"format":"s16le","rate":22050,"channels":1,"chunk_ms":20,"source":"browser"}"#;
+    /// `Agent.audio.clean` from the echo module: whole 10 ms frames (220 samples, WebRTC's frame at this rate).
+    pub const AUDIO_CLEAN: &str = r#"{"format":"s16le","rate":22050,"channels":1,"frame_samples":220,"source":"Agent.audio","echo":"cancelled against Agent.speech"}"#;
     /// `Agent.video` from the page.
     pub const VIDEO: &str =
         r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;
@@ -203,6 +212,7 @@ mod tests {
     fn fixed_headers_are_json_objects() {
         for h in [
             headers::AUDIO,
+            headers::AUDIO_CLEAN,
             headers::VIDEO,
             headers::CTRL,
             headers::PLAYBACK,

@@ -8,6 +8,7 @@ use flow_hub::module::Module;
 
 pub mod audio_fft;
 pub mod brain;
+pub mod echo;
 mod luma;
 pub mod observer;
 mod on_demand;
@@ -28,6 +29,7 @@ pub fn builtin(language: Language, knowledge: Option<PathBuf>) -> Vec<Box<dyn Mo
             language,
             knowledge,
         }),
+        Box::new(echo::EchoModule),
         Box::new(vision::VisionModule),
         Box::new(video_y::VideoY),
         Box::new(audio_fft::AudioFft),

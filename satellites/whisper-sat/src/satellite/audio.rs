@@ -259,18 +259,24 @@ fn segment(
     }
 }
 
-/// Keeps the `Agent.audio` subscription open exactly while ASR is enabled, feeding the listener.
+/// Keeps the microphone's subscription open exactly while ASR is enabled, feeding the listener.
+///
+/// The microphone is `Agent.audio.clean` (the server's echo module: `Agent.audio` less the agent's own voice) when
+/// the hub has it, `Agent.audio` otherwise; a satellite listening to the raw stream moves to the cleaned one when
+/// it appears (a satellite that connected before the module made its channel).
 pub async fn follow_audio(
     client: Client,
     listener: Listener,
     mut enabled: watch::Receiver<bool>,
 ) -> Result<(), SatelliteError> {
+    let mut events = client.events();
     loop {
         while !*enabled.borrow_and_update() {
             enabled.changed().await?;
         }
-        let sub = client.subscribe(channels::AUDIO.name).await?;
-        tracing::info!("ASR enabled: listening to Agent.audio");
+        let name = microphone_channel(&client).await;
+        let sub = client.subscribe(name).await?;
+        tracing::info!("ASR enabled: listening to {name}");
         loop {
             tokio::select! {
                 data = sub.recv() => {
@@ -283,12 +289,36 @@ pub async fn follow_audio(
                         break;
                     }
                 }
+                event = events.recv() => match event {
+                    Ok(flow::ClientEvent::ChannelAdded(info))
+                        if info.name == channels::AUDIO_CLEAN.name && name != channels::AUDIO_CLEAN.name =>
+                    {
+                        tracing::info!("{} appeared: moving to it", channels::AUDIO_CLEAN.name);
+                        break;
+                    }
+                    Err(broadcast::error::RecvError::Closed) => return Ok(()),
+                    _ => {}
+                },
             }
         }
         // Dropping the subscription unsubscribes: a disabled satellite costs the hub nothing.
         drop(sub);
-        listener.send(Feed::Discard);
-        tracing::info!("ASR disabled: stopped listening");
+        if *enabled.borrow() {
+            // Moving to the cleaned stream: what was open on the raw one ends where it stands.
+            listener.send(Feed::Flush);
+        } else {
+            listener.send(Feed::Discard);
+            tracing::info!("ASR disabled: stopped listening");
+        }
+    }
+}
+
+/// The channel this satellite hears the microphone on: the cleaned one when the hub has it.
+async fn microphone_channel(client: &Client) -> &'static str {
+    if client.channel(channels::AUDIO_CLEAN.name).await.is_ok() {
+        channels::AUDIO_CLEAN.name
+    } else {
+        channels::AUDIO.name
     }
 }
 

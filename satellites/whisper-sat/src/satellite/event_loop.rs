@@ -478,7 +478,9 @@ impl Satellite {
             }
             Ok(ClientEvent::ChannelRemoved { name, .. }) => {
                 self.peers.remove(&name);
-                if name == agent_contract::channels::AUDIO.name {
+                if name == agent_contract::channels::AUDIO.name
+                    || name == agent_contract::channels::AUDIO_CLEAN.name
+                {
                     self.listener.send(audio::Feed::Flush);
                 }
                 if let Some(id) = claim::claimed_utterance(&name) {

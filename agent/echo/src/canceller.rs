@@ -1,0 +1,251 @@
+//! The canceller: microphone messages in, the same audio less the agent's echo out.
+//!
+//! Audio is processed in 10 ms frames (220 samples at 22050 Hz, as WebRTC frames that rate). For each microphone
+//! frame the far-end frame fed before it is the reference `lead_ms` later than the frame's capture time: AEC3 can
+//! only cancel an echo whose reference came first, and it finds the rest of the delay itself (up to about 500 ms),
+//! so the lead covers a page that plays a little earlier than its schedule says and a stamp a little late. The
+//! reference is fed on every frame, silence included, so the filter's notion of the echo path stays continuous.
+//! Output comes frame by frame: a message's leftover samples (441 is not a multiple of 220) wait for the next one.
+
+use sonora::config::EchoCanceller;
+use sonora::{AudioProcessing, Config, StreamConfig};
+
+use crate::clock::MicClock;
+use crate::rate::{RATE, samples_us};
+use crate::reference::Reference;
+use crate::residual::{ResidualConfig, ResidualGate, level_dbfs};
+
+/// Samples per processing frame: WebRTC's 10 ms at 22050 Hz.
+pub const FRAME: usize = RATE as usize / 100;
+/// Speech that finished this long before the microphone's time is forgotten (AEC3's filter covers well under it).
+const REFERENCE_KEPT_US: u64 = 2_000_000;
+
+/// The canceller's settings (`[modules.echo]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CancellerConfig {
+    /// How far ahead of the microphone the reference is fed (ms, 0..=200).
+    pub lead_ms: u32,
+    /// The page's jitter buffer before an utterance's first chunk plays, used until the page says when it played
+    /// (ms, 0..=1000).
+    pub jitter_ms: u32,
+    /// Silence what the filter leaves of the echo ([`crate::residual`]).
+    pub residual_gate: bool,
+}
+
+impl Default for CancellerConfig {
+    fn default() -> Self {
+        Self {
+            lead_ms: 60,
+            jitter_ms: 60,
+            residual_gate: true,
+        }
+    }
+}
+
+/// A setting out of range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CancellerError {
+    #[error("{key}: {value} is outside {range}")]
+    OutOfRange {
+        key: &'static str,
+        value: u32,
+        range: &'static str,
+    },
+}
+
+/// What the canceller has done so far.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CancellerStats {
+    /// 10 ms frames processed.
+    pub frames: u64,
+    /// Frames processed while the agent's speech was playing.
+    pub frames_with_speech: u64,
+    /// Frames the residual-echo gate silenced as the agent's echo.
+    pub frames_silenced: u64,
+    /// The residue's learned gain against the reference (dB).
+    pub residue_gain_db: f32,
+    /// Times the microphone stream started again (a hole in the sequence or a long pause).
+    pub restarts: u64,
+    /// AEC3's own estimate of the echo return loss enhancement (dB), once it has one.
+    pub erle_db: Option<f64>,
+    /// AEC3's estimate of the echo's delay behind the reference fed to it (ms), lead included.
+    pub delay_ms: Option<i32>,
+}
+
+/// The echo canceller of one microphone.
+pub struct Canceller {
+    cfg: CancellerConfig,
+    apm: AudioProcessing,
+    clock: MicClock,
+    reference: Reference,
+    residual: Option<ResidualGate>,
+    /// Microphone samples not yet processed (fewer than a frame) and the hub time of the first.
+    pending: Vec<f32>,
+    pending_us: u64,
+    render: Vec<f32>,
+    scratch: Vec<f32>,
+    cleaned: Vec<f32>,
+    stats: CancellerStats,
+}
+
+impl std::fmt::Debug for Canceller {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Canceller")
+            .field("cfg", &self.cfg)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Canceller {
+    /// A canceller with AEC3's default settings (high-pass filter on, no noise suppression or gain control).
+    pub fn new(cfg: CancellerConfig) -> Result<Self, CancellerError> {
+        if cfg.lead_ms > 200 {
+            return Err(CancellerError::OutOfRange {
+                key: "lead_ms",
+                value: cfg.lead_ms,
+                range: "0..=200",
+            });
+        }
+        if cfg.jitter_ms > 1000 {
+            return Err(CancellerError::OutOfRange {
+                key: "jitter_ms",
+                value: cfg.jitter_ms,
+                range: "0..=1000",
+            });
+        }
+        Ok(Self {
+            cfg,
+            apm: echo_canceller3(),
+            clock: MicClock::default(),
+            reference: Reference::new(cfg.jitter_ms),
+            residual: cfg
+                .residual_gate
+                .then(|| ResidualGate::new(ResidualConfig::default())),
+            pending: Vec::with_capacity(FRAME),
+            pending_us: 0,
+            render: vec![0.0; FRAME],
+            scratch: vec![0.0; FRAME],
+            cleaned: vec![0.0; FRAME],
+            stats: CancellerStats::default(),
+        })
+    }
+
+    /// A chunk of the agent's speech (s16le) that reached the hub at `arrival_us` ([`Reference::speech`]).
+    pub fn speech(&mut self, arrival_us: u64, framing: Option<(u32, u32)>, pcm: &[u8]) {
+        let samples: Vec<i16> = pcm
+            .chunks_exact(2)
+            .map(|b| i16::from_le_bytes([b[0], b[1]]))
+            .collect();
+        self.reference.speech(arrival_us, framing, &samples);
+    }
+
+    /// The page began playing `utterance` at `at_us` ([`Reference::played`]).
+    pub fn played(&mut self, utterance: u32, at_us: u64) {
+        self.reference.played(utterance, at_us);
+    }
+
+    /// The speech was stopped at `at_us` ([`Reference::stopped`]).
+    pub fn stopped(&mut self, at_us: u64, utterance: Option<u32>) {
+        self.reference.stopped(at_us, utterance);
+    }
+
+    /// Microphone message `seq` (s16le), stamped `ts_us` by the hub: appends the cleaned samples of every frame it
+    /// completes to `out` (s16le). Over a stream, the output is the input less the echo, sample for sample, one
+    /// frame behind at most.
+    pub fn microphone(&mut self, seq: u64, ts_us: u64, pcm: &[u8], out: &mut Vec<u8>) {
+        let placed = self.clock.place(seq, ts_us, pcm.len() / 2);
+        if placed.restarted {
+            // A new stream may be another microphone, room or loudspeaker: the filter and the learned residue
+            // start again rather than unlearn the old path while the echo leaks.
+            self.stats.restarts += 1;
+            self.apm = echo_canceller3();
+            self.residual = self
+                .cfg
+                .residual_gate
+                .then(|| ResidualGate::new(ResidualConfig::default()));
+        }
+        // The samples waiting from the last message come right before this one's.
+        self.pending_us = placed
+            .first_us
+            .saturating_sub(samples_us(self.pending.len() as u64));
+        for b in pcm.chunks_exact(2) {
+            self.pending
+                .push(f32::from(i16::from_le_bytes([b[0], b[1]])) / 32768.0);
+            if self.pending.len() == FRAME {
+                self.frame(out);
+                self.pending.clear();
+                self.pending_us += samples_us(FRAME as u64);
+            }
+        }
+        self.reference
+            .forget_before(self.pending_us.saturating_sub(REFERENCE_KEPT_US));
+    }
+
+    /// What the canceller has done so far, with AEC3's current estimates.
+    pub fn stats(&self) -> CancellerStats {
+        let aec = self.apm.statistics();
+        CancellerStats {
+            erle_db: aec.echo_return_loss_enhancement,
+            delay_ms: aec.delay_ms,
+            residue_gain_db: self.residual.as_ref().map_or(0.0, ResidualGate::gain_db),
+            ..self.stats.clone()
+        }
+    }
+
+    /// Processes the pending frame: its reference first, then the microphone.
+    fn frame(&mut self, out: &mut Vec<u8>) {
+        let lead = u64::from(self.cfg.lead_ms) * 1000;
+        let speaking = self
+            .reference
+            .render(self.pending_us + lead, &mut self.render);
+        self.stats.frames += 1;
+        if speaking {
+            self.stats.frames_with_speech += 1;
+        }
+        // Both calls fail only on a frame whose length or channel count does not match the stream's, which
+        // `FRAME` rules out; a frame that failed anyway passes through uncancelled rather than being lost.
+        let rendered = self
+            .apm
+            .process_render_f32(&[&self.render], &mut [&mut self.scratch]);
+        // No delay hint: AEC3 estimates it (the call only sets what the echo canceller is told is external delay).
+        let _ = self.apm.set_stream_delay_ms(0);
+        let captured = self
+            .apm
+            .process_capture_f32(&[&self.pending], &mut [&mut self.cleaned]);
+        let mut cleaned = if rendered.is_ok() && captured.is_ok() {
+            &self.cleaned
+        } else {
+            &self.pending
+        };
+        if let Some(gate) = &mut self.residual {
+            gate.reference(self.pending_us + lead, level_dbfs(&self.render));
+            if gate.is_echo(
+                self.pending_us,
+                level_dbfs(&self.pending),
+                level_dbfs(cleaned),
+            ) {
+                self.stats.frames_silenced += 1;
+                self.scratch.fill(0.0);
+                cleaned = &self.scratch;
+            }
+        }
+        for &s in cleaned {
+            let v = (s * 32768.0).round().clamp(-32768.0, 32767.0) as i16;
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+}
+
+/// WebRTC's audio processing with AEC3 alone, on the microphone's rate.
+fn echo_canceller3() -> AudioProcessing {
+    let stream = StreamConfig::new(RATE, 1);
+    AudioProcessing::builder()
+        .config(Config {
+            echo_canceller: Some(EchoCanceller::default()),
+            ..Default::default()
+        })
+        .capture_config(stream)
+        .render_config(stream)
+        .build()
+}
