@@ -70,6 +70,7 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	test -x models/piper-venv/bin/piper || (python3 -m venv models/piper-venv && models/piper-venv/bin/pip install -q piper-tts==1.8.0)
 	$(MAKE) model-release MODEL=base
 	AGENT_BIN_DIR=$(TARGET_DIR)/release PIPER_PYTHON=models/piper-venv/bin/python $(TARGET_DIR)/release/voice-bench | tee $(BENCH_LOGS)/voice-bench.log
+	$(TARGET_DIR)/release/echo-bench | tee $(BENCH_LOGS)/echo-bench.log
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
 	VISION_PYTHON=bench/vision/.venv/bin/python $(TARGET_DIR)/release/vision-bench --iterations 15 --rounds 3 --write-doc docs/bench-vision.md | tee $(BENCH_LOGS)/vision-bench.log
 	$(TARGET_DIR)/release/vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log

@@ -13,6 +13,7 @@ packages=(
     ffmpeg sox                               # fixture conversion for fake camera / microphone devices
     flite                                    # spoken questions for the full-pipeline test (a voice not our own)
     redis-server                             # hub benchmark baseline
+    libspeexdsp-dev                          # echo-bench's baseline: Speex's echo canceller
     # Real Italian speech with its transcripts for the Italian conversation test: the Asterisk prompts recorded by
     # Carlo Flora (CC-BY-3.0), 8 kHz WAV under /usr/share/asterisk/sounds/it_IT_m_Carlo, text in the doc directory.
     asterisk-core-sounds-it-wav asterisk-core-sounds-it

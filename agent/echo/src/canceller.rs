@@ -17,6 +17,14 @@ use crate::residual::{ResidualConfig, ResidualGate, level_dbfs};
 
 /// Samples per processing frame: WebRTC's 10 ms at 22050 Hz.
 pub const FRAME: usize = RATE as usize / 100;
+/// Samples by which AEC3's output lags its input at this rate (its resampling to the 16 kHz bands and back),
+/// measured (`tests/room.rs`); the microphone passed through uncancelled is delayed as much, so that switching
+/// between the two keeps the stream's timing.
+pub const PROCESSING_DELAY: usize = 201;
+/// AEC3 has found an echo once it has estimated a delay for it, or its own ERLE estimate reaches this (dB): with no
+/// echo at all it reports a delay of 0 and about 0.2 dB, with one 84-352 ms and 8-10 dB (measured on sox's room,
+/// tests/conversation.rs).
+const ECHO_FOUND_DB: f64 = 3.0;
 /// Speech that finished this long before the microphone's time is forgotten (AEC3's filter covers well under it).
 const REFERENCE_KEPT_US: u64 = 2_000_000;
 
@@ -60,6 +68,8 @@ pub struct CancellerStats {
     pub frames: u64,
     /// Frames processed while the agent's speech was playing.
     pub frames_with_speech: u64,
+    /// Frames whose output is AEC3's (it had found an echo); the others pass the microphone through.
+    pub frames_cancelled: u64,
     /// Frames the residual-echo gate silenced as the agent's echo.
     pub frames_silenced: u64,
     /// The residue's learned gain against the reference (dB).
@@ -83,6 +93,9 @@ pub struct Canceller {
     pending: Vec<f32>,
     pending_us: u64,
     render: Vec<f32>,
+    /// The microphone, `PROCESSING_DELAY` samples late.
+    raw: std::collections::VecDeque<f32>,
+    raw_frame: Vec<f32>,
     scratch: Vec<f32>,
     cleaned: Vec<f32>,
     stats: CancellerStats,
@@ -125,6 +138,8 @@ impl Canceller {
             pending: Vec::with_capacity(FRAME),
             pending_us: 0,
             render: vec![0.0; FRAME],
+            raw: std::iter::repeat_n(0.0, PROCESSING_DELAY).collect(),
+            raw_frame: vec![0.0; FRAME],
             scratch: vec![0.0; FRAME],
             cleaned: vec![0.0; FRAME],
             stats: CancellerStats::default(),
@@ -151,15 +166,31 @@ impl Canceller {
     }
 
     /// Microphone message `seq` (s16le), stamped `ts_us` by the hub: appends the cleaned samples of every frame it
-    /// completes to `out` (s16le). Over a stream, the output is the input less the echo, sample for sample, one
-    /// frame behind at most.
-    pub fn microphone(&mut self, seq: u64, ts_us: u64, pcm: &[u8], out: &mut Vec<u8>) {
+    /// completes to `out` (s16le). Over a stream, the output is the input less the echo, sample for sample,
+    /// `PROCESSING_DELAY` samples and at most a frame behind. When this message starts a new stream (a hole in the
+    /// sequence, or the publisher was silent for 4 s) the old stream's last samples are written first, as they
+    /// were heard, and the byte offset in `out` where the new stream begins is returned.
+    pub fn microphone(
+        &mut self,
+        seq: u64,
+        ts_us: u64,
+        pcm: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Option<usize> {
         let placed = self.clock.place(seq, ts_us, pcm.len() / 2);
+        let mut restarted_at = None;
         if placed.restarted {
+            // The old stream's tail, still in the delay line and the unfinished frame, passes through.
+            for &s in self.raw.iter().chain(&self.pending) {
+                push_s16(out, s);
+            }
+            self.pending.clear();
+            restarted_at = Some(out.len());
             // A new stream may be another microphone, room or loudspeaker: the filter and the learned residue
             // start again rather than unlearn the old path while the echo leaks.
             self.stats.restarts += 1;
             self.apm = echo_canceller3();
+            self.raw = std::iter::repeat_n(0.0, PROCESSING_DELAY).collect();
             self.residual = self
                 .cfg
                 .residual_gate
@@ -180,6 +211,7 @@ impl Canceller {
         }
         self.reference
             .forget_before(self.pending_us.saturating_sub(REFERENCE_KEPT_US));
+        restarted_at
     }
 
     /// What the canceller has done so far, with AEC3's current estimates.
@@ -213,26 +245,39 @@ impl Canceller {
         let captured = self
             .apm
             .process_capture_f32(&[&self.pending], &mut [&mut self.cleaned]);
-        let mut cleaned = if rendered.is_ok() && captured.is_ok() {
+        self.raw.extend(self.pending.iter().copied());
+        for (o, s) in self.raw_frame.iter_mut().zip(self.raw.drain(..FRAME)) {
+            *o = s;
+        }
+        // Without an echo (headphones, no loudspeaker, audio injected in tests) AEC3 would still hold a user down
+        // while the agent speaks, assuming an echo it has not found: the microphone passes through until it has.
+        let aec = self.apm.statistics();
+        let found = aec.delay_ms.is_some_and(|d| d > 0)
+            || aec
+                .echo_return_loss_enhancement
+                .is_some_and(|erle| erle >= ECHO_FOUND_DB);
+        let mut cleaned = if found && rendered.is_ok() && captured.is_ok() {
+            self.stats.frames_cancelled += 1;
             &self.cleaned
         } else {
-            &self.pending
+            &self.raw_frame
         };
         if let Some(gate) = &mut self.residual {
             gate.reference(self.pending_us + lead, level_dbfs(&self.render));
-            if gate.is_echo(
-                self.pending_us,
-                level_dbfs(&self.pending),
-                level_dbfs(cleaned),
-            ) {
+            if found
+                && gate.is_echo(
+                    self.pending_us,
+                    level_dbfs(&self.raw_frame),
+                    level_dbfs(cleaned),
+                )
+            {
                 self.stats.frames_silenced += 1;
                 self.scratch.fill(0.0);
                 cleaned = &self.scratch;
             }
         }
         for &s in cleaned {
-            let v = (s * 32768.0).round().clamp(-32768.0, 32767.0) as i16;
-            out.extend_from_slice(&v.to_le_bytes());
+            push_s16(out, s);
         }
     }
 }
@@ -248,4 +293,10 @@ fn echo_canceller3() -> AudioProcessing {
         .capture_config(stream)
         .render_config(stream)
         .build()
+}
+
+/// Appends a sample in [-1, 1] as s16le.
+fn push_s16(out: &mut Vec<u8>, sample: f32) {
+    let v = (sample * 32768.0).round().clamp(-32768.0, 32767.0) as i16;
+    out.extend_from_slice(&v.to_le_bytes());
 }

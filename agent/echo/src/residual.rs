@@ -11,7 +11,8 @@
 //! agent): the 95th percentile of the last five seconds of their cleaned level against the reference, so the floor
 //! covers how much the filter leaves in this room, its bad moments included. A user talking over the agent is
 //! barely touched by the filter (it only removes what matches the reference), so those frames teach nothing,
-//! whatever the floor was. Until half a second of such frames exists the gain is `initial_gain_db` (-12 dB, a
+//! whatever the floor was. The canceller asks the gate only while AEC3 finds an echo at all
+//! ([`crate::canceller`]). Until half a second of such frames exists the gain is `initial_gain_db` (-12 dB, a
 //! typical echo return loss: AEC3 finds the echo path within about half a second of speech). Because the residue
 //! is far under the echo once the filter has converged, a user is heard over a reply much quieter than a gate on
 //! the raw microphone would need.

@@ -149,3 +149,18 @@ fn a_user_talking_over_the_reply_comes_through() {
         "the user was distorted: correlation {correlation:.2}"
     );
 }
+
+/// With no speech from the agent (and so no echo found) the microphone passes through untouched, only delayed as
+/// much as AEC3's path would delay it.
+#[test]
+fn with_the_agent_silent_the_microphone_passes_through() {
+    use agent_echo::canceller::PROCESSING_DELAY;
+    let user = fixture("audio/LJ001-0002.wav");
+    let cleaned = cancel(CancellerConfig::default(), &[], &user);
+    assert!(cleaned.len() + PROCESSING_DELAY + 441 >= user.len());
+    assert!(cleaned[..PROCESSING_DELAY].iter().all(|&s| s == 0.0));
+    assert_eq!(
+        &cleaned[PROCESSING_DELAY..],
+        &user[..cleaned.len() - PROCESSING_DELAY]
+    );
+}

@@ -36,7 +36,9 @@ const fn service(name: &'static str, doc: &'static str) -> Channel {
 /// The microphone: s16le mono PCM at 22050 Hz in 20 ms chunks, from the page holding the role (or any satellite).
 pub const AUDIO: Channel = stream("Agent.audio", "microphone PCM (browser link)");
 /// The microphone less the agent's own voice (the echo module, docs/voice.md): `Agent.audio`'s format, in whole
-/// 10 ms frames; whisper satellites listen here when it exists. Only while someone subscribes.
+/// 10 ms frames; whisper satellites listen here when it exists. An empty message is a stream break: the
+/// microphone's stream started again (a new publisher, a hole, a pause of 4 s), as a new sequence on
+/// `Agent.audio` would say. Only while someone subscribes.
 pub const AUDIO_CLEAN: Channel = stream(
     "Agent.audio.clean",
     "microphone PCM less the agent's echo (echo module)",
@@ -131,7 +133,7 @@ pub mod headers {
     pub const AUDIO: &str =
         r#"{"format":"s16le","rate":22050,"channels":1,"chunk_ms":20,"source":"browser"}"#;
     /// `Agent.audio.clean` from the echo module: whole 10 ms frames (220 samples, WebRTC's frame at this rate).
-    pub const AUDIO_CLEAN: &str = r#"{"format":"s16le","rate":22050,"channels":1,"frame_samples":220,"source":"Agent.audio","echo":"cancelled against Agent.speech"}"#;
+    pub const AUDIO_CLEAN: &str = r#"{"format":"s16le","rate":22050,"channels":1,"frame_samples":220,"source":"Agent.audio","echo":"cancelled against Agent.speech","break":"empty message"}"#;
     /// `Agent.video` from the page.
     pub const VIDEO: &str =
         r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"browser"}"#;

@@ -137,11 +137,19 @@ impl Module for EchoModule {
                         d = microphone.recv() => {
                             let Some(d) = d else { return Ok(()) };
                             cleaned.clear();
-                            canceller.microphone(d.seq, d.ts_us, &d.payload, &mut cleaned);
-                            if !cleaned.is_empty() {
-                                // Awaited, not tried: the satellites must hear every sample. A full link stalls
-                                // only this module; the hub drops its oldest microphone messages for it (counted).
-                                publisher.publish(bytes::Bytes::copy_from_slice(&cleaned)).await?;
+                            let restarted = canceller.microphone(d.seq, d.ts_us, &d.payload, &mut cleaned);
+                            // Awaited, not tried: the satellites must hear every sample. A full link stalls only
+                            // this module; the hub drops its oldest microphone messages for it (counted).
+                            let split = restarted.unwrap_or(0);
+                            if split > 0 {
+                                publisher.publish(bytes::Bytes::copy_from_slice(&cleaned[..split])).await?;
+                            }
+                            if restarted.is_some() {
+                                // The contract's stream break: what follows is a new stream.
+                                publisher.publish(bytes::Bytes::new()).await?;
+                            }
+                            if cleaned.len() > split {
+                                publisher.publish(bytes::Bytes::copy_from_slice(&cleaned[split..])).await?;
                             }
                             report.maybe(&ctx, &canceller);
                         }
@@ -175,6 +183,7 @@ impl Report {
         ctx.report(serde_json::json!({
             "frames": s.frames,
             "frames_with_speech": s.frames_with_speech,
+            "frames_cancelled": s.frames_cancelled,
             "frames_silenced": s.frames_silenced,
             "residue_gain_db": s.residue_gain_db,
             "restarts": s.restarts,

@@ -281,7 +281,12 @@ pub async fn follow_audio(
             tokio::select! {
                 data = sub.recv() => {
                     let Some(d) = data else { return Ok(()) };
-                    listener.send(Feed::Audio { seq: d.seq, ts_us: d.ts_us, pcm: d.payload });
+                    if d.payload.is_empty() {
+                        // `Agent.audio.clean`'s stream break: the microphone's stream started again.
+                        listener.send(Feed::Flush);
+                    } else {
+                        listener.send(Feed::Audio { seq: d.seq, ts_us: d.ts_us, pcm: d.payload });
+                    }
                 }
                 changed = enabled.changed() => {
                     changed?;
