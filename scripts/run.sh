@@ -24,7 +24,9 @@ for _ in $(seq 100); do
 done
 if [[ -x "$bin/whisper-sat" ]]; then
     # WHISPER_SAT_MODEL names a provisioned model (`make run MODEL=base`); the satellite's default is tiny.en.
-    "$bin/whisper-sat" run --data-dir data --model "${WHISPER_SAT_MODEL:-tiny.en}" --language "$language" &
+    # It hears the microphone less the agent's echo (the server's echo module), with its own-voice gate as the
+    # second line for the moment before the canceller has found the echo (docs/voice.md, "Echo cancellation").
+    "$bin/whisper-sat" run --data-dir data --model "${WHISPER_SAT_MODEL:-tiny.en}" --language "$language" --echo-gate &
     sat=$!
 fi
 if [[ -x "$bin/llm-sat" ]]; then

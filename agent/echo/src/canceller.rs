@@ -95,6 +95,9 @@ pub struct Canceller {
     render: Vec<f32>,
     /// The microphone, `PROCESSING_DELAY` samples late.
     raw: std::collections::VecDeque<f32>,
+    /// Processed samples not yet handed out: each message gives back as many samples as it brought, a frame
+    /// later (whisper-sat's segmenter frames 20 ms messages as they come).
+    ready: std::collections::VecDeque<f32>,
     raw_frame: Vec<f32>,
     scratch: Vec<f32>,
     cleaned: Vec<f32>,
@@ -139,6 +142,7 @@ impl Canceller {
             pending_us: 0,
             render: vec![0.0; FRAME],
             raw: std::iter::repeat_n(0.0, PROCESSING_DELAY).collect(),
+            ready: std::iter::repeat_n(0.0, FRAME).collect(),
             raw_frame: vec![0.0; FRAME],
             scratch: vec![0.0; FRAME],
             cleaned: vec![0.0; FRAME],
@@ -165,9 +169,9 @@ impl Canceller {
         self.reference.stopped(at_us, utterance);
     }
 
-    /// Microphone message `seq` (s16le), stamped `ts_us` by the hub: appends the cleaned samples of every frame it
-    /// completes to `out` (s16le). Over a stream, the output is the input less the echo, sample for sample,
-    /// `PROCESSING_DELAY` samples and at most a frame behind. When this message starts a new stream (a hole in the
+    /// Microphone message `seq` (s16le), stamped `ts_us` by the hub: appends as many cleaned samples as it brought
+    /// to `out` (s16le). Over a stream, the output is the input less the echo, sample for sample,
+    /// `PROCESSING_DELAY` samples and a frame behind. When this message starts a new stream (a hole in the
     /// sequence, or the publisher was silent for 4 s) the old stream's last samples are written first, as they
     /// were heard, and the byte offset in `out` where the new stream begins is returned.
     pub fn microphone(
@@ -181,13 +185,15 @@ impl Canceller {
         let mut restarted_at = None;
         if placed.restarted {
             // The old stream's tail, still in the delay line and the unfinished frame, passes through.
-            for &s in self.raw.iter().chain(&self.pending) {
+            for &s in self.ready.iter().chain(&self.raw).chain(&self.pending) {
                 push_s16(out, s);
             }
             self.pending.clear();
+            self.ready = std::iter::repeat_n(0.0, FRAME).collect();
             restarted_at = Some(out.len());
-            // A new stream may be another microphone, room or loudspeaker: the filter and the learned residue
-            // start again rather than unlearn the old path while the echo leaks.
+            // A new stream may be another microphone, room or loudspeaker, or the same one with another delay: the
+            // filter and the learned residue start again rather than unlearn the old path while the echo leaks (a
+            // filter kept across tests/conversation.rs's streams, each some tens of ms off the last, leaked).
             self.stats.restarts += 1;
             self.apm = echo_canceller3();
             self.raw = std::iter::repeat_n(0.0, PROCESSING_DELAY).collect();
@@ -204,10 +210,15 @@ impl Canceller {
             self.pending
                 .push(f32::from(i16::from_le_bytes([b[0], b[1]])) / 32768.0);
             if self.pending.len() == FRAME {
-                self.frame(out);
+                self.frame();
                 self.pending.clear();
                 self.pending_us += samples_us(FRAME as u64);
             }
+        }
+        // A frame of zeros was ready before the first message, so there are always enough.
+        let n = (pcm.len() / 2).min(self.ready.len());
+        for s in self.ready.drain(..n) {
+            push_s16(out, s);
         }
         self.reference
             .forget_before(self.pending_us.saturating_sub(REFERENCE_KEPT_US));
@@ -226,7 +237,7 @@ impl Canceller {
     }
 
     /// Processes the pending frame: its reference first, then the microphone.
-    fn frame(&mut self, out: &mut Vec<u8>) {
+    fn frame(&mut self) {
         let lead = u64::from(self.cfg.lead_ms) * 1000;
         let speaking = self
             .reference
@@ -276,9 +287,7 @@ impl Canceller {
                 cleaned = &self.scratch;
             }
         }
-        for &s in cleaned {
-            push_s16(out, s);
-        }
+        self.ready.extend(cleaned.iter().copied());
     }
 }
 
