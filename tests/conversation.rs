@@ -608,7 +608,7 @@ async fn the_canceller_keeps_the_piper_voice_from_being_heard_and_lets_a_user_ba
     // some runs even with the gate ("Let me tell you." in a CI run), and AEC3's suppressor distorts a person
     // talking over a 0 dB echo beyond Whisper's reach; docs/voice.md and echo-bench have the figures.
     let scenes = [(50, 12.0, true)];
-    own_voice_scenes(&agent, &dir, &scenes, false).await?;
+    own_voice_scenes(&agent, &dir, &scenes).await?;
     // The satellite heard the cleaned microphone: the canceller (working only while someone listens) processed
     // the scenes' audio while the reply played.
     let status = agent_tests::http::get_json(agent.http, "/api/status", agent.token()).await?;
@@ -631,7 +631,7 @@ async fn with_the_canceller_off_the_echo_gate_still_keeps_the_agent_from_hearing
     let dir = DataDir::new()?;
     let agent = conversing_agent_with(&dir, "[modules.echo]\nenabled = false\n").await?;
     let _satellite = Satellite::start_with(&agent, "own-voice-asr", &["--echo-gate"]).await?;
-    own_voice_scenes(&agent, &dir, &[(50, 12.0, true), (300, 12.0, true)], false).await?;
+    own_voice_scenes(&agent, &dir, &[(50, 12.0, true), (300, 12.0, true)]).await?;
     let watcher = agent.client("own-voice-check").await?;
     assert!(
         watcher.channel(ch::AUDIO_CLEAN.name).await.is_err(),
@@ -641,13 +641,11 @@ async fn with_the_canceller_off_the_echo_gate_still_keeps_the_agent_from_hearing
 }
 
 /// The own-voice scenes, one per (echo delay in ms, attenuation in dB, with a person too): the reply's echo alone
-/// starts nothing; the echo with a person speaking over it barges in once and the person is transcribed. With
-/// `warm_up`, each room's echo is played once, unjudged, before its scenes.
+/// starts nothing; the echo with a person speaking over it barges in once and the person is transcribed.
 async fn own_voice_scenes(
     agent: &Agent,
     dir: &DataDir,
     scenes: &[(u32, f32, bool)],
-    warm_up: bool,
 ) -> anyhow::Result<()> {
     use agent_tests::spoken;
     const REPLY: &str = "Let me tell you about the weather today. In the morning it will be cloudy with a \
@@ -693,22 +691,6 @@ async fn own_voice_scenes(
     for &(delay_ms, attenuation_db, with_user) in scenes {
         let scene = format!("{delay_ms} ms, -{attenuation_db} dB");
         let echo = spoken::room_echo(&reply, delay_ms, attenuation_db, dir.path())?;
-        if warm_up {
-            // The room is heard once before it is judged: a page's microphone streams all along, so its canceller
-            // has found the echo path by a reply's second sentence; here every scene is a stream of its own.
-            let first = play_during_reply(
-                agent,
-                &say,
-                &speech,
-                &transcript,
-                &rules,
-                &avatar,
-                &echo,
-                dir.path(),
-            )
-            .await?;
-            println!("warm-up, {scene}: {first:#?}");
-        }
         let alone = play_during_reply(
             agent,
             &say,
