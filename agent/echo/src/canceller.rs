@@ -11,6 +11,8 @@ use sonora::config::EchoCanceller;
 use sonora::{AudioProcessing, Config, StreamConfig};
 
 use crate::clock::MicClock;
+use crate::onset::Onsets;
+use crate::presence::Presence;
 use crate::rate::{RATE, samples_us};
 use crate::reference::Reference;
 use crate::residual::{ResidualConfig, ResidualGate, level_dbfs};
@@ -25,6 +27,10 @@ pub const PROCESSING_DELAY: usize = 201;
 /// echo at all it reports a delay of 0 and about 0.2 dB, with one 84-352 ms and 8-10 dB (measured on sox's room,
 /// tests/conversation.rs).
 const ECHO_FOUND_DB: f64 = 3.0;
+/// Until AEC3 has found an echo, a frame is held while it is quieter than the loudest recent reference plus this
+/// (dB): a loud loudspeaker's echo, reverb added, comes back above the agent's own digital level (sox's room at
+/// 0 dB: 6 dB above it, tests/room.rs), so only a user much louder than the agent is heard before the echo is found.
+const HOLD_FLOOR_DB: f32 = 10.0;
 /// Speech that finished this long before the microphone's time is forgotten (AEC3's filter covers well under it).
 const REFERENCE_KEPT_US: u64 = 2_000_000;
 
@@ -38,6 +44,12 @@ pub struct CancellerConfig {
     pub jitter_ms: u32,
     /// Silence what the filter leaves of the echo ([`crate::residual`]).
     pub residual_gate: bool,
+    /// How much of the agent's speech the canceller hears before it decides there is no echo to find (ms of frames
+    /// with speech since an echo was last found, 0..=10000). Until AEC3 has found the echo or this much has played without it, a
+    /// frame under the agent's own level plus 10 dB is held as possible echo; after it, with no echo
+    /// found (headphones, no loudspeaker), the microphone passes through untouched. 0 (the default): never hold;
+    /// the microphone passes through until AEC3 has found the echo (docs/voice.md says what each costs).
+    pub hold_ms: u32,
 }
 
 impl Default for CancellerConfig {
@@ -46,6 +58,7 @@ impl Default for CancellerConfig {
             lead_ms: 60,
             jitter_ms: 60,
             residual_gate: true,
+            hold_ms: 0,
         }
     }
 }
@@ -80,6 +93,21 @@ pub struct CancellerStats {
     pub erle_db: Option<f64>,
     /// AEC3's estimate of the echo's delay behind the reference fed to it (ms), lead included.
     pub delay_ms: Option<i32>,
+    /// Frames held as possible echo before AEC3 had found one.
+    pub frames_held: u64,
+    /// How much of the agent's speech the current stream had heard when AEC3 first found the echo (ms).
+    pub echo_found_after_ms: Option<u64>,
+}
+
+/// What a frame's output is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Route {
+    /// AEC3's output, then the residual gate.
+    Cancelled,
+    /// The microphone, held while it could be the echo AEC3 has not found yet.
+    Held,
+    /// The microphone as it came: no echo to cancel.
+    Passed,
 }
 
 /// The echo canceller of one microphone.
@@ -89,6 +117,22 @@ pub struct Canceller {
     clock: MicClock,
     reference: Reference,
     residual: Option<ResidualGate>,
+    /// The floor a frame must clear while AEC3 has not found the echo: the reference's level plus
+    /// `HOLD_FLOOR_DB`, learning nothing.
+    hold: ResidualGate,
+    /// Whether the microphone follows the reference at all, from the levels ([`crate::presence`]).
+    presence: Presence,
+    /// The levels showed no echo in this stream (and AEC3 has found none since).
+    no_echo: bool,
+    /// Whether the microphone's voice began before the agent's speech ([`crate::onset`]).
+    onsets: Onsets,
+    /// Frames with speech in this stream, and how many there had been when AEC3 first found the echo.
+    stream_speech_frames: u64,
+    found_after: Option<u64>,
+    /// Frames with speech heard without an echo found, across streams until one finds an echo: a page that showed
+    /// no echo over a whole hold is not held again when its stream starts anew (tests/asr.rs and
+    /// tests/conversation.rs stream each recording on its own), one that had an echo is.
+    unfound_speech_frames: u64,
     /// Microphone samples not yet processed (fewer than a frame) and the hub time of the first.
     pending: Vec<f32>,
     pending_us: u64,
@@ -123,6 +167,13 @@ impl Canceller {
                 range: "0..=200",
             });
         }
+        if cfg.hold_ms > 10_000 {
+            return Err(CancellerError::OutOfRange {
+                key: "hold_ms",
+                value: cfg.hold_ms,
+                range: "0..=10000",
+            });
+        }
         if cfg.jitter_ms > 1000 {
             return Err(CancellerError::OutOfRange {
                 key: "jitter_ms",
@@ -135,9 +186,14 @@ impl Canceller {
             apm: echo_canceller3(),
             clock: MicClock::default(),
             reference: Reference::new(cfg.jitter_ms),
-            residual: cfg
-                .residual_gate
-                .then(|| ResidualGate::new(ResidualConfig::default())),
+            residual: cfg.residual_gate.then(|| residual_gate(cfg)),
+            hold: hold_gate(),
+            presence: Presence::default(),
+            no_echo: false,
+            onsets: Onsets::default(),
+            stream_speech_frames: 0,
+            found_after: None,
+            unfound_speech_frames: 0,
             pending: Vec::with_capacity(FRAME),
             pending_us: 0,
             render: vec![0.0; FRAME],
@@ -195,12 +251,18 @@ impl Canceller {
             // filter and the learned residue start again rather than unlearn the old path while the echo leaks (a
             // filter kept across tests/conversation.rs's streams, each some tens of ms off the last, leaked).
             self.stats.restarts += 1;
+            if self.found_after.is_some() {
+                self.unfound_speech_frames = 0;
+            }
             self.apm = echo_canceller3();
             self.raw = std::iter::repeat_n(0.0, PROCESSING_DELAY).collect();
-            self.residual = self
-                .cfg
-                .residual_gate
-                .then(|| ResidualGate::new(ResidualConfig::default()));
+            self.residual = self.cfg.residual_gate.then(|| residual_gate(self.cfg));
+            self.hold = hold_gate();
+            self.presence = Presence::default();
+            self.no_echo = false;
+            self.onsets = Onsets::default();
+            self.stream_speech_frames = 0;
+            self.found_after = None;
         }
         // The samples waiting from the last message come right before this one's.
         self.pending_us = placed
@@ -232,6 +294,7 @@ impl Canceller {
             erle_db: aec.echo_return_loss_enhancement,
             delay_ms: aec.delay_ms,
             residue_gain_db: self.residual.as_ref().map_or(0.0, ResidualGate::gain_db),
+            echo_found_after_ms: self.found_after.map(|frames| frames * 10),
             ..self.stats.clone()
         }
     }
@@ -245,6 +308,7 @@ impl Canceller {
         self.stats.frames += 1;
         if speaking {
             self.stats.frames_with_speech += 1;
+            self.stream_speech_frames += 1;
         }
         // Both calls fail only on a frame whose length or channel count does not match the stream's, which
         // `FRAME` rules out; a frame that failed anyway passes through uncancelled rather than being lost.
@@ -261,34 +325,84 @@ impl Canceller {
             *o = s;
         }
         // Without an echo (headphones, no loudspeaker, audio injected in tests) AEC3 would still hold a user down
-        // while the agent speaks, assuming an echo it has not found: the microphone passes through until it has.
+        // while the agent speaks, assuming an echo it has not found: its output is used once it has found one.
+        // Before that a frame under the agent's level is held (it may be the echo: the first words of the first
+        // reply, at any room's loudness), unless the microphone's voice began before the agent's, and until the
+        // levels show the microphone does not follow the agent at all or enough speech has played without an echo
+        // being found.
         let aec = self.apm.statistics();
-        let found = aec.delay_ms.is_some_and(|d| d > 0)
-            || aec
-                .echo_return_loss_enhancement
-                .is_some_and(|erle| erle >= ECHO_FOUND_DB);
-        let mut cleaned = if found && rendered.is_ok() && captured.is_ok() {
-            self.stats.frames_cancelled += 1;
-            &self.cleaned
+        let found = rendered.is_ok()
+            && captured.is_ok()
+            && (aec.delay_ms.is_some_and(|d| d > 0)
+                || aec
+                    .echo_return_loss_enhancement
+                    .is_some_and(|erle| erle >= ECHO_FOUND_DB));
+        if found && self.found_after.is_none() {
+            self.found_after = Some(self.stream_speech_frames);
+        }
+        if speaking && !found {
+            self.unfound_speech_frames += 1;
+        }
+        let render_db = level_dbfs(&self.render);
+        let raw_db = level_dbfs(&self.raw_frame);
+        let held = self.holding(found, speaking, render_db, raw_db);
+        let route = if found {
+            Route::Cancelled
+        } else if held {
+            Route::Held
         } else {
-            &self.raw_frame
+            Route::Passed
+        };
+        let mut cleaned = match route {
+            Route::Cancelled => {
+                self.stats.frames_cancelled += 1;
+                &self.cleaned
+            }
+            Route::Held | Route::Passed => &self.raw_frame,
         };
         if let Some(gate) = &mut self.residual {
-            gate.reference(self.pending_us + lead, level_dbfs(&self.render));
-            if found
-                && gate.is_echo(
-                    self.pending_us,
-                    level_dbfs(&self.raw_frame),
-                    level_dbfs(cleaned),
-                )
+            gate.reference(self.pending_us + lead, render_db);
+            if route == Route::Cancelled
+                && gate.is_echo(self.pending_us, raw_db, level_dbfs(cleaned))
             {
                 self.stats.frames_silenced += 1;
                 self.scratch.fill(0.0);
                 cleaned = &self.scratch;
             }
         }
+        if route == Route::Held && self.hold.is_echo(self.pending_us, raw_db, raw_db) {
+            self.stats.frames_held += 1;
+            self.scratch.fill(0.0);
+            cleaned = &self.scratch;
+        }
         self.ready.extend(cleaned.iter().copied());
     }
+}
+
+/// The residual gate: with the hold on, its floor starts where the hold's was (10 dB over the agent's level) until
+/// the residue is learned, since AEC3 reports an echo some frames before its filter has converged and a loud room's
+/// echo comes back above the agent's level (tests/room.rs); without it, at the typical -12 dB.
+fn residual_gate(cfg: CancellerConfig) -> ResidualGate {
+    let initial_gain_db = if cfg.hold_ms > 0 {
+        HOLD_FLOOR_DB - ResidualConfig::default().margin_db
+    } else {
+        ResidualConfig::default().initial_gain_db
+    };
+    ResidualGate::new(ResidualConfig {
+        initial_gain_db,
+        ..ResidualConfig::default()
+    })
+}
+
+/// The gate of the frames AEC3 has not yet cleaned: an echo up to `HOLD_FLOOR_DB` over the reference, never learned
+/// lower.
+fn hold_gate() -> ResidualGate {
+    ResidualGate::new(ResidualConfig {
+        margin_db: 0.0,
+        initial_gain_db: HOLD_FLOOR_DB,
+        learn_below_db: f32::NEG_INFINITY,
+        ..ResidualConfig::default()
+    })
 }
 
 /// WebRTC's audio processing with AEC3 alone, on the microphone's rate.
@@ -302,6 +416,33 @@ fn echo_canceller3() -> AudioProcessing {
         .capture_config(stream)
         .render_config(stream)
         .build()
+}
+
+impl Canceller {
+    /// Whether a frame AEC3 has not cleaned is held as possible echo (`hold_ms`); the hold's bookkeeping runs only
+    /// when it is on.
+    fn holding(&mut self, found: bool, speaking: bool, render_db: f32, raw_db: f32) -> bool {
+        if self.cfg.hold_ms == 0 {
+            return false;
+        }
+        let lead = u64::from(self.cfg.lead_ms) * 1000;
+        self.hold.reference(self.pending_us + lead, render_db);
+        self.presence.frame(render_db, raw_db);
+        if found {
+            self.no_echo = false;
+        } else if !self.no_echo && self.presence.no_echo() {
+            self.no_echo = true;
+        }
+        // The earliest the page may play this frame's reference is the frame's own time (the lead covers a page
+        // ahead of its schedule): a voice under way before it is the user's.
+        let users = self
+            .onsets
+            .frame(self.pending_us, raw_db, speaking.then_some(self.pending_us));
+        !self.no_echo
+            && !users
+            && (self.found_after.is_some()
+                || self.unfound_speech_frames * 10 < u64::from(self.cfg.hold_ms))
+    }
 }
 
 /// Appends a sample in [-1, 1] as s16le.

@@ -10,6 +10,8 @@
 
 pub mod canceller;
 pub mod clock;
+pub mod onset;
+pub mod presence;
 pub mod rate;
 pub mod reference;
 pub mod residual;

@@ -13,7 +13,8 @@
 //! barely touched by the filter (it only removes what matches the reference), so those frames teach nothing,
 //! whatever the floor was. The canceller asks the gate only while AEC3 finds an echo at all
 //! ([`crate::canceller`]). Until half a second of such frames exists the gain is `initial_gain_db` (-12 dB, a
-//! typical echo return loss: AEC3 finds the echo path within about half a second of speech). Because the residue
+//! typical echo return loss; +7 dB, 10 dB over the agent's level, when the canceller holds before AEC3 has found
+//! the echo). A user over the agent is heard once the residue is learned. Because the residue
 //! is far under the echo once the filter has converged, a user is heard over a reply much quieter than a gate on
 //! the raw microphone would need.
 

@@ -48,6 +48,15 @@ fn room(far: &[f32], delay_ms: usize, gain_db: f32) -> Vec<f32> {
 /// Runs `mic` (starting when the reply's chunks arrive) through a canceller that was sent `reply` at once, as the
 /// TTS module sends it ahead; returns the cleaned microphone.
 fn cancel(cfg: CancellerConfig, reply: &[f32], mic: &[f32]) -> Vec<f32> {
+    cancel_with_stats(cfg, reply, mic).0
+}
+
+/// [`cancel`], with what the canceller did.
+fn cancel_with_stats(
+    cfg: CancellerConfig,
+    reply: &[f32],
+    mic: &[f32],
+) -> (Vec<f32>, agent_echo::CancellerStats) {
     let mut canceller = Canceller::new(cfg).expect("valid settings");
     let t0 = 1_000_000_000u64;
     for (k, chunk) in reply.chunks(441).enumerate() {
@@ -69,14 +78,24 @@ fn cancel(cfg: CancellerConfig, reply: &[f32], mic: &[f32]) -> Vec<f32> {
     }
     let stats = canceller.stats();
     println!("{stats:?}");
-    out.chunks_exact(2)
+    let out = out
+        .chunks_exact(2)
         .map(|b| f32::from(i16::from_le_bytes([b[0], b[1]])) / 32768.0)
-        .collect()
+        .collect();
+    (out, stats)
 }
 
 fn energy(x: &[f32]) -> f64 {
     x.iter().map(|&s| f64::from(s).powi(2)).sum()
 }
+
+/// The canceller holding the microphone before AEC3 has found the echo (`hold_ms`, off by default).
+const HOLDING: CancellerConfig = CancellerConfig {
+    lead_ms: 60,
+    jitter_ms: 60,
+    residual_gate: true,
+    hold_ms: 1500,
+};
 
 /// The page plays the reply 60 ms after it arrived: the echo is that much later again.
 const PLAYED_MS: usize = 60;
@@ -162,4 +181,92 @@ fn with_the_agent_silent_the_microphone_passes_through() {
     assert_eq!(cleaned.len(), user.len());
     assert!(cleaned[..late].iter().all(|&s| s == 0.0));
     assert_eq!(&cleaned[late..], &user[..cleaned.len() - late]);
+}
+
+/// A fresh stream's first words of echo, before AEC3 has found it, are held at any room's loudness (0 dB included,
+/// which no learned gate holds): nothing loud comes out of the first half second of the reply's echo.
+#[test]
+fn the_first_words_of_the_echo_are_held_before_the_filter_has_found_it() {
+    let reply = fixture("audio/LJ001-0001.wav");
+    for delay_ms in [50, 300] {
+        for gain_db in [-12.0, 0.0] {
+            let echo = room(&reply, PLAYED_MS + delay_ms, gain_db);
+            let (cleaned, stats) = cancel_with_stats(HOLDING, &reply, &echo);
+            let found = stats.echo_found_after_ms;
+            println!("delay {delay_ms} ms, {gain_db} dB: found after {found:?} ms of speech");
+            assert!(found.is_some(), "AEC3 never found the echo: {stats:?}");
+            // The loudest 20 ms of the first 1.5 s out, against the echo's loudest.
+            let loudest = |x: &[f32]| {
+                x[..(3 * RATE as usize / 2).min(x.len())]
+                    .chunks(441)
+                    .map(|c| energy(c) / c.len() as f64)
+                    .fold(0.0, f64::max)
+            };
+            let left = 10.0 * (loudest(&cleaned) / loudest(&echo).max(1e-12)).log10();
+            println!("  loudest 20 ms left of the first 1.5 s: {left:.1} dB");
+            assert!(
+                left < -20.0,
+                "delay {delay_ms} ms, {gain_db} dB: {left:.1} dB left"
+            );
+        }
+    }
+}
+
+/// With no echo at all (headphones) the canceller stops holding once `hold_ms` of the reply has played: a user
+/// heard over the rest of the reply comes through untouched.
+#[test]
+fn without_an_echo_the_hold_ends_and_a_user_over_the_reply_passes_through() {
+    use agent_echo::canceller::{FRAME, PROCESSING_DELAY};
+    let reply = fixture("audio/LJ001-0001.wav");
+    let user = fixture("audio/LJ001-0002.wav");
+    let user_at = 3 * RATE as usize;
+    let mut mic = vec![0.0; user_at];
+    mic.extend_from_slice(&user);
+    let (cleaned, stats) = cancel_with_stats(HOLDING, &reply, &mic);
+    assert_eq!(stats.echo_found_after_ms, None, "{stats:?}");
+    let late = PROCESSING_DELAY + FRAME;
+    assert_eq!(&cleaned[user_at + late..], &user[..user.len() - late]);
+}
+
+/// The levels of 10 ms frames of `x` (dBFS).
+fn frame_levels(x: &[f32]) -> Vec<f32> {
+    x.chunks(RATE as usize / 100)
+        .map(agent_echo::residual::level_dbfs)
+        .collect()
+}
+
+/// On real speech, the levels tell an echo from a person: the reply's echo through the room is never taken for no
+/// echo, and a different person talking over the reply (no loudspeaker) is, within a second of the reply.
+#[test]
+fn the_levels_tell_the_replys_echo_from_a_person_talking_over_it() {
+    use agent_echo::presence::Presence;
+    let reply = fixture("audio/LJ001-0001.wav");
+    let reference = frame_levels(&reply);
+    for delay_ms in [50, 300] {
+        for gain_db in [-12.0, 0.0] {
+            let echo = frame_levels(&room(&reply, PLAYED_MS + delay_ms, gain_db));
+            let mut presence = Presence::default();
+            for (i, (&r, &m)) in reference.iter().zip(&echo).enumerate() {
+                presence.frame(r, m);
+                assert!(
+                    !presence.no_echo(),
+                    "{delay_ms} ms, {gain_db} dB, at {} ms",
+                    i * 10
+                );
+            }
+        }
+    }
+    for other in ["audio/LJ001-0002.wav", "audio/LJ001-0004.wav"] {
+        let user = frame_levels(&fixture(other));
+        let mut presence = Presence::default();
+        let no_echo_at = reference.iter().zip(&user).position(|(&r, &m)| {
+            presence.frame(r, m);
+            presence.no_echo()
+        });
+        println!(
+            "{other} over the reply: no echo after {:?} ms",
+            no_echo_at.map(|i| i * 10)
+        );
+        assert!(no_echo_at.is_some_and(|i| i <= 100), "{other}");
+    }
 }

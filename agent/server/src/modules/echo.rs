@@ -34,6 +34,9 @@ pub struct EchoParams {
     pub jitter_ms: u32,
     /// Silence what the adaptive filter leaves of the echo (`agent_echo::residual`).
     pub residual_gate: bool,
+    /// The agent's speech a new stream hears before deciding it has no echo; until then frames under the agent's
+    /// level are held (ms, 0..=10000).
+    pub hold_ms: u32,
 }
 
 impl Default for EchoParams {
@@ -44,6 +47,7 @@ impl Default for EchoParams {
             lead_ms: cfg.lead_ms,
             jitter_ms: cfg.jitter_ms,
             residual_gate: cfg.residual_gate,
+            hold_ms: cfg.hold_ms,
         }
     }
 }
@@ -62,6 +66,7 @@ impl EchoParams {
             lead_ms: self.lead_ms,
             jitter_ms: self.jitter_ms,
             residual_gate: self.residual_gate,
+            hold_ms: self.hold_ms,
         })
         .map_err(|e| anyhow::anyhow!("[modules.echo] {e}"))
     }
@@ -185,6 +190,8 @@ impl Report {
             "frames_with_speech": s.frames_with_speech,
             "frames_cancelled": s.frames_cancelled,
             "frames_silenced": s.frames_silenced,
+            "frames_held": s.frames_held,
+            "echo_found_after_ms": s.echo_found_after_ms,
             "residue_gain_db": s.residue_gain_db,
             "restarts": s.restarts,
             "erle_db": s.erle_db,
