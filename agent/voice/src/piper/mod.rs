@@ -46,8 +46,9 @@ pub struct PiperConfig {
     pub noise_w: Option<f32>,
     /// Slower (> 1) or faster (< 1) speech before the rate of each request; `None`: the voice's default (1.0).
     pub length_scale: Option<f32>,
-    /// ONNX Runtime threads inside one run. One by default: the agent shares its cores with whisper-sat, and on
-    /// two busy cores a second spinning thread made each run two to three times slower (docs/voice.md).
+    /// ONNX Runtime threads inside one run, the caller's included. Its helpers sleep rather than spin while they
+    /// wait, so they only take cores that are idle: two made the first audio ~30% sooner on two quiet cores and no
+    /// later on busy ones (docs/voice.md, "Threads").
     pub threads: usize,
     /// The first sentence of an utterance is cut at its first natural break after this many words, and its first
     /// part spoken while the rest is synthesised (`piper::parts`); 0 speaks every sentence in one run.
@@ -81,7 +82,7 @@ impl Default for PiperConfig {
             noise_scale: None,
             noise_w: None,
             length_scale: None,
-            threads: 1,
+            threads: 2,
             first_part_words: 3,
             cache_seconds: 60,
         }

@@ -82,6 +82,11 @@ impl Network {
             .map_err(|e| failed(&e))?
             .with_inter_threads(1)
             .map_err(|e| failed(&e))?
+            // Helpers sleep instead of spinning while they wait for work: a spinning helper took a busy core from
+            // whisper-sat and the page (each run two to three times slower), a sleeping one only runs where a core
+            // is idle, and ONNX Runtime takes back the work it has not started (docs/voice.md, "Threads").
+            .with_intra_op_spinning(false)
+            .map_err(|e| failed(&e))?
             .commit_from_file(model)
             .map_err(|e| failed(&e))?;
         let outputs: Vec<&str> = session.outputs().iter().map(|o| o.name()).collect();

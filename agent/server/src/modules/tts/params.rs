@@ -76,7 +76,7 @@ pub struct PiperParams {
     pub noise_w: Option<f32>,
     /// Slower (> 1) or faster (< 1), 0.25-4, before `rate_wpm` (175 = 1.0) scales it.
     pub length_scale: Option<f32>,
-    /// ONNX Runtime threads for one sentence, 1-16 (default 1).
+    /// ONNX Runtime threads for one sentence, 1-16 (default 2; the helpers sleep rather than spin).
     pub threads: Option<usize>,
     /// The first sentence of a reply is cut at its first natural break after this many words and its first part
     /// played while the rest is synthesised, 0-50 (default 3; 0: whole sentences).
