@@ -33,16 +33,10 @@ static ONE_BROWSER: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 fn media() -> &'static FakeMedia {
     static MEDIA: OnceLock<FakeMedia> = OnceLock::new();
     MEDIA.get_or_init(|| {
-        static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-        let dir = DIR.get_or_init(|| {
-            tempfile::Builder::new()
-                .prefix("avatar3d-fixtures-")
-                .tempdir()
-                .expect("temp dir")
-        });
-        prepare(dir.path())
-            .expect("converting fixtures with ffmpeg")
-            .0
+        // Shared with tests/browser.rs, in cargo's folder for test files (not a temporary folder per process, which
+        // a static never drops).
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("browser-fixtures");
+        prepare(&dir).expect("converting fixtures with ffmpeg").0
     })
 }
 

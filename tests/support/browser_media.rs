@@ -17,7 +17,8 @@ pub fn speech_fixture() -> PathBuf {
 /// Frequency of the test tone the FFT test plays.
 pub const TONE_HZ: f64 = 1000.0;
 
-/// Converts the fixtures once per test process into `dir`: the speech and a test tone as 48 kHz WAV (what a
+/// Converts the fixtures into `dir`, keeping what is there (a shared folder is converted once per machine; delete
+/// it after changing a conversion here): the speech and a test tone as 48 kHz WAV (what a
 /// sound card gives, so the page's resampler has real work to do) and the camera frames as a 15 fps Y4M video.
 pub fn prepare(dir: &Path) -> anyhow::Result<(FakeMedia, FakeMedia)> {
     std::fs::create_dir_all(dir)?;
@@ -27,41 +28,38 @@ pub fn prepare(dir: &Path) -> anyhow::Result<(FakeMedia, FakeMedia)> {
     let speech = dir.join("speech.wav");
     let tone = dir.join("tone.wav");
     if !video.exists() {
-        ffmpeg(&[
-            "-framerate",
-            "15",
-            "-i",
-            path_str(&frames)?,
-            "-pix_fmt",
-            "yuv420p",
-            path_str(&video)?,
-        ])?;
+        convert(
+            &video,
+            &[
+                "-framerate",
+                "15",
+                "-i",
+                path_str(&frames)?,
+                "-pix_fmt",
+                "yuv420p",
+            ],
+        )?;
     }
     if !speech.exists() {
-        ffmpeg(&[
-            "-i",
-            path_str(&speech_fixture())?,
-            "-ar",
-            "48000",
-            "-ac",
-            "1",
-            path_str(&speech)?,
-        ])?;
+        convert(
+            &speech,
+            &[
+                "-i",
+                path_str(&speech_fixture())?,
+                "-ar",
+                "48000",
+                "-ac",
+                "1",
+            ],
+        )?;
     }
     if !tone.exists() {
         // A half-scale sine (ffmpeg's `sine` source has a fixed 1/8 amplitude, so the expression source is used).
         let src = format!("aevalsrc=0.5*sin(2*PI*{TONE_HZ}*t):s=48000:d=10");
-        ffmpeg(&[
-            "-f",
-            "lavfi",
-            "-i",
-            &src,
-            "-ac",
-            "1",
-            "-c:a",
-            "pcm_s16le",
-            path_str(&tone)?,
-        ])?;
+        convert(
+            &tone,
+            &["-f", "lavfi", "-i", &src, "-ac", "1", "-c:a", "pcm_s16le"],
+        )?;
     }
     Ok((
         FakeMedia {
@@ -80,19 +78,30 @@ fn path_str(p: &Path) -> anyhow::Result<&str> {
         .with_context(|| format!("non-UTF-8 path {}", p.display()))
 }
 
-fn ffmpeg(args: &[&str]) -> anyhow::Result<()> {
-    let out = Command::new("ffmpeg")
+/// Runs ffmpeg with `args` into `out`, written under a name of this process's and renamed into place when whole:
+/// the test processes of a run share the folder, and one must never read a file another is still writing.
+fn convert(out: &Path, args: &[&str]) -> anyhow::Result<()> {
+    let name = out
+        .file_name()
+        .and_then(|n| n.to_str())
+        .with_context(|| format!("no file name in {}", out.display()))?;
+    // ffmpeg picks the format by the extension, so the process's mark goes before it.
+    let part = out.with_file_name(format!("{}.{name}", std::process::id()));
+    let done = Command::new("ffmpeg")
         .args(["-loglevel", "error", "-y"])
         .args(args)
+        .arg(&part)
         .output()
         .context("running ffmpeg (apt-get install ffmpeg)")?;
-    if !out.status.success() {
+    if !done.status.success() {
+        let _ = std::fs::remove_file(&part);
         bail!(
             "ffmpeg {args:?} failed: {}",
-            String::from_utf8_lossy(&out.stderr)
+            String::from_utf8_lossy(&done.stderr)
         );
     }
-    Ok(())
+    std::fs::rename(&part, out)
+        .with_context(|| format!("moving {} to {}", part.display(), out.display()))
 }
 
 /// Reads a mono s16 WAV file's samples.
@@ -194,31 +203,33 @@ pub fn prepare_pipeline(dir: &Path) -> anyhow::Result<FakeMedia> {
     if !video.exists() {
         let face = fx.join("faces/fr_obama.jpg");
         let code = fx.join("qr/derived/zxing_qrcode-1_17_640x360.jpg");
-        ffmpeg(&[
-            "-loop",
-            "1",
-            "-framerate",
-            "15",
-            "-t",
-            "10",
-            "-i",
-            path_str(&face)?,
-            "-loop",
-            "1",
-            "-framerate",
-            "15",
-            "-t",
-            "10",
-            "-i",
-            path_str(&code)?,
-            "-filter_complex",
-            "[0]scale=-2:330,pad=640:360:640-iw-20:15:black,setsar=1[a];[1]scale=640:360,setsar=1[b];[a][b]concat=n=2:v=1[v]",
-            "-map",
-            "[v]",
-            "-pix_fmt",
-            "yuv420p",
-            path_str(&video)?,
-        ])?;
+        convert(
+            &video,
+            &[
+                "-loop",
+                "1",
+                "-framerate",
+                "15",
+                "-t",
+                "10",
+                "-i",
+                path_str(&face)?,
+                "-loop",
+                "1",
+                "-framerate",
+                "15",
+                "-t",
+                "10",
+                "-i",
+                path_str(&code)?,
+                "-filter_complex",
+                "[0]scale=-2:330,pad=640:360:640-iw-20:15:black,setsar=1[a];[1]scale=640:360,setsar=1[b];[a][b]concat=n=2:v=1[v]",
+                "-map",
+                "[v]",
+                "-pix_fmt",
+                "yuv420p",
+            ],
+        )?;
     }
     if !audio.exists() {
         let mut parts = Vec::new();
@@ -258,12 +269,11 @@ pub fn prepare_pipeline(dir: &Path) -> anyhow::Result<FakeMedia> {
                 "48000",
                 "-c:a",
                 "pcm_s16le",
-                path_str(&audio)?,
             ]
             .map(str::to_owned),
         );
         let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-        ffmpeg(&refs)?;
+        convert(&audio, &refs)?;
     }
     Ok(FakeMedia {
         audio_wav: audio,
