@@ -11,8 +11,7 @@ use sonora::config::EchoCanceller;
 use sonora::{AudioProcessing, Config, StreamConfig};
 
 use crate::clock::MicClock;
-use crate::onset::Onsets;
-use crate::presence::Presence;
+use crate::hold::{HOLD_FLOOR_DB, Hold};
 use crate::rate::{RATE, samples_us};
 use crate::reference::Reference;
 use crate::residual::{ResidualConfig, ResidualGate, level_dbfs};
@@ -27,10 +26,6 @@ pub const PROCESSING_DELAY: usize = 201;
 /// echo at all it reports a delay of 0 and about 0.2 dB, with one 84-352 ms and 8-10 dB (measured on sox's room,
 /// tests/conversation.rs).
 const ECHO_FOUND_DB: f64 = 3.0;
-/// Until AEC3 has found an echo, a frame is held while it is quieter than the loudest recent reference plus this
-/// (dB): a loud loudspeaker's echo, reverb added, comes back above the agent's own digital level (sox's room at
-/// 0 dB: 6 dB above it, tests/room.rs), so only a user much louder than the agent is heard before the echo is found.
-const HOLD_FLOOR_DB: f32 = 10.0;
 /// Speech that finished this long before the microphone's time is forgotten (AEC3's filter covers well under it).
 const REFERENCE_KEPT_US: u64 = 2_000_000;
 
@@ -45,10 +40,11 @@ pub struct CancellerConfig {
     /// Silence what the filter leaves of the echo ([`crate::residual`]).
     pub residual_gate: bool,
     /// How much of the agent's speech the canceller hears before it decides there is no echo to find (ms of frames
-    /// with speech since an echo was last found, 0..=10000). Until AEC3 has found the echo or this much has played without it, a
-    /// frame under the agent's own level plus 10 dB is held as possible echo; after it, with no echo
-    /// found (headphones, no loudspeaker), the microphone passes through untouched. 0 (the default): never hold;
-    /// the microphone passes through until AEC3 has found the echo (docs/voice.md says what each costs).
+    /// with speech and no echo found, counted across streams until one finds an echo; 0..=10000). Until AEC3 has
+    /// found the echo or this much has played without it, a frame under the agent's own level plus 10 dB is held as
+    /// possible echo ([`crate::hold`]); after it, with no echo found (headphones, no loudspeaker), the microphone
+    /// passes through untouched. 0 (the default): never hold; the microphone passes through until AEC3 has found
+    /// the echo (docs/voice.md says what each costs).
     pub hold_ms: u32,
 }
 
@@ -117,15 +113,8 @@ pub struct Canceller {
     clock: MicClock,
     reference: Reference,
     residual: Option<ResidualGate>,
-    /// The floor a frame must clear while AEC3 has not found the echo: the reference's level plus
-    /// `HOLD_FLOOR_DB`, learning nothing.
-    hold: ResidualGate,
-    /// Whether the microphone follows the reference at all, from the levels ([`crate::presence`]).
-    presence: Presence,
-    /// The levels showed no echo in this stream (and AEC3 has found none since).
-    no_echo: bool,
-    /// Whether the microphone's voice began before the agent's speech ([`crate::onset`]).
-    onsets: Onsets,
+    /// The hold of the frames AEC3 has not cleaned yet, when `hold_ms` is on.
+    hold: Hold,
     /// Frames with speech in this stream, and how many there had been when AEC3 first found the echo.
     stream_speech_frames: u64,
     found_after: Option<u64>,
@@ -187,10 +176,7 @@ impl Canceller {
             clock: MicClock::default(),
             reference: Reference::new(cfg.jitter_ms),
             residual: cfg.residual_gate.then(|| residual_gate(cfg)),
-            hold: hold_gate(),
-            presence: Presence::default(),
-            no_echo: false,
-            onsets: Onsets::default(),
+            hold: Hold::default(),
             stream_speech_frames: 0,
             found_after: None,
             unfound_speech_frames: 0,
@@ -257,10 +243,7 @@ impl Canceller {
             self.apm = echo_canceller3();
             self.raw = std::iter::repeat_n(0.0, PROCESSING_DELAY).collect();
             self.residual = self.cfg.residual_gate.then(|| residual_gate(self.cfg));
-            self.hold = hold_gate();
-            self.presence = Presence::default();
-            self.no_echo = false;
-            self.onsets = Onsets::default();
+            self.hold = Hold::default();
             self.stream_speech_frames = 0;
             self.found_after = None;
         }
@@ -370,7 +353,7 @@ impl Canceller {
                 cleaned = &self.scratch;
             }
         }
-        if route == Route::Held && self.hold.is_echo(self.pending_us, raw_db, raw_db) {
+        if route == Route::Held && self.hold.is_echo(self.pending_us, raw_db) {
             self.stats.frames_held += 1;
             self.scratch.fill(0.0);
             cleaned = &self.scratch;
@@ -390,17 +373,6 @@ fn residual_gate(cfg: CancellerConfig) -> ResidualGate {
     };
     ResidualGate::new(ResidualConfig {
         initial_gain_db,
-        ..ResidualConfig::default()
-    })
-}
-
-/// The gate of the frames AEC3 has not yet cleaned: an echo up to `HOLD_FLOOR_DB` over the reference, never learned
-/// lower.
-fn hold_gate() -> ResidualGate {
-    ResidualGate::new(ResidualConfig {
-        margin_db: 0.0,
-        initial_gain_db: HOLD_FLOOR_DB,
-        learn_below_db: f32::NEG_INFINITY,
         ..ResidualConfig::default()
     })
 }
@@ -426,22 +398,15 @@ impl Canceller {
             return false;
         }
         let lead = u64::from(self.cfg.lead_ms) * 1000;
-        self.hold.reference(self.pending_us + lead, render_db);
-        self.presence.frame(render_db, raw_db);
-        if found {
-            self.no_echo = false;
-        } else if !self.no_echo && self.presence.no_echo() {
-            self.no_echo = true;
-        }
-        // The earliest the page may play this frame's reference is the frame's own time (the lead covers a page
-        // ahead of its schedule): a voice under way before it is the user's.
-        let users = self
-            .onsets
-            .frame(self.pending_us, raw_db, speaking.then_some(self.pending_us));
-        !self.no_echo
-            && !users
-            && (self.found_after.is_some()
-                || self.unfound_speech_frames * 10 < u64::from(self.cfg.hold_ms))
+        self.hold.frame(
+            self.pending_us,
+            self.pending_us + lead,
+            render_db,
+            raw_db,
+            speaking,
+            found,
+        ) && (self.found_after.is_some()
+            || self.unfound_speech_frames * 10 < u64::from(self.cfg.hold_ms))
     }
 }
 

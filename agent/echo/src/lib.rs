@@ -10,6 +10,7 @@
 
 pub mod canceller;
 pub mod clock;
+pub mod hold;
 pub mod onset;
 pub mod presence;
 pub mod rate;

@@ -72,13 +72,19 @@ fn extend(run: Option<(u64, u64)>, event: Option<u64>, now_us: u64) -> Option<(u
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_voice_under_way_when_the_agent_begins_is_the_users() {
+    /// Onsets that have heard the first second of a quiet room (-60 dB) with the agent silent, none of it early.
+    fn after_a_quiet_second() -> Onsets {
         let mut onsets = Onsets::default();
-        // Room noise, then the user talks from 1 s on, with short gaps between words.
         for k in 0..100u64 {
             assert!(!onsets.frame(k * 10_000, -60.0, None));
         }
+        onsets
+    }
+
+    #[test]
+    fn a_voice_under_way_when_the_agent_begins_is_the_users() {
+        // Room noise, then the user talks from 1 s on, with short gaps between words.
+        let mut onsets = after_a_quiet_second();
         for k in 100..400u64 {
             let level = if k % 30 < 25 { -25.0 } else { -60.0 };
             // The agent starts at 2 s.
@@ -90,10 +96,7 @@ mod tests {
 
     #[test]
     fn a_voice_that_starts_after_the_agent_may_be_its_echo() {
-        let mut onsets = Onsets::default();
-        for k in 0..100u64 {
-            onsets.frame(k * 10_000, -60.0, None);
-        }
+        let mut onsets = after_a_quiet_second();
         // The agent from 1 s on, a loud microphone 300 ms later.
         for k in 100..300u64 {
             let level = if k >= 130 { -20.0 } else { -60.0 };
@@ -106,10 +109,7 @@ mod tests {
 
     #[test]
     fn the_echo_of_a_sentence_running_on_into_the_next_is_not_the_users() {
-        let mut onsets = Onsets::default();
-        for k in 0..100u64 {
-            onsets.frame(k * 10_000, -60.0, None);
-        }
+        let mut onsets = after_a_quiet_second();
         // The agent's first sentence from 1 s to 2 s, its echo from 1.1 s to 2.3 s; the next sentence at 2.4 s.
         for k in 100..400u64 {
             let speaking = ((100..200).contains(&k) || k >= 240).then_some(k * 10_000);
