@@ -602,8 +602,9 @@ async fn the_canceller_keeps_the_piper_voice_from_being_heard_and_lets_a_user_ba
 -> anyhow::Result<()> {
     let _one = ONE_CONVERSATION.lock().await;
     let dir = DataDir::new()?;
-    // The voice's cache holds the reply, so that every scene's reply is the very audio its echo was made of.
-    let agent = conversing_agent_with(&dir, "[modules.tts]\nengine = \"piper\"\n").await?;
+    // The default voice, Piper: its cache holds the reply, so that every scene's reply is the very audio its echo
+    // was made of.
+    let agent = conversing_agent(&dir).await?;
     // As `make run` starts it: the gate follows the cleaned stream as the second line (docs/voice.md).
     let _satellite = Satellite::start_with(&agent, "own-voice-asr", &["--echo-gate"]).await?;
     // 50 ms late and 12 dB down. Each scene is a microphone stream of its own, so a fresh canceller, which passes
@@ -633,7 +634,12 @@ async fn with_the_canceller_off_the_echo_gate_still_keeps_the_agent_from_hearing
 -> anyhow::Result<()> {
     let _one = ONE_CONVERSATION.lock().await;
     let dir = DataDir::new()?;
-    let agent = conversing_agent_with(&dir, "[modules.echo]\nenabled = false\n").await?;
+    // The gate alone holds espeak-ng's voice (Piper's livelier audio is the canceller's: docs/voice.md).
+    let agent = conversing_agent_with(
+        &dir,
+        "[modules.echo]\nenabled = false\n[modules.tts]\nengine = \"espeak\"\n",
+    )
+    .await?;
     let _satellite = Satellite::start_with(&agent, "own-voice-asr", &["--echo-gate"]).await?;
     own_voice_scenes(&agent, &dir, &[(50, 12.0, true), (300, 12.0, true)]).await?;
     let watcher = agent.client("own-voice-check").await?;

@@ -227,6 +227,14 @@ async fn with_every_module_on_the_page_draws_what_the_agent_sees_and_plays_what_
         .await?;
     let voice = browser.eval(&tab, "agentDebug.latency.voice.last").await?;
     println!("speech end -> reply audio: {voice} ms");
+    // Beside it, the strip names the voice that answers: English speaks with Piper by default (the welcome's voice).
+    browser
+        .wait_for(
+            &tab,
+            "agentDebug.latency.engine === 'piper' && document.getElementById('st-voice').textContent.includes('Piper')",
+            STAGE,
+        )
+        .await?;
     let before = browser.eval(&tab, "agentDebug.speechChunks").await?;
     let before = before.as_u64().unwrap_or_default();
     browser

@@ -93,7 +93,7 @@ impl ChatRunFigures {
     pub fn first_sentence(&self) -> f64 {
         ms(self.prompt, self.first_sentence)
     }
-    /// First `sentence` -> first reply PCM (the brain's `say`, espeak's first chunk).
+    /// First `sentence` -> first reply PCM (the brain's `say`, the voice's first chunk).
     pub fn first_pcm(&self) -> f64 {
         ms(self.first_sentence, self.base.first_pcm)
     }

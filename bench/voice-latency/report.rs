@@ -174,7 +174,7 @@ impl Figures {
             },
             Stage {
                 name: "first_tts_chunk",
-                how: "rule trace received -> first reply PCM received (say request, espeak's first chunk)",
+                how: "rule trace received -> first reply PCM received (say request, the voice's first chunk)",
                 values: of(RunFigures::first_chunk),
             },
             Stage {

@@ -43,6 +43,7 @@ export function installDebugHook({ avatar, avatarRenderer, avatarReason, link, p
     camera: { last: latencies.camera.last, median: latencies.camera.median() },
     clockOffsetMs: link.clock.offset(),
     behind: [...latencies.behind],
+    engine: latencies.engine,
   }));
   define("connection", () => link.state);
   define("sent", () => ({ ...page.sent }));

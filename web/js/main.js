@@ -294,6 +294,7 @@ link.addEventListener("welcome", (ev) => {
   // Connected again: an earlier refusal shown in the banner no longer holds.
   showBanner(null);
   applyLanguage(pickLanguage(params.get("lang"), ev.detail.language));
+  latencies.speaksWith(ev.detail.voice);
   page.welcomes += 1;
   refreshButtons();
   refreshAgentControls();

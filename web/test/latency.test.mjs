@@ -59,6 +59,19 @@ test("the stages the server says are behind are shown beside the voice figure, a
   assert.ok(!l.voiceText().includes("slow"), l.voiceText());
 });
 
+test("the voice figure names the engine the welcome says speaks, and an older server's welcome names none", () => {
+  const link = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/link.json", import.meta.url), "utf8"));
+  const l = new Latencies();
+  l.turn(vector.messages.find((m) => !m.behind));
+  assert.ok(!l.voiceText().includes("·"), l.voiceText());
+  l.speaksWith(link.welcome.voice);
+  assert.ok(l.voiceText().endsWith(" · espeak-ng"), l.voiceText());
+  l.speaksWith("piper");
+  assert.ok(l.voiceText().endsWith(" · Piper"), l.voiceText());
+  l.speaksWith(undefined);
+  assert.ok(!l.voiceText().includes("·"), l.voiceText());
+});
+
 test("a figure shows the last value and the median of the recent ones", () => {
   const f = new Figure();
   assert.equal(f.text(), "–");

@@ -28,7 +28,16 @@ pub fn application(config: &Config) -> anyhow::Result<Application> {
     let fft_hop = modules::audio_fft::AudioFftParams::from_json(&config.module("audio_fft"))
         .map_err(|e| config.module_error("browser", &format!("{e:#}")))?
         .hop;
-    let browser = browser::BrowserLink::from_config(config, fft_hop, shutdown.subscribe())
+    // And which engine speaks: the latency figure names it.
+    let voice = match modules::tts::params::TtsParams::from_json(&config.module("tts"))
+        .map_err(|e| config.module_error("tts", &format!("{e:#}")))?
+        .voice_settings(language)
+        .engine
+    {
+        agent_voice::Engine::Piper => "piper",
+        agent_voice::Engine::Espeak => "espeak",
+    };
+    let browser = browser::BrowserLink::from_config(config, fft_hop, voice, shutdown.subscribe())
         .map_err(|e| config.module_error("browser", &format!("{e:#}")))?;
     let knowledge = Some(config.agent.knowledge.trim())
         .filter(|dir| !dir.is_empty())

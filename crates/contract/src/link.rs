@@ -74,10 +74,18 @@ pub struct Welcome {
     /// unless `?lang=` chooses. Absent from servers that predate it, which speak English.
     #[serde(default = "english")]
     pub language: String,
+    /// The engine that speaks that language by default (`piper`, the neural voice, or `espeak`, espeak-ng): the
+    /// latency figure on the page names it. Absent from servers that predate it, which speak with espeak-ng.
+    #[serde(default = "espeak")]
+    pub voice: String,
 }
 
 fn english() -> String {
     "en".into()
+}
+
+fn espeak() -> String {
+    "espeak".into()
 }
 
 /// Media counters of the last second.

@@ -269,6 +269,7 @@ pub fn link() -> serde_json::Value {
             state: "free".into(),
         },
         language: "it".into(),
+        voice: "espeak".into(),
     };
     let status = Status {
         kind: "status".into(),

@@ -10,6 +10,8 @@
 const WINDOW = 31;
 /** Frames remembered for matching: about four seconds of camera at 15 fps. */
 const FRAMES = 64;
+/** The engines' names as the status strip shows them. @type {Record<string, string>} */
+const ENGINES = { piper: "Piper", espeak: "espeak-ng" };
 /** How far the hub's publish time may be from the page's send time and still be that frame (ms): well under the
  * 66 ms between frames at 15 fps, well over a local link's delay plus the clock estimate's error. */
 const MATCH_MS = 30;
@@ -51,6 +53,8 @@ export class Latencies {
     this.camera = new Figure();
     /** The turn's stages the server says are behind on its machine (`Agent.latency`'s `behind`). @type {string[]} */
     this.behind = [];
+    /** The engine that speaks, as the welcome names it (`piper` or `espeak`); null before the welcome. @type {string | null} */
+    this.engine = null;
     /** @type {{sentMs: number, captureMs: number}[]} */
     this.frames = [];
   }
@@ -98,9 +102,20 @@ export class Latencies {
     this.behind = Array.isArray(m.behind) ? m.behind.filter((s) => typeof s === "string") : [];
   }
 
-  /** The voice figure with the stages that are behind: "2400 ms (median 900) · slow: transcription". */
+  /**
+   * The welcome's `voice`: the engine that speaks the agent's language.
+   * @param {unknown} voice
+   */
+  speaksWith(voice) {
+    this.engine = typeof voice === "string" && voice ? voice : null;
+  }
+
+  /** The voice figure with the engine and the stages that are behind: "2400 ms (median 900) · Piper · slow:
+   * transcription". */
   voiceText() {
-    const figure = this.voice.text();
-    return this.behind.length ? `${figure} · slow: ${this.behind.join(", ")}` : figure;
+    const parts = [this.voice.text()];
+    if (this.engine) parts.push(ENGINES[this.engine] ?? this.engine);
+    if (this.behind.length) parts.push(`slow: ${this.behind.join(", ")}`);
+    return parts.join(" · ");
   }
 }

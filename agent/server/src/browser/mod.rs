@@ -72,11 +72,13 @@ pub struct BrowserLink {
 }
 
 impl BrowserLink {
-    /// Reads `[modules.browser]`; `fft_hop` is the spectra's hop (`[modules.audio_fft]`), which the page is told in
-    /// its welcome; `shutdown` turning true closes every page socket.
+    /// Reads `[modules.browser]`; `fft_hop` is the spectra's hop (`[modules.audio_fft]`) and `voice` the engine
+    /// that speaks the agent's language (`[modules.tts]`), which the page is told in its welcome; `shutdown` turning
+    /// true closes every page socket.
     pub fn from_config(
         config: &Config,
         fft_hop: usize,
+        voice: &'static str,
         shutdown: watch::Receiver<bool>,
     ) -> anyhow::Result<Self> {
         let browser: BrowserConfig = section(config, "browser")?;
@@ -105,6 +107,7 @@ impl BrowserLink {
                 next_page: AtomicU64::new(1),
                 fft_hop,
                 language: config.agent.language.clone(),
+                voice,
                 shutdown,
             }),
         })

@@ -203,6 +203,7 @@ impl Conn {
                 state: role.as_str().into(),
             },
             language: self.shared.language.clone(),
+            voice: self.shared.voice.into(),
         };
         self.send_json(serde_json::to_value(welcome).unwrap_or_default())
             .await;

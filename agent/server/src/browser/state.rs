@@ -35,6 +35,8 @@ pub struct Shared {
     pub fft_hop: usize,
     /// The agent's language (`agent.language`), told to the page in its welcome.
     pub language: String,
+    /// The engine that speaks it (`piper` or `espeak`), told to the page in its welcome too.
+    pub voice: &'static str,
     pub shutdown: watch::Receiver<bool>,
 }
 
