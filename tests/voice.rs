@@ -594,6 +594,60 @@ async fn piper_counts(rig: &Rig, done: impl Fn(u64, u64) -> bool) -> anyhow::Res
     .await?
 }
 
+/// The brain's fixed replies are made in the Piper voice's cache at start, as `make run` starts the agent (the
+/// default program, brain and TTS on): the first "Hello! How can I help you?" then plays without a run of the
+/// network, its two sentences counted as cache hits at `/api/status`.
+#[tokio::test]
+async fn the_programs_fixed_replies_are_prepared_at_start_and_the_first_one_comes_from_the_cache()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::start_configured(
+        &dir,
+        "[modules.vision]\nenabled = false\n",
+        "tts: speaking on",
+    )
+    .await?;
+    agent
+        .output
+        .wait_for("the fixed replies are prepared", 1, PATIENCE)
+        .await
+        .context("the brain did not prepare its fixed replies")?;
+    let satellite = agent.client("prepare-test").await?;
+    let speech = satellite.subscribe(ch::SPEECH.name).await?;
+    let avatar = satellite.subscribe(ch::AVATAR.name).await?;
+    let rig = Rig {
+        _dir: dir,
+        agent,
+        satellite,
+        speech,
+        avatar,
+    };
+    // The status is reported each second: the counts once two reports a second and a half apart agree.
+    let (runs, hits) = until("the preparation's counts to settle", PATIENCE, async {
+        let mut last = piper_counts(&rig, |_, _| true).await?;
+        loop {
+            tokio::time::sleep(Duration::from_millis(1500)).await;
+            let now = piper_counts(&rig, |_, _| true).await?;
+            if now == last {
+                return anyhow::Ok(now);
+            }
+            last = now;
+        }
+    })
+    .await??;
+    assert!(runs >= 10, "{runs} runs prepared the fixed replies");
+    let hello = rig.speak("Hello! How can I help you?").await?;
+    let pcm = collect_pcm(&rig.speech, hello, QUIET).await?;
+    assert!(pcm.len() > RATE as usize / 2, "{} samples", pcm.len());
+    let (runs_after, hits_after) = piper_counts(&rig, |_, h| h >= hits + 2).await?;
+    assert_eq!(
+        (runs_after, hits_after),
+        (runs, hits + 2),
+        "the greeting ran the network"
+    );
+    Ok(())
+}
+
 /// Issue 48 through the real TTS module: a fixed reply said again plays from the Piper voice's cache (the same
 /// samples, no run of the network: counted at `/api/status`), and a long first sentence with a break is spoken in
 /// two runs whose audio reaches `Agent.speech` without a gap in its offsets.

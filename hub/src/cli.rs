@@ -196,6 +196,10 @@ async fn run(
              enable [modules.recorder])"
         );
     }
+    // The stop signals are taken before the server starts: it answers /healthz while its modules are still starting
+    // (the Piper voice's checks take a second), and a SIGTERM then (systemd stopping a unit as it comes up, the
+    // install test) killed it with the default action instead of a clean shutdown.
+    let stop = StopSignals::new()?;
     let server = crate::start(config, app)
         .await
         .with_context(|| format!("starting {name}"))?;
@@ -218,16 +222,31 @@ async fn run(
     if let Some(unix) = &server.flow_unix {
         println!("flow hub: unix:{}", unix.display());
     }
-    wait_for_signal().await?;
+    stop.wait().await;
     server.shutdown().await;
     Ok(())
 }
 
-async fn wait_for_signal() -> anyhow::Result<()> {
-    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-    tokio::select! {
-        r = tokio::signal::ctrl_c() => r?,
-        _ = term.recv() => {}
+/// SIGTERM and SIGINT (Ctrl-C), handled from the moment this is made.
+struct StopSignals {
+    term: tokio::signal::unix::Signal,
+    interrupt: tokio::signal::unix::Signal,
+}
+
+impl StopSignals {
+    fn new() -> anyhow::Result<Self> {
+        use tokio::signal::unix::{SignalKind, signal};
+        Ok(StopSignals {
+            term: signal(SignalKind::terminate()).context("handling SIGTERM")?,
+            interrupt: signal(SignalKind::interrupt()).context("handling SIGINT")?,
+        })
     }
-    Ok(())
+
+    /// Waits for either.
+    async fn wait(mut self) {
+        tokio::select! {
+            _ = self.term.recv() => {}
+            _ = self.interrupt.recv() => {}
+        }
+    }
 }

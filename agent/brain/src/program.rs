@@ -7,7 +7,10 @@ use std::time::Duration;
 use crate::check::Checker;
 use crate::error::LoadError;
 use crate::parser::parse;
-use crate::syntax::{Decl, Expr, Guard, Procedure, Temporal, ToolDecl};
+use crate::syntax::{
+    ActionExpr, Decl, Expr, Guard, Primitive, Procedure, TemplatePart, Temporal, ToolDecl,
+};
+use crate::value::Value;
 
 pub use crate::capabilities::{Capabilities, SAID};
 
@@ -71,6 +74,44 @@ impl Program {
     /// The services the language model may call (`tool` declarations), in source order.
     pub fn tools(&self) -> &[ToolDecl] {
         &self.tools
+    }
+
+    /// What the program says word for word (`say("...")` without holes), each text once in source order: the replies
+    /// a voice with a cache can synthesise before they are first asked for (docs/voice.md, "The cache").
+    pub fn fixed_sayings(&self) -> Vec<String> {
+        let mut sayings: Vec<String> = Vec::new();
+        let actions = self
+            .procedures
+            .iter()
+            .flat_map(|p| &p.rules)
+            .flat_map(|r| r.durative.iter().chain(&r.discrete));
+        for action in actions {
+            let ActionExpr::Primitive {
+                primitive: Primitive::Say,
+                args,
+                ..
+            } = action
+            else {
+                continue;
+            };
+            let text = match args.first() {
+                Some(Expr::Lit(Value::Text(text), _)) => Some(text.clone()),
+                Some(Expr::Template(parts, _)) => parts
+                    .iter()
+                    .map(|part| match part {
+                        TemplatePart::Text(text) => Some(text.as_str()),
+                        TemplatePart::Hole(_) => None,
+                    })
+                    .collect::<Option<String>>(),
+                _ => None,
+            };
+            if let Some(text) = text.filter(|t| !t.trim().is_empty())
+                && !sayings.contains(&text)
+            {
+                sayings.push(text);
+            }
+        }
+        sayings
     }
 
     /// How many rules the program has, over all procedures.

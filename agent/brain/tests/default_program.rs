@@ -470,3 +470,31 @@ fn what_was_asked_is_answered_from_the_last_question() {
         ["You asked: What time is it?"]
     );
 }
+
+#[test]
+fn the_fixed_sayings_are_the_replies_said_word_for_word_each_once() {
+    let sayings = default_program().fixed_sayings();
+    for fixed in [
+        "Hello! How can I help you?",
+        "You're welcome.",
+        "Let me think.",
+        "I can't see anyone right now.",
+    ] {
+        assert!(
+            sayings.iter().any(|s| s == fixed),
+            "{fixed:?} not in {sayings:?}"
+        );
+    }
+    // Replies with holes are made when they are said.
+    assert!(sayings.iter().all(|s| !s.contains('{')), "{sayings:?}");
+    assert!(
+        !sayings.iter().any(|s| s.starts_with("It is ")),
+        "{sayings:?}"
+    );
+    let mut unique = sayings.clone();
+    unique.sort();
+    unique.dedup();
+    assert_eq!(unique.len(), sayings.len(), "{sayings:?}");
+    // And they are the answers the brain gives: "thank you" is answered with one of them.
+    assert!(sayings.contains(&answer("thank you")), "{sayings:?}");
+}

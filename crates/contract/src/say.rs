@@ -16,6 +16,18 @@ pub struct SayRequest {
     /// The W3C `traceparent` of the reply this speech starts, when it answers a turn (docs/telemetry.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trace: Option<String>,
+    /// Synthesise `text` in the configured voice into its cache without playing it (a program's fixed replies,
+    /// made before they are first asked for); answered with [`PrepareAnswer`] once done. Speech asked for
+    /// meanwhile stops it, so it never holds a reply back by more than one run of the voice.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub prepare: bool,
+}
+
+/// The answer to a request to prepare a text: whether its audio is now in the voice's cache (false for a voice
+/// without one, espeak-ng, which needs none, and for a preparation that speech asked for meanwhile stopped).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PrepareAnswer {
+    pub cached: bool,
 }
 
 /// The answer to a request to speak: the utterance number its speech and visemes carry.

@@ -8,6 +8,7 @@
 mod avatar_out;
 pub mod behaviour;
 pub mod params;
+mod prepare;
 pub mod speaker;
 pub mod wire;
 
@@ -135,6 +136,8 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
     };
     info!(engine = ?tts.voice.engine, voice = %tts.voice.voice, rate = tts.voice.rate_wpm, "tts: speaking on {} and {}", channels::SPEECH.name, channels::AVATAR.name);
 
+    // Texts made in the voice's cache ahead (`prepare`), stopped by any speech asked for.
+    let mut preparing = prepare::Preparations::default();
     let mut ticks = ctx.ticks();
     loop {
         tokio::select! {
@@ -142,19 +145,32 @@ async fn run(mut ctx: ModuleContext, language: Language) -> anyhow::Result<()> {
             call = service.next() => {
                 let Some(call) = call else { break };
                 let answer = match wire::say_request(&call.payload) {
-                    Ok(request) => tts.request(request).await,
+                    Ok(SayRequest::Prepare { text }) => {
+                        preparing.start(&tts.synth, &tts.voice, &text, call);
+                        continue;
+                    }
+                    Ok(request) => {
+                        if matches!(request, SayRequest::Say { .. }) {
+                            preparing.stop();
+                        }
+                        tts.request(request).await
+                    }
                     Err(reason) => Err(format!("bad {} request: {reason}", channels::SAY.name)),
                 };
                 if let Err(e) = call.respond(answer).await {
                     debug!("tts: answer not delivered: {e}");
                 }
             }
+            () = preparing.finished() => {}
             data = ctrl.recv() => {
                 let Some(data) = data else { break };
-                if let Some(request) = wire::ctrl_request(&data.payload)
-                    && let Err(reason) = tts.request(request).await
-                {
-                    warn!("tts: {} request failed: {reason}", channels::CTRL.name);
+                if let Some(request) = wire::ctrl_request(&data.payload) {
+                    if matches!(request, SayRequest::Say { .. }) {
+                        preparing.stop();
+                    }
+                    if let Err(reason) = tts.request(request).await {
+                        warn!("tts: {} request failed: {reason}", channels::CTRL.name);
+                    }
                 }
             }
             data = transcripts.recv() => {
@@ -205,6 +221,8 @@ impl Tts {
                 }
                 Ok(wire::cancelled(&stopped))
             }
+            // The service loop hands these to `prepare::Preparations`, which answers them when they are done.
+            SayRequest::Prepare { .. } => Err("prepare is taken on Agent.say only".into()),
         }
     }
 

@@ -150,6 +150,11 @@ async fn run(
         .map_err(|e| anyhow::anyhow!("[agent] knowledge: {e:#}"))?;
     let (chat_done_tx, mut chat_done) = mpsc::channel(DONE_QUEUE);
     let speech = Speech::start(client.clone());
+    // The voice makes the program's fixed replies now, while nobody is waiting for them (docs/voice.md).
+    tokio::spawn(speech::prepare_sayings(
+        client.clone(),
+        program.fixed_sayings(),
+    ));
     let rules = client
         .publisher(channels::RULES.name, channels::headers::RULES)
         .await?;

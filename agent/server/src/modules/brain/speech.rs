@@ -9,12 +9,12 @@ use flow::Client;
 use flow_telemetry::TraceContext;
 use tokio::sync::mpsc;
 use tokio::time::Instant;
-use tracing::{debug, warn};
+use tracing::{debug, info, warn};
 
 /// The TTS module's service: `{"text": "..."}` queues an utterance and answers `{"utterance": N}`;
 /// `{"cancel": "all"}` or `{"cancel": N}` stops speech (see docs/voice.md).
 use agent_contract::channels::SAY;
-use agent_contract::say::{SayAnswer, SayRequest};
+use agent_contract::say::{PrepareAnswer, SayAnswer, SayRequest};
 
 /// Requests waiting for the speech task; when it is this far behind (the TTS module is not answering), new
 /// requests are dropped and logged rather than queued without bound.
@@ -107,6 +107,7 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
                 rate_wpm: None,
                 pitch: None,
                 trace: trace.map(|t| t.traceparent()),
+                prepare: false,
             })
             .unwrap_or_default(),
             Request::StopDurative { text } => match durative.remove(text) {
@@ -135,6 +136,51 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
         }
     }
     debug!("brain: speech task ended");
+}
+
+/// How long the preparation of one text may take: a few runs of the voice on a busy machine.
+const PREPARE_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Asks the TTS module to prepare the program's fixed replies (`Program::fixed_sayings`) one at a time, so that
+/// the first time each is said its audio comes from the voice's cache; stops at the first answer that the voice
+/// keeps none (espeak-ng) or at the first failure (no TTS module). A preparation that speech stopped is not
+/// retried: that reply is cached when it is first said.
+pub async fn prepare_sayings(client: Client, sayings: Vec<String>) {
+    let mut cached = 0;
+    for text in &sayings {
+        let request = SayRequest {
+            text: text.clone(),
+            voice: None,
+            rate_wpm: None,
+            pitch: None,
+            trace: None,
+            prepare: true,
+        };
+        let body = serde_json::to_vec(&request).unwrap_or_default();
+        match client.call(SAY.name, body, PREPARE_TIMEOUT).await {
+            Ok(answer) => match serde_json::from_slice::<PrepareAnswer>(&answer) {
+                Ok(PrepareAnswer { cached: true }) => cached += 1,
+                Ok(PrepareAnswer { cached: false }) if cached == 0 => {
+                    debug!("brain: the voice keeps no cache; nothing to prepare");
+                    return;
+                }
+                Ok(PrepareAnswer { cached: false }) => {}
+                Err(e) => {
+                    debug!("brain: {} answered a preparation with {e}", SAY.name);
+                    return;
+                }
+            },
+            Err(e) => {
+                debug!("brain: preparing the fixed replies stopped: {e}");
+                return;
+            }
+        }
+    }
+    info!(
+        cached,
+        of = sayings.len(),
+        "brain: the fixed replies are prepared in the voice's cache"
+    );
 }
 
 /// Follows the agent's speech output to tell when it is audible: every chunk on `Agent.speech` extends the

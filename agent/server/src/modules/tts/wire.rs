@@ -51,6 +51,10 @@ pub enum SayRequest {
         trace: Option<TraceContext>,
     },
     Cancel(CancelTarget),
+    /// Synthesise `text` in the configured voice into its cache, without playing it.
+    Prepare {
+        text: String,
+    },
 }
 
 /// Parses an `Agent.say` call: `{"text": "...", "voice"?, "rate_wpm"?, "pitch"?}` or
@@ -76,6 +80,12 @@ pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
     if say.text.trim().is_empty() {
         return Err("text is empty".into());
     }
+    if say.prepare {
+        if say.voice.is_some() || say.rate_wpm.is_some() || say.pitch.is_some() {
+            return Err("prepare: only the configured voice keeps a cache, so voice, rate_wpm and pitch are not taken".into());
+        }
+        return Ok(SayRequest::Prepare { text: say.text });
+    }
     let choice = VoiceChoice {
         voice: say.voice,
         rate_wpm: say.rate_wpm,
@@ -97,6 +107,11 @@ pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
 pub fn said(utterance: u64) -> Bytes {
     // Plain data with string keys always serialises.
     Bytes::from(serde_json::to_vec(&say::SayAnswer { utterance }).unwrap_or_default())
+}
+
+/// The answer to a `prepare` call.
+pub fn prepared(cached: bool) -> Bytes {
+    Bytes::from(serde_json::to_vec(&say::PrepareAnswer { cached }).unwrap_or_default())
 }
 
 /// The answer to a `cancel` call: the utterances stopped.
@@ -271,6 +286,17 @@ mod tests {
                 },
                 trace: None,
             })
+        );
+        assert_eq!(
+            say_request(br#"{"text":"Let me think.","prepare":true}"#),
+            Ok(SayRequest::Prepare {
+                text: "Let me think.".into()
+            })
+        );
+        let other_voice = say_request(br#"{"text":"Ciao","voice":"it","prepare":true}"#);
+        assert!(
+            matches!(&other_voice, Err(reason) if reason.contains("prepare")),
+            "{other_voice:?}"
         );
         let reply = TraceContext::turn("u1").child("reply");
         let traced = format!(r#"{{"text":"Hi","trace":"{}"}}"#, reply.traceparent());
