@@ -203,33 +203,21 @@ pub fn prepare_pipeline(dir: &Path) -> anyhow::Result<FakeMedia> {
     if !video.exists() {
         let face = fx.join("faces/fr_obama.jpg");
         let code = fx.join("qr/derived/zxing_qrcode-1_17_640x360.jpg");
-        convert(
-            &video,
-            &[
-                "-loop",
-                "1",
-                "-framerate",
-                "15",
-                "-t",
-                "10",
-                "-i",
-                path_str(&face)?,
-                "-loop",
-                "1",
-                "-framerate",
-                "15",
-                "-t",
-                "10",
-                "-i",
-                path_str(&code)?,
-                "-filter_complex",
-                "[0]scale=-2:330,pad=640:360:640-iw-20:15:black,setsar=1[a];[1]scale=640:360,setsar=1[b];[a][b]concat=n=2:v=1[v]",
-                "-map",
-                "[v]",
-                "-pix_fmt",
-                "yuv420p",
-            ],
-        )?;
+        // Each picture is a 10 s still at 15 fps.
+        let mut args: Vec<&str> = Vec::new();
+        for picture in [&face, &code] {
+            args.extend(["-loop", "1", "-framerate", "15", "-t", "10", "-i"]);
+            args.push(path_str(picture)?);
+        }
+        args.extend([
+            "-filter_complex",
+            "[0]scale=-2:330,pad=640:360:640-iw-20:15:black,setsar=1[a];[1]scale=640:360,setsar=1[b];[a][b]concat=n=2:v=1[v]",
+            "-map",
+            "[v]",
+            "-pix_fmt",
+            "yuv420p",
+        ]);
+        convert(&video, &args)?;
     }
     if !audio.exists() {
         let mut parts = Vec::new();
