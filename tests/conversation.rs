@@ -8,7 +8,9 @@
 use agent_contract::channels as ch;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, Satellite, fixture, json_message, next_payload, run, until};
+use agent_tests::{
+    Agent, DataDir, Satellite, fixture, json_message, next_payload, run, start_when_ready, until,
+};
 use anyhow::Context;
 use flow::Subscription;
 use serde_json::Value;
@@ -775,15 +777,19 @@ where
     for sub in [speech, transcript, rules, avatar] {
         while sub.try_recv().is_some() {}
     }
+    let wav = dir.join("microphone.wav");
+    spoken::write_wav(&wav, mic)?;
+    // The microphone starts with the reply's first chunk, as one in the room hears the loudspeaker from its first
+    // sample: started only once the test saw that chunk, it came a process start late, which on a busy machine put
+    // the echo past the delays AEC3 finds (CI heard the whole reply once).
+    let mut publish = agent.microphone(&wav, 1500)?;
+    publish.arg("--after").arg(ch::SPEECH.name);
+    let mut playing = start_when_ready(publish, "waiting for", PATIENCE).await?;
     say().await?;
     tokio::time::timeout(PATIENCE, speech.recv())
         .await
         .context("the reply never started")?
         .context("Agent.speech ended")?;
-    let wav = dir.join("microphone.wav");
-    spoken::write_wav(&wav, mic)?;
-    let publish = agent.microphone(&wav, 1500)?;
-    let mut playing = tokio::spawn(run(publish, b"", PATIENCE));
     let mut scene = Scene::default();
     let mut quiet_from = None;
     // A voice start whose transcript never comes is judged by the caller on what was seen, not waited for forever.

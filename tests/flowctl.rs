@@ -316,6 +316,39 @@ async fn pub_wav_streams_20_ms_chunks_of_22050_hz_pcm() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `pub-wav --after CHANNEL` subscribes, says it waits, and streams nothing until a message arrives there: then the
+/// whole file follows.
+#[tokio::test]
+async fn pub_wav_after_a_channel_waits_for_its_next_message() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = agent(&dir).await?;
+    let sdk = agent.client("loudspeaker").await?;
+    let loudspeaker = sdk.publisher("Cli.speaker", "{}").await?;
+    let (_c, sub) = early_subscriber(&agent, "Cli.heard").await?;
+    let native = fixture("audio/LJ001-0002.wav")?;
+    let samples = hound::WavReader::open(&native)?.len() as usize;
+    let mut cmd = agent.flowctl()?;
+    cmd.args([
+        "pub-wav",
+        "Cli.heard",
+        native.to_str().context("path")?,
+        "--after",
+        "Cli.speaker",
+    ]);
+    let started = agent_tests::start_when_ready(cmd, "waiting for Cli.speaker", PATIENCE).await?;
+    // Subscribed and waiting: nothing is streamed however long the loudspeaker stays silent.
+    tokio::time::sleep(std::time::Duration::from_millis(500)).await;
+    assert!(
+        sub.try_recv().is_none(),
+        "streamed before the loudspeaker spoke"
+    );
+    loudspeaker.publish(b"first chunk".to_vec()).await?;
+    let (_, pcm) = collect_pcm(&sub, samples).await?;
+    assert_eq!(pcm.len(), samples);
+    started.await??.ok()?;
+    Ok(())
+}
+
 #[tokio::test]
 async fn call_prints_the_response_or_one_line_of_error() -> anyhow::Result<()> {
     let dir = DataDir::new()?;

@@ -97,3 +97,64 @@ pub fn command(name: &str) -> anyhow::Result<Command> {
     cmd.env("NO_COLOR", "1").kill_on_drop(true);
     Ok(cmd)
 }
+
+/// Starts `cmd` and returns once it has printed a line starting with `ready` on stdout (within `timeout`), with
+/// the rest of its run as a task: it is killed if it has not finished `timeout` after that line.
+pub async fn start_when_ready(
+    mut cmd: Command,
+    ready: &str,
+    timeout: Duration,
+) -> anyhow::Result<tokio::task::JoinHandle<anyhow::Result<Finished>>> {
+    use tokio::io::{AsyncBufReadExt, AsyncReadExt, BufReader};
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .kill_on_drop(true)
+        .spawn()
+        .context("spawning")?;
+    let stdout = child.stdout.take().context("no stdout")?;
+    let mut stderr = child.stderr.take().context("no stderr")?;
+    // Read on its own, so that a chatty command never blocks on a full pipe.
+    let errors = tokio::spawn(async move {
+        let mut text = String::new();
+        let _ = stderr.read_to_string(&mut text).await;
+        text
+    });
+    let mut lines = BufReader::new(stdout).lines();
+    let mut printed = String::new();
+    let found = tokio::time::timeout(timeout, async {
+        while let Some(line) = lines.next_line().await.context("reading stdout")? {
+            printed.push_str(&line);
+            printed.push('\n');
+            if line.starts_with(ready) {
+                return anyhow::Ok(true);
+            }
+        }
+        anyhow::Ok(false)
+    })
+    .await;
+    match found {
+        Ok(Ok(true)) => {}
+        Ok(Ok(false)) => bail!("exited before printing {ready:?}: {printed}"),
+        Ok(Err(e)) => return Err(e),
+        Err(_) => bail!("printed no {ready:?} within {timeout:?}: {printed}"),
+    }
+    Ok(tokio::spawn(async move {
+        let rest = async {
+            while let Some(line) = lines.next_line().await.context("reading stdout")? {
+                printed.push_str(&line);
+                printed.push('\n');
+            }
+            anyhow::Ok(child.wait().await?)
+        };
+        let status = tokio::time::timeout(timeout, rest)
+            .await
+            .with_context(|| format!("did not finish within {timeout:?}"))??;
+        Ok(Finished {
+            status,
+            stdout: printed,
+            stderr: errors.await.unwrap_or_default(),
+        })
+    }))
+}

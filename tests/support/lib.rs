@@ -20,7 +20,7 @@ pub mod wait;
 pub mod wires;
 
 pub use agent::{Agent, AgentOptions, DataDir};
-pub use binaries::{binary, command, run};
+pub use binaries::{binary, command, run, start_when_ready};
 pub use fixtures::fixture;
 pub use raw::RawConn;
 pub use satellite::Satellite;

@@ -155,6 +155,22 @@ pub async fn open_publisher(
     Ok(publisher)
 }
 
+/// Subscribes to `channel`, says so on stdout (a caller may start the producer then), and returns when its next
+/// message arrives.
+pub async fn wait_for_message(client: &Client, channel: &str) -> anyhow::Result<()> {
+    let subscription = client
+        .subscribe(channel)
+        .await
+        .with_context(|| format!("subscribing to {channel}"))?;
+    println!("waiting for {channel}");
+    std::io::Write::flush(&mut std::io::stdout()).context("writing to stdout")?;
+    subscription
+        .recv()
+        .await
+        .with_context(|| format!("{channel} ended before its first message"))?;
+    Ok(())
+}
+
 pub async fn pub_file(publisher: &Publisher, file: &Path) -> anyhow::Result<()> {
     let data = tokio::fs::read(file)
         .await

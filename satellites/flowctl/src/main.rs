@@ -104,6 +104,10 @@ enum Cmd {
         /// Wait until someone subscribes before streaming.
         #[arg(long)]
         wait_subscriber: bool,
+        /// Start streaming when the next message arrives on this channel, not at once: a microphone that hears a
+        /// loudspeaker starts with what the loudspeaker plays (prints `waiting for CHANNEL` once subscribed).
+        #[arg(long, value_name = "CHANNEL")]
+        after: Option<String>,
     },
     /// Call a service with a JSON request and print the response.
     Call {
@@ -233,6 +237,7 @@ async fn dispatch(client: &Client, cmd: Cmd) -> anyhow::Result<()> {
             realtime,
             tail_ms,
             wait_subscriber,
+            after,
         } => {
             if !(5..=1000).contains(&chunk_ms) {
                 bail!("--chunk-ms must be between 5 and 1000");
@@ -241,6 +246,9 @@ async fn dispatch(client: &Client, cmd: Cmd) -> anyhow::Result<()> {
             let publisher =
                 commands::open_publisher(client, &name, header, wait_subscriber).await?;
             let pcm = wav::load_as_22050_mono(&file)?;
+            if let Some(channel) = after {
+                commands::wait_for_message(client, &channel).await?;
+            }
             commands::pub_pcm(&publisher, &pcm, chunk_ms, realtime, tail_ms).await?;
             client.ping().await?;
             Ok(())
