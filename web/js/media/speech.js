@@ -89,7 +89,9 @@ export class SpeechPlayer {
     if (pcm.length === 0) return;
     const ctx = audioContext();
     const now = ctx.currentTime;
-    const fresh = this.playhead < now;
+    // A context that has not started yet reads 0, as the playhead does before any speech: that first chunk is a
+    // fresh start too.
+    const fresh = this.playhead <= now;
     if (fresh) {
       this.switchRoute();
       // The shift takes the route's delay at once while nothing is heard. Drawing follows it too (heardTime), but
