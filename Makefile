@@ -32,18 +32,26 @@ run: deps build model-release model-face model-voice model-llm
 ## test runner, no npm package needed), the workspace's Rust suites (cargo-nextest: a process per test and a ceiling per
 ## test, .config/nextest.toml; then the doc tests, which nextest does not run) and the Python SDK's pytest suite
 ## against the debug binaries (pytest-timeout's ceiling per test). Every crate is compiled once: `build-debug` builds
-## every target with the features `cargo test` uses, the model conversion runs that build's whisper-sat, and clippy's
-## check pass is the only other compilation. Each phase prints its time (`phase NAME: N s`, scripts/phase.sh;
+## every target with the features `cargo test` uses and clippy's lints (below), and the model conversion runs that
+## build's whisper-sat. Each phase prints its time (`phase NAME: N s`, scripts/phase.sh;
 ## docs/testing.md).
 test: deps build-debug model model-base model-face model-voice model-llm llm-server python
 	scripts/phase.sh fmt $(CARGO) fmt --all --check
 	scripts/phase.sh tsc scripts/web-deps/node_modules/.bin/tsc -p web/tsconfig.json
-	scripts/phase.sh clippy $(CARGO) clippy --workspace --all-targets -- -D warnings
 	scripts/phase.sh no-std $(CARGO) build -p flow-lite --lib --target thumbv7em-none-eabihf
 	scripts/phase.sh node-test node --test web/test/*.test.mjs scripts/avatar-gen/tests/*.test.mjs
 	scripts/phase.sh cargo-test scripts/test-digest.sh $(CARGO) nextest run --workspace --no-fail-fast
 	scripts/phase.sh doc-test $(CARGO) test --workspace --doc
 	scripts/phase.sh pytest env AGENT_BIN_DIR=$(TARGET_DIR)/debug satellites/python/.venv/bin/python -m pytest -q satellites/python/tests
+
+# Clippy's lints are checked while the debug build compiles the workspace's own crates: `clippy-driver` wraps rustc
+# for them (as `cargo clippy` does, but in the build that the tests use), so there is no check pass compiling every
+# crate and build script a second time. `CLIPPY_ARGS` is clippy's own way of passing `-D warnings` (its arguments
+# joined by `__CLIPPY_HACKERY__`). Every phase of `make test` that compiles (build-debug, python, no-std, cargo-test,
+# doc-test) runs with the same two variables, so none rebuilds what another built.
+CLIPPY_DRIVER ?= clippy-driver
+test: export RUSTC_WORKSPACE_WRAPPER = $(CLIPPY_DRIVER)
+test: export CLIPPY_ARGS = -D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__
 
 ## Install as a systemd service (docs/deploy.md): the release binaries (it does not build: `make build` first), config/,
 ## the provisioned models and deploy/'s units rendered for PREFIX. DESTDIR stages it; ROLE=satellites installs only the
