@@ -99,7 +99,10 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	$(TARGET_DIR)/release/bench-summary --logs $(BENCH_LOGS) --doc docs/benchmarks.md
 
 ## The soak (not part of the tests): the whole agent with a browser, two satellites and the recorder for MINUTES
-## (default 30), sampled every minute; writes docs/soak.md, its CSV and docs/soak.png.
+## (default 30) or HOURS, sampled every minute; writes docs/soak.md, its CSV and docs/soak.png.
+ifdef HOURS
+MINUTES := $(shell echo $$(( $(HOURS) * 60 )))
+endif
 MINUTES ?= 30
 soak: .SHELLFLAGS := -o pipefail -c
 soak: deps model-release model-face build

@@ -9,6 +9,9 @@
 //! targets: RSS growth after the first five minutes <= 5 MB per process, no descriptor growth, every question
 //! answered, p95 in the last five minutes within 10% of the first five.
 //!
+//! Each process's RSS is also fitted from minute 5 on (MiB per hour): over a long run (`make soak HOURS=N`) a leak
+//! keeps its slope and a high-water mark reached once does not.
+//!
 //! Options: `--minutes N` (default 30), `--write PATH` (Markdown report; the CSV goes to PATH with `.csv`).
 
 use std::collections::BTreeMap;
@@ -102,6 +105,19 @@ fn answered(finals: &[Duration], says: &[Duration]) -> usize {
         .iter()
         .filter(|q| says.iter().any(|a| *a >= **q && *a <= **q + ANSWER_WITHIN))
         .count()
+}
+
+/// The least-squares slope of `points` (x, y); 0 for fewer than two distinct x.
+fn least_squares_slope(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let mean_x = points.iter().map(|p| p.0).sum::<f64>() / n;
+    let mean_y = points.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxx: f64 = points.iter().map(|p| (p.0 - mean_x).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|p| (p.0 - mean_x) * (p.1 - mean_y)).sum();
+    if sxx > 0.0 { sxy / sxx } else { 0.0 }
 }
 
 fn lock(seen: &Mutex<Seen>) -> std::sync::MutexGuard<'_, Seen> {
@@ -317,6 +333,22 @@ impl<'a> Report<'a> {
         }
     }
 
+    /// Each process's RSS trend from minute 5 on, in MiB per hour: the least-squares slope over every minute's
+    /// sample, so that a long run tells a steady leak (a slope that holds) from a high-water mark reached once (a
+    /// step, then flat: the slope falls as the run goes on), which the end-to-end difference cannot.
+    fn slopes(&self) -> Vec<f64> {
+        let settled: Vec<&Row> = self.rows.iter().filter(|r| r.minute >= 5).collect();
+        (0..self.pids.len())
+            .map(|i| {
+                let points: Vec<(f64, f64)> = settled
+                    .iter()
+                    .map(|r| (r.minute as f64 / 60.0, r.procs[i].rss_mib()))
+                    .collect();
+                least_squares_slope(&points)
+            })
+            .collect()
+    }
+
     /// RSS growth (MiB) and descriptor growth per process from minute 5 to the end.
     fn growth(&self) -> Vec<(String, f64, i64, i64)> {
         let settled = self.rows.iter().find(|r| r.minute >= 5);
@@ -357,9 +389,10 @@ impl<'a> Report<'a> {
 
     fn summary(&self) -> Vec<String> {
         let mut out = Vec::new();
-        for (name, rss, fds, threads) in self.growth() {
+        let slopes = self.slopes();
+        for ((name, rss, fds, threads), slope) in self.growth().into_iter().zip(slopes) {
             out.push(format!(
-                "SUMMARY soak {name}: RSS growth after minute 5 {rss:+.1} MiB (target <= 5), descriptors {fds:+}, threads {threads:+}"
+                "SUMMARY soak {name}: RSS growth after minute 5 {rss:+.1} MiB (target <= 5), trend {slope:+.2} MiB/h, descriptors {fds:+}, threads {threads:+}"
             ));
         }
         let ((p50a, p95a, na), (p50b, p95b, nb)) = self.windows();
@@ -408,7 +441,7 @@ impl<'a> Report<'a> {
 
     fn markdown(&self, minutes: u64) -> String {
         let mut m = format!(
-            "# Soak\n\n`make soak MINUTES={minutes}`: see `bench/soak/main.rs` for what runs. Taken on {} at commit \
+            "# Soak\n\n`make soak MINUTES={minutes}` (or `HOURS=N`): see `bench/soak/main.rs` for what runs. Taken on {} at commit \
              {}.\n\n",
             taken_on(),
             agent_bench::summary::current_commit()
@@ -449,5 +482,29 @@ impl<'a> Report<'a> {
             let _ = writeln!(m, "- {n} x {text:?}");
         }
         m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::least_squares_slope;
+
+    #[test]
+    fn a_steady_leak_shows_its_rate_and_a_step_then_flat_shows_a_falling_one() {
+        // 3 MiB per hour, sampled every minute for two hours.
+        let steady: Vec<(f64, f64)> = (0..120)
+            .map(|m| (m as f64 / 60.0, 100.0 + 3.0 * m as f64 / 60.0))
+            .collect();
+        assert!((least_squares_slope(&steady) - 3.0).abs() < 1e-9);
+        // A step of 8 MiB at minute 10, flat after: over 30 minutes it looks like growth, over two hours much less.
+        let step = |minutes: u32| -> Vec<(f64, f64)> {
+            (5..minutes)
+                .map(|m| (f64::from(m) / 60.0, if m < 10 { 100.0 } else { 108.0 }))
+                .collect()
+        };
+        let short = least_squares_slope(&step(30));
+        let long = least_squares_slope(&step(120));
+        assert!(short > 2.0 * long && long > 0.0, "{short} {long}");
+        assert_eq!(least_squares_slope(&[(1.0, 5.0)]), 0.0);
     }
 }
