@@ -109,6 +109,49 @@ async fn a_satellite_over_udp_publishes_to_a_tcp_subscriber_and_hears_a_tcp_publ
     Ok(())
 }
 
+/// Pictures sent to a UDP subscriber leave the hub a burst at a time: each 60 kB frame's fragments go out in one
+/// `sendmmsg`, so the hub makes several times fewer send calls than it sends datagrams, and every frame arrives
+/// whole and in order.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_burst_of_pictures_to_a_udp_subscriber_leaves_in_batched_calls_and_arrives_whole_in_order()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let (hub, udp) = hub_with_udp(&dir, "").await?;
+    let satellite = udp_client(&hub, udp, "udp-eyes").await?;
+    let camera = hub.client("camera").await?;
+    let publisher = camera
+        .publisher("Udp.pictures", r#"{"mime":"image/jpeg"}"#)
+        .await?;
+    let sub = satellite.subscribe("Udp.pictures").await?;
+    let mut active = publisher.subscribers();
+    tokio::time::timeout(PATIENCE, active.wait_for(|&a| a))
+        .await
+        .context("the UDP subscription never reached the publisher")??;
+    let sent_before = metric(&hub, "flow_udp_sent_datagrams_total").await?;
+    let calls_before = metric(&hub, "flow_udp_send_calls_total").await?;
+    for seq in 0..20u32 {
+        publisher.publish(payload(seq, 60_000)).await?;
+        // A camera's pace, well within the socket buffers.
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    for expected in 0..20u32 {
+        let p = next(&sub).await?;
+        assert_eq!(check(&p)?, expected);
+        assert_eq!(p.len(), 8 + 60_000);
+    }
+    let sent = metric(&hub, "flow_udp_sent_datagrams_total").await? - sent_before;
+    let calls = metric(&hub, "flow_udp_send_calls_total").await? - calls_before;
+    // 20 pictures of about 44 fragments each: at least 880 datagrams, in a few dozen calls.
+    ensure!(sent >= 20.0 * 40.0, "{sent} datagrams sent");
+    ensure!(
+        calls * 4.0 <= sent,
+        "{calls} send calls for {sent} datagrams: not batched"
+    );
+    ensure!(metric(&hub, "flow_udp_lost_messages_total").await? == 0.0);
+    satellite.close_and_wait(Duration::from_secs(5)).await;
+    Ok(())
+}
+
 /// What the relay did.
 #[derive(Debug, Default)]
 struct Mangled {

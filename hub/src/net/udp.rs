@@ -228,6 +228,16 @@ impl Collector for UdpCollector {
                 "Duplicate UDP datagrams discarded",
                 &s.duplicates,
             ),
+            (
+                "flow_udp_sent_datagrams",
+                "UDP datagrams the hub's sessions sent, retransmissions included",
+                &s.sent,
+            ),
+            (
+                "flow_udp_send_calls",
+                "System calls that sent them: a burst (a message's fragments) goes out in one sendmmsg",
+                &s.send_calls,
+            ),
         ] {
             ConstCounter::new(UdpStats::get(counter)).encode(encoder.encode_descriptor(
                 name,

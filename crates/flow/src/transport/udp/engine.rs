@@ -109,6 +109,10 @@ pub struct UdpStats {
     pub duplicates: AtomicU64,
     /// Sessions open now (the hub's edge).
     pub sessions: AtomicU64,
+    /// Datagrams sent (every session's, retransmissions included).
+    pub sent: AtomicU64,
+    /// System calls that sent them (`sendmmsg` takes a burst at once: `batch.rs`).
+    pub send_calls: AtomicU64,
 }
 
 impl UdpStats {

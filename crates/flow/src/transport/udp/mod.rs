@@ -1,5 +1,6 @@
 //! FlowProtocol over UDP (`udp://HOST:PORT`): sessions of datagrams (`datagram.rs`) carrying the same frames as
-//! every other transport, with a reliable lane and a best-effort one (`engine.rs`), driven by one task per session.
+//! every other transport, with a reliable lane and a best-effort one (`engine.rs`), driven by one task per session
+//! that sends each burst in one system call (`batch.rs`).
 //!
 //! A client opens a session with a hello padded to 1200 bytes, sent again with back-off until the hub answers with
 //! a session id; from then on every datagram carries that id. [`UdpTransport::connect`] is the client's end; the
@@ -20,6 +21,7 @@ use tokio::time::Instant;
 
 use super::traits::{Transport, TransportRead, TransportWrite};
 
+pub mod batch;
 pub mod datagram;
 pub mod engine;
 
@@ -231,16 +233,17 @@ impl Driver {
         }
     }
 
-    async fn send(&self, d: &[u8]) -> Result<(), String> {
-        let sent = match self.to {
-            Some(to) => self.socket.send_to(d, to).await,
-            None => self.socket.send(d).await,
-        };
-        match sent {
+    /// Sends a burst of datagrams in as few system calls as the kernel takes (`batch.rs`).
+    async fn send(&self, datagrams: &[impl AsRef<[u8]>]) -> Result<(), String> {
+        match batch::send_all(&self.socket, self.to, datagrams).await {
+            Ok(sent) => {
+                batch::count(sent, &self.stats.sent, &self.stats.send_calls);
+                Ok(())
+            }
             // A connected socket hears of a closed port: nobody listens there any more.
             Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => Err(format!("udp: {e}")),
-            // Anything else (a full buffer, a route that comes and goes) is a lost datagram.
-            _ => Ok(()),
+            // Anything else (the socket's readiness failing) loses the burst, as the wire could.
+            Err(_) => Ok(()),
         }
     }
 
@@ -249,10 +252,16 @@ impl Driver {
         let mut reader_open = true;
         let mut closing_since: Option<Instant> = None;
         let mut buf = vec![0u8; 65536];
+        let mut burst: Vec<Bytes> = Vec::new();
         loop {
             let now = Instant::now();
+            // Everything the engine has to send now goes out together: a frame's fragments, acknowledgements.
+            burst.clear();
             while let Some(d) = self.engine.poll_send(now) {
-                self.send(&d).await?;
+                burst.push(d);
+            }
+            if !burst.is_empty() {
+                self.send(&burst).await?;
             }
             if !reader_open {
                 while self.engine.poll_frame().is_some() {}
@@ -262,8 +271,7 @@ impl Driver {
                 if self.engine.all_acknowledged() || now >= since + CLOSE_GRACE || !reader_open {
                     let close = self.engine.close_datagram();
                     // Twice: a lost close costs the peer its idle timeout.
-                    self.send(&close).await?;
-                    self.send(&close).await?;
+                    self.send(&[&close, &close]).await?;
                     return Ok(());
                 }
             }
