@@ -1,7 +1,8 @@
 //! `Message`: one message as Python sees it, its payload shared with the Rust SDK's buffer and exposed through the
 //! buffer protocol, so `memoryview(msg)`, `msg.data` and `msg.pcm()` read it where it lies.
 //!
-//! The one `unsafe` block of the binding lives here: handing CPython a pointer into the payload.
+//! One of the binding's two `unsafe` blocks lives here (the other is `loan.rs`): handing CPython a pointer into the
+//! payload.
 
 use std::os::raw::c_int;
 

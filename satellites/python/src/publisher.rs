@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 use tokio::task::JoinHandle;
 
 use crate::errors::{ChannelError, IntoPy};
+use crate::loan::Loan;
 use crate::payload::to_bytes;
 use crate::runtime::{runtime, wait_for};
 
@@ -91,6 +92,19 @@ impl Publisher {
             Ok(false) => crate::runtime::wait(py, publisher.publish(bytes))?.py_err(),
             Err(e) => Err(crate::errors::to_py(e)),
         }
+    }
+
+    /// A slot of the channel's shared-memory segment to write a message of up to `size` bytes into, in place
+    /// (`loan.rs`): the zero-copy way to publish a large frame. None when the connection has no shared memory (not
+    /// a Unix socket, or the hub's is off), when the channel's segment is not there yet (it is asked for now: the
+    /// next call may have it), or when every slot is still held; then publish the frame with `publish`.
+    fn loan(&self, size: usize) -> PyResult<Option<Loan>> {
+        let publisher = self.publisher()?;
+        // Asking the hub for the channel's segment is a task on the runtime.
+        let _entered = runtime().enter();
+        Ok(publisher
+            .loan(size)
+            .map(|loan| Loan::new(self.name.clone(), loan)))
     }
 
     /// Publishes unless the send queue is full; returns whether the message was queued (drops are counted in

@@ -99,3 +99,60 @@ def test_a_megabyte_frame_over_the_unix_socket_reads_as_a_numpy_view_of_shared_m
         small = by_reference.recv(timeout=PATIENCE)
         assert not small.in_shared_memory and small.bytes() == b"x" * (THRESHOLD - 1)
         assert by_copy.recv(timeout=PATIENCE).bytes() == b"x" * (THRESHOLD - 1)
+
+
+def test_a_loaned_frame_is_written_in_the_segment_and_arrives_by_reference_without_a_copy(hub):
+    frame = np.random.default_rng(51).integers(0, 256, size=1 << 20, dtype=np.uint8)
+    with hub.client(hub.unix, "py-loan-pub") as producer, hub.client(hub.unix, "py-loan-sub") as local:
+        pub = producer.publisher("Py.shm.loaned", {"format": "raw"})
+        sub = local.subscribe("Py.shm.loaned")
+        wait_subscribers(producer, "Py.shm.loaned", 1)
+
+        # The first ask for a slot asks the hub for the channel's segment: until it has come there is no loan, and
+        # the frame goes the ordinary way.
+        loan = None
+        for _ in range(100):
+            loan = pub.loan(frame.nbytes)
+            if loan is not None:
+                break
+            pub.publish(frame)
+            assert np.array_equal(np.frombuffer(sub.recv(timeout=PATIENCE), dtype=np.uint8), frame)
+        assert loan is not None, "no slot after 100 frames over the Unix socket"
+        assert len(loan) == frame.nbytes and loan.pending
+
+        # Written through numpy straight into the slot, which lies in the hub's memfd segment.
+        view = np.frombuffer(loan, dtype=np.uint8)
+        assert view.flags.writeable and not view.flags.owndata
+        written_at = view.ctypes.data
+        assert MEMFD in mapping_of(written_at), mapping_of(written_at)
+        view[:] = frame
+        # The slot is the subscribers' once published: not while a view of it lives.
+        with pytest.raises(BufferError):
+            loan.publish()
+        del view
+        loan.publish()
+        assert not loan.pending and len(loan) == 0
+
+        msg = sub.recv(timeout=PATIENCE)
+        assert msg.in_shared_memory
+        arr = np.frombuffer(msg, dtype=np.uint8)
+        assert np.array_equal(arr, frame)
+        # The subscriber reads the bytes the producer wrote where they were written: in the hub's segment.
+        assert MEMFD in mapping_of(arr.ctypes.data)
+
+        # A shorter message in a larger loan, and a loan given back unpublished.
+        loan = pub.loan(frame.nbytes)
+        assert loan is not None
+        with memoryview(loan) as m:
+            m[:5] = b"short"
+        loan.publish(length=5)
+        assert sub.recv(timeout=PATIENCE).bytes() == b"short"
+        spare = pub.loan(frame.nbytes)
+        assert spare is not None
+        spare.discard()
+        with pytest.raises(Exception):
+            spare.publish()
+        with pytest.raises(ValueError):
+            other = pub.loan(16 * 1024)
+            assert other is not None
+            other.publish(length=32 * 1024)

@@ -82,12 +82,30 @@ class Publisher:
         """Publishes one message; waits (GIL released) only while the send queue is full."""
     def try_publish(self, payload: Payload) -> bool:
         """Publishes unless the send queue is full; returns whether it was queued."""
+    def loan(self, size: int) -> Optional["Loan"]:
+        """A shared-memory slot of ``size`` bytes to write a message into in place (zero copy); None without shared
+        memory (TCP, the hub's off), before the channel's segment has come, or while every slot is held."""
     def wait_subscribers(self, timeout: Optional[float] = None) -> bool:
         """Waits until someone subscribes; False if ``timeout`` seconds pass first."""
     def set_header(self, header: Union[dict, str]) -> None: ...
     def close(self) -> None: ...
     def __enter__(self) -> "Publisher": ...
     def __exit__(self, *exc: Any) -> bool: ...
+
+class Loan:
+    """A message written in place into a shared-memory slot: a writable buffer (``memoryview(loan)``,
+    ``numpy.frombuffer(loan, dtype=...)``). Release every view before ``publish()`` or ``discard()``."""
+
+    @property
+    def channel(self) -> str: ...
+    @property
+    def pending(self) -> bool:
+        """Neither published nor discarded yet."""
+    def __len__(self) -> int: ...
+    def publish(self, length: Optional[int] = None) -> None:
+        """Publishes the message (its first ``length`` bytes); BufferError while a view of it is alive."""
+    def discard(self) -> None:
+        """Gives the slot back unpublished."""
 
 class Subscription:
     """Messages of one channel in order; sticky by name across removals and reconnects."""
