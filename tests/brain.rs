@@ -69,6 +69,9 @@ impl Rig {
         // The brain, the TTS module and the observer follow transcripts; the brain follows detections.
         rig.until_subscribers(ch::TRANSCRIPT.name, 3).await?;
         rig.until_subscribers(ch::DETECTIONS.name, 1).await?;
+        // The brain makes Agent.rules after it follows transcripts: heard before our subscription was attached to
+        // it, a question's rule trace went nowhere (CI, and one run in three here while CI ran).
+        rig.until_subscribers(ch::RULES.name, 1).await?;
         Ok(rig)
     }
 

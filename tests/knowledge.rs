@@ -58,6 +58,15 @@ impl Rig {
                 {
                     tokio::time::sleep(Duration::from_millis(20)).await;
                 }
+                // Agent.rules comes after: a question heard before our subscription was attached to it would
+                // have its rule trace go nowhere.
+                while !user
+                    .channel(ch::RULES.name)
+                    .await
+                    .is_ok_and(|info| info.stats.subscribers >= 1)
+                {
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
             },
         )
         .await?;

@@ -105,6 +105,9 @@ impl Rig {
         rig.until_subscribers(ch::TRANSCRIPT.name, 2).await?;
         rig.until_subscribers(ch::DETECTIONS.name, 1).await?;
         rig.until_subscribers(ch::TRANSCRIPT_PAUSE.name, 1).await?;
+        // Agent.rules is made after the brain follows transcripts: a question heard before our subscription was
+        // attached to it had its rule trace go nowhere (CI: the chat hand-over never seen).
+        rig.until_subscribers(ch::RULES.name, 1).await?;
         Ok(rig)
     }
 
