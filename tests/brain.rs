@@ -105,9 +105,19 @@ impl Rig {
         let boxes: Vec<Value> = (0..faces)
             .map(|i| json!({ "x": 250 + 60 * i, "y": 100, "w": 80, "h": 80 }))
             .collect();
+        // Each face turned to the agent, as the vision module's per-face analysis reports it.
+        let people: Vec<Value> = boxes
+            .iter()
+            .enumerate()
+            .map(|(i, face)| {
+                json!({ "id": i, "face": face, "mouth_open": 0.0, "eyes_open": 0.3, "yaw_deg": 0.0,
+                    "pitch_deg": 0.0, "looking": true, "smile": 0.0, "smiling": false, "speaking": false })
+            })
+            .collect();
         let message = json!({
             "frame": { "seq": seq, "ts_us": 0, "width": 640, "height": 360 },
             "faces": boxes,
+            "people": people,
             "motion": null,
             "codes": [],
         });

@@ -32,6 +32,13 @@ pub enum Action {
     /// Answer `text` from the knowledge folder: the host says its best passage (docs/knowledge.md), or asserts
     /// `failed("recall", reason)` when the folder holds nothing confident about it.
     Recall { text: String },
+    /// Remember the face of the person talking (or the only one in view) under `name`, in the pair database; the
+    /// host asserts `failed("learn_face", reason)` when there is no such face (docs/vision.md, "Acquaintance").
+    #[serde(rename = "learn_face")]
+    LearnFace { name: String },
+    /// Erase what was stored of the face of the person talking (or the only one in view).
+    #[serde(rename = "forget_face")]
+    ForgetFace,
 }
 
 impl fmt::Display for Action {
@@ -54,6 +61,8 @@ impl fmt::Display for Action {
             } => write!(f, "chat({text:?}, {tool:?})"),
             Action::ForgetConversation => f.write_str("forget_conversation"),
             Action::Recall { text } => write!(f, "recall({text:?})"),
+            Action::LearnFace { name } => write!(f, "learn_face({name:?})"),
+            Action::ForgetFace => f.write_str("forget_face"),
         }
     }
 }

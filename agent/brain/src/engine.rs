@@ -536,6 +536,8 @@ fn instantiate(action: &ActionExpr, scope: &Scope<'_>) -> Result<Option<Deed>, S
         }),
         Primitive::ForgetConversation => Deed::Act(Action::ForgetConversation),
         Primitive::Recall => Deed::Act(Action::Recall { text: text(0)? }),
+        Primitive::LearnFace => Deed::Act(Action::LearnFace { name: text(0)? }),
+        Primitive::ForgetFace => Deed::Act(Action::ForgetFace),
         Primitive::Remember | Primitive::Forget => {
             let (name, fact_args) = match &args[0] {
                 Expr::Call(name, fact_args, _) => (name.clone(), Some(fact_args)),

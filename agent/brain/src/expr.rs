@@ -30,9 +30,10 @@ impl PairDb for BTreeMap<String, Value> {
 }
 
 /// Built-in functions and how many arguments each takes.
-pub(crate) const FUNCTIONS: [(&str, usize); 5] = [
+pub(crate) const FUNCTIONS: [(&str, usize); 6] = [
     ("plural", 3),
     ("words", 1),
+    ("after", 2),
     ("lower", 1),
     ("upper", 1),
     ("db", 1),
@@ -112,6 +113,9 @@ fn call(name: &str, args: &[Value], db: &dyn PairDb) -> Option<Value> {
             Some(Value::Text(format!("{count} {noun}")))
         }
         ("words", [text]) => Some(Value::Num(phrase::normalise(&text.to_string()).len() as f64)),
+        ("after", [text, phrase]) => {
+            phrase::after(&text.to_string(), &phrase.to_string()).map(Value::Text)
+        }
         ("lower", [text]) => Some(Value::Text(text.to_string().to_lowercase())),
         ("upper", [text]) => Some(Value::Text(text.to_string().to_uppercase())),
         ("db", [key]) => db.lookup(&key.to_string()),
@@ -159,5 +163,18 @@ mod tests {
             Pos::default(),
         );
         assert_eq!(eval(&words, &scope), Some(Value::Num(0.0)));
+        let after = |text: &str| {
+            eval(
+                &Expr::Call(
+                    "after".into(),
+                    vec![lit(text.into()), lit("my name is".into())],
+                    Pos::default(),
+                ),
+                &scope,
+            )
+        };
+        assert_eq!(after("Hi, my name is Anna."), Some(Value::from("anna")));
+        assert_eq!(after("My name is"), None);
+        assert_eq!(after("What is your name?"), None);
     }
 }

@@ -191,6 +191,25 @@ impl Pattern {
     }
 }
 
+/// The words of `text` after the first place the words of `phrase` occur in it (both normalised, words compared as
+/// in [`Pattern`]), joined by spaces; `None` when the phrase is not there or nothing follows it.
+/// `after("Hi, my name is Anna.", "my name is")` is `"anna"`.
+pub fn after(text: &str, phrase: &str) -> Option<String> {
+    let words = normalise(text);
+    let wanted = normalise(phrase);
+    if wanted.is_empty() {
+        return None;
+    }
+    let start = (0..words.len().saturating_sub(wanted.len() - 1)).find(|&start| {
+        wanted
+            .iter()
+            .zip(&words[start..])
+            .all(|(w, heard)| same_word(heard, w))
+    })?;
+    let rest = &words[start + wanted.len()..];
+    (!rest.is_empty()).then(|| rest.join(" "))
+}
+
 /// Whether `text` contains the phrase `pattern` (both normalised; see [`Pattern`]).
 pub fn matches(text: &str, pattern: &str) -> bool {
     Pattern::new(pattern).matches_words(&normalise(text))

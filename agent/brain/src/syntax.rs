@@ -193,6 +193,10 @@ pub enum Primitive {
     ForgetConversation,
     /// `recall(T)`: say the knowledge folder's best passage for `T`.
     Recall,
+    /// `learn_face(Name)`: remember the talking person's face under a name.
+    LearnFace,
+    /// `forget_face`: erase the talking person's stored face.
+    ForgetFace,
 }
 
 impl Primitive {
@@ -209,6 +213,8 @@ impl Primitive {
             "chat" => Primitive::Chat,
             "forget_conversation" => Primitive::ForgetConversation,
             "recall" => Primitive::Recall,
+            "learn_face" => Primitive::LearnFace,
+            "forget_face" => Primitive::ForgetFace,
             _ => return None,
         })
     }
@@ -226,6 +232,8 @@ impl Primitive {
             Primitive::Chat => "chat",
             Primitive::ForgetConversation => "forget_conversation",
             Primitive::Recall => "recall",
+            Primitive::LearnFace => "learn_face",
+            Primitive::ForgetFace => "forget_face",
         }
     }
 
@@ -236,9 +244,10 @@ impl Primitive {
             | Primitive::Run
             | Primitive::Remember
             | Primitive::Forget
-            | Primitive::Recall => (1, 1),
+            | Primitive::Recall
+            | Primitive::LearnFace => (1, 1),
             Primitive::Publish | Primitive::Call | Primitive::Set => (2, 2),
-            Primitive::Cancel | Primitive::ForgetConversation => (0, 0),
+            Primitive::Cancel | Primitive::ForgetConversation | Primitive::ForgetFace => (0, 0),
             // The optional second argument names the tool the model must call.
             Primitive::Chat => (1, 2),
         }
@@ -256,6 +265,8 @@ impl Primitive {
                 | Primitive::Chat
                 | Primitive::ForgetConversation
                 | Primitive::Recall
+                | Primitive::LearnFace
+                | Primitive::ForgetFace
         )
     }
 }

@@ -332,12 +332,77 @@ fn the_default_program_declares_the_robot_command_tool() {
     assert_eq!(tool.args["direction"], ["left", "right"]);
 }
 
-/// Face frames at 15 fps for `seconds`.
+/// Face frames at 15 fps for `seconds`, of a person turned to the agent.
 fn person_in_view(sim: &mut Sim, seconds: u64) {
     for _ in 0..seconds * 15 {
         sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+        sim.perceive("looking", vec![Value::Num(1.0)]);
         sim.advance(ms(66));
     }
+}
+
+#[test]
+fn a_person_who_looks_elsewhere_is_not_greeted_until_they_look() {
+    let mut sim = assistant();
+    for _ in 0..45 {
+        sim.perceive("face", vec![Value::Num(1.0), Value::from("left")]);
+        sim.advance(ms(66));
+    }
+    assert!(sim.said().is_empty(), "{:?}", sim.said());
+    person_in_view(&mut sim, 2);
+    assert_eq!(sim.said(), [GREETING]);
+}
+
+#[test]
+fn a_known_face_is_greeted_by_name() {
+    let mut sim = assistant();
+    for _ in 0..30 {
+        sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+        sim.perceive("looking", vec![Value::Num(1.0)]);
+        sim.perceive("acquaintance", vec![Value::from("Anna")]);
+        sim.advance(ms(66));
+    }
+    assert_eq!(sim.said(), ["Good afternoon, Anna! Nice to see you again."]);
+    assert_eq!(says(&sim.hear("Do you know me?")), ["You are Anna."]);
+}
+
+#[test]
+fn my_name_is_learns_the_face_and_forget_me_forgets_it() {
+    let mut sim = assistant();
+    let effects = sim.hear("Hi, my name is Anna.");
+    assert_eq!(
+        effects,
+        vec![Effect::Fire(Action::LearnFace {
+            name: "anna".into()
+        })]
+    );
+    sim.advance(ms(200));
+    let replied = sim.perceive(
+        "reply",
+        vec![Value::from("learn_face"), Value::from("Anna")],
+    );
+    assert_eq!(
+        says(&replied),
+        ["Nice to meet you, Anna. I will remember your face."]
+    );
+    sim.advance(ms(3000));
+    assert_eq!(
+        sim.hear("Please forget me."),
+        vec![Effect::Fire(Action::ForgetFace)]
+    );
+    sim.advance(ms(200));
+    let failed = sim.perceive(
+        "failed",
+        vec![Value::from("forget_face"), Value::from("not known")],
+    );
+    assert_eq!(says(&failed), ["I have not stored your face."]);
+    // Nothing is learned without being asked.
+    sim.advance(ms(3000));
+    let asked = sim.hear("What is my name?");
+    assert_eq!(
+        says(&asked),
+        ["I don't know you yet. Tell me your name, and I will remember your face."]
+    );
 }
 
 const CONFUSED: &str = "Sorry, I did not understand. You can ask me the time, or what I see.";

@@ -137,9 +137,10 @@ fn girati_verso_is_a_tool_call_the_model_must_make() {
 #[test]
 fn a_face_is_greeted_once_in_italian() {
     let mut sim = assistente();
-    // A face seen at 5 frames a second for a second (one detection alone is not greeted).
+    // A face turned to the agent, seen at 5 frames a second for a second (one detection alone is not greeted).
     for _ in 0..5 {
         sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+        sim.perceive("looking", vec![Value::Num(1.0)]);
         sim.advance(ms(200));
     }
     assert_eq!(

@@ -8,7 +8,8 @@ use crate::grey::GreyImage;
 use crate::identity::Descriptor;
 use crate::landmarks::Landmarks;
 
-/// Where the models are; the defaults are where `make model-face` puts them.
+/// Where the models are; the defaults are where `make model-face` puts them in the repository this was built
+/// from (an installed agent names its copies in its configuration).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FaceModelPaths {
     /// dlib's 68-point shape predictor.
@@ -19,13 +20,23 @@ pub struct FaceModelPaths {
 
 impl Default for FaceModelPaths {
     fn default() -> Self {
+        let root = repo_root();
         Self {
-            landmarks: PathBuf::from(DEFAULT_LANDMARKS),
-            descriptor: Some(PathBuf::from(DEFAULT_DESCRIPTOR)),
+            landmarks: root.join(DEFAULT_LANDMARKS),
+            descriptor: Some(root.join(DEFAULT_DESCRIPTOR)),
         }
     }
 }
 
+/// The repository root, found from this crate's manifest directory (agent/face).
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+}
+
+/// The models' places in the repository.
 pub const DEFAULT_LANDMARKS: &str = "models/dlib/shape_predictor_68_face_landmarks.dat";
 pub const DEFAULT_DESCRIPTOR: &str = "models/dlib/dlib_face_recognition_resnet_model_v1.dat";
 

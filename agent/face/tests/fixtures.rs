@@ -22,11 +22,7 @@ fn fixtures() -> PathBuf {
 }
 
 fn paths() -> FaceModelPaths {
-    let defaults = FaceModelPaths::default();
-    FaceModelPaths {
-        landmarks: repo().join(&defaults.landmarks),
-        descriptor: defaults.descriptor.map(|d| repo().join(d)),
-    }
+    FaceModelPaths::default()
 }
 
 /// A fixture JPEG as grey pixels, width and height.

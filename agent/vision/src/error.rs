@@ -43,6 +43,8 @@ pub enum VisionError {
     OpenCv(#[from] opencv::Error),
     #[error("barcode reader: {0}")]
     Barcode(String),
+    #[error("people: {0}")]
+    Face(#[from] agent_face::FaceError),
 }
 
 /// Why processing one frame failed: a bad frame (skip it) or a detector failure.

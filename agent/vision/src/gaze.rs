@@ -1,5 +1,5 @@
-//! The gaze target policy: look at the largest / most central face, else at the centre of motion, else go idle;
-//! smoothed so the avatar's eyes glide instead of jittering with every detection.
+//! The gaze target policy: look at the person talking, else the largest / most central face, else at the centre of
+//! motion, else go idle; smoothed so the avatar's eyes glide instead of jittering with every detection.
 
 use crate::geometry::{BoxPx, FrameSize, PointPx};
 
@@ -49,6 +49,8 @@ impl Default for GazeParams {
 pub struct GazePolicy {
     params: GazeParams,
     watched_face: Option<BoxPx>,
+    /// The speaker's face for the next update (see [`GazePolicy::prefer`]).
+    preferred: Option<BoxPx>,
     raw: Option<(f32, f32, GazeSource)>,
     smoothed: (f32, f32),
     last_evidence_us: Option<u64>,
@@ -60,11 +62,18 @@ impl GazePolicy {
         Self {
             params,
             watched_face: None,
+            preferred: None,
             raw: None,
             smoothed: (0.5, 0.5),
             last_evidence_us: None,
             last_update_us: None,
         }
+    }
+
+    /// Looks at `face` (the person talking) in the next update, whatever the other faces score; it becomes the
+    /// watched face, so the gaze stays there after the talk until another face beats it by `switch_margin`.
+    pub fn prefer(&mut self, face: Option<BoxPx>) {
+        self.preferred = face;
     }
 
     /// Updates the policy with one frame's faces and centre of motion and returns the smoothed target.
@@ -124,9 +133,13 @@ impl GazePolicy {
         }
     }
 
-    /// Picks the face to watch: the best score (area weighted by closeness to the centre), but the face already
+    /// Picks the face to watch: the preferred one (the speaker) when there is one, else the best score (area weighted by closeness to the centre), but the face already
     /// being watched keeps the gaze unless another beats it by `switch_margin`.
     fn choose_face(&mut self, size: FrameSize, faces: &[BoxPx]) -> Option<BoxPx> {
+        if let Some(speaker) = self.preferred.take() {
+            self.watched_face = Some(speaker);
+            return Some(speaker);
+        }
         let score = |face: &BoxPx| {
             let (nx, ny) = size.normalise(face.centre());
             let distance = (nx * nx + ny * ny).sqrt() / std::f32::consts::SQRT_2;
@@ -261,5 +274,20 @@ mod tests {
             None,
         );
         assert!(third.x > 0.5, "{third:?}");
+    }
+
+    #[test]
+    fn the_speaker_takes_the_gaze_from_a_larger_face() {
+        let mut policy = GazePolicy::new(GazeParams {
+            smoothing_us: 0,
+            ..GazeParams::default()
+        });
+        let large = face(60, 100, 140);
+        let small = face(500, 150, 50);
+        let first = policy.update(0, SIZE, &[large, small], None);
+        assert!(first.x < 0.5, "{first:?}");
+        policy.prefer(Some(small));
+        let speaking = policy.update(FRAME_US, SIZE, &[large, small], None);
+        assert!(speaking.x > 0.75, "{speaking:?}");
     }
 }

@@ -14,8 +14,11 @@ pub mod gaze;
 pub mod geometry;
 pub mod jpeg;
 pub mod motion;
+pub mod people;
+pub mod people_settings;
 pub mod pipeline;
 pub mod settings;
+pub mod speaker;
 pub mod wire;
 
 pub use error::{FrameError, ProcessError, VisionError};

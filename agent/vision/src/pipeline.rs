@@ -12,6 +12,7 @@ use crate::frame::{self, GreyFrame};
 use crate::gaze::{GazeParams, GazePolicy, GazeTarget};
 use crate::geometry::{BoxPx, FrameSize};
 use crate::motion::{Motion, MotionDetector, MotionParams};
+use crate::people::{People, PeopleParams, Person};
 
 /// Which face detector runs: the CenterFace network (the default) or OpenCV's cascades with the budgeted scan.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,6 +63,8 @@ impl FaceDetector {
 #[derive(Debug, Clone)]
 pub struct PipelineParams {
     pub faces: Option<FaceDetection>,
+    /// The per-face analysis of the faces found (needs `faces`).
+    pub people: Option<PeopleParams>,
     pub motion: Option<MotionParams>,
     pub codes: Option<CodeParams>,
     /// A code not decoded for this long has left the view; its next sighting is a new appearance.
@@ -74,6 +77,7 @@ impl Default for PipelineParams {
     fn default() -> Self {
         Self {
             faces: Some(FaceDetection::default()),
+            people: Some(PeopleParams::default()),
             motion: Some(MotionParams::default()),
             codes: Some(CodeParams::default()),
             code_forget_after_us: 1_000_000,
@@ -88,6 +92,7 @@ impl Default for PipelineParams {
 pub struct StageTimings {
     pub decode: Duration,
     pub faces: Option<Duration>,
+    pub people: Option<Duration>,
     pub motion: Option<Duration>,
     pub codes: Option<Duration>,
     pub total: Duration,
@@ -103,6 +108,8 @@ pub struct FrameDetections {
     /// Completed full face scans: cycles of the cascades' budgeted scan (see [`FaceScanner`]) or runs of the network
     /// (see [`CenterFace`]); 0 when face detection is off.
     pub face_cycles: u64,
+    /// The analysed faces; `None` when the analysis is off.
+    pub people: Option<Vec<Person>>,
     pub motion: Option<Motion>,
     pub codes: Option<Vec<SeenCode>>,
     pub gaze: GazeTarget,
@@ -113,6 +120,7 @@ pub struct FrameDetections {
 #[derive(Debug)]
 pub struct VisionPipeline {
     faces: Option<FaceDetector>,
+    people: Option<People>,
     motion: Option<MotionDetector>,
     codes: Option<CodeReader>,
     appearances: AppearanceTracker,
@@ -125,6 +133,10 @@ pub struct VisionPipeline {
 impl VisionPipeline {
     pub fn new(params: PipelineParams) -> Result<Self, VisionError> {
         Ok(Self {
+            people: match (&params.faces, params.people) {
+                (Some(_), Some(people)) => Some(People::new(people)?),
+                _ => None,
+            },
             faces: params.faces.map(FaceDetector::new).transpose()?,
             motion: params.motion.map(MotionDetector::new).transpose()?,
             codes: params.codes.map(CodeReader::new).transpose()?,
@@ -144,6 +156,14 @@ impl VisionPipeline {
         }
         self.appearances = AppearanceTracker::new(self.code_forget_after_us);
         self.gaze = GazePolicy::new(self.gaze_params.clone());
+        if let Some(people) = self.people.as_mut() {
+            people.reset();
+        }
+    }
+
+    /// The per-face analysis, when it runs (voice activity, acquaintances, the face to learn).
+    pub fn people(&mut self) -> Option<&mut People> {
+        self.people.as_mut()
     }
 
     /// Decodes and processes one JPEG frame with sequence number `seq` taken at `frame_us`.
@@ -198,6 +218,12 @@ impl VisionPipeline {
             }
             None => (None, 0),
         };
+        let people = match (self.people.as_mut(), faces.as_deref()) {
+            (Some(analysis), Some(found)) => Some(timed(&mut timings.people, || {
+                analysis.observe(frame, frame_us, found)
+            })?),
+            _ => None,
+        };
         let codes = match self.codes.as_mut() {
             Some(reader) => {
                 let decoded = timed(&mut timings.codes, || reader.read(frame))?;
@@ -206,6 +232,13 @@ impl VisionPipeline {
             None => None,
         };
         let size = frame.size();
+        self.gaze.prefer(
+            people
+                .iter()
+                .flatten()
+                .find(|person| person.speaking)
+                .map(|person| person.face),
+        );
         let gaze = self.gaze.update(
             frame_us,
             size,
@@ -219,6 +252,7 @@ impl VisionPipeline {
             size,
             faces,
             face_cycles,
+            people,
             motion,
             codes,
             gaze,

@@ -14,6 +14,7 @@ use crate::face::{Cascade, DEBIAN_CASCADE_DIR, FaceParams};
 use crate::frame::DEFAULT_MAX_PIXELS;
 use crate::gaze::GazeParams;
 use crate::motion::{MotionMethod, MotionParams};
+use crate::people_settings::PeopleSettings;
 use crate::pipeline::{FaceDetection, PipelineParams};
 
 /// `[modules.vision]`.
@@ -31,6 +32,8 @@ pub struct VisionSettings {
     /// Threads OpenCV may use inside one call (process-wide).
     pub threads: u32,
     pub faces: FaceSettings,
+    /// `[modules.vision.people]`: the per-face analysis of the faces found.
+    pub people: PeopleSettings,
     pub motion: MotionSettings,
     pub codes: CodeSettings,
     pub gaze: GazeSettings,
@@ -113,6 +116,7 @@ impl Default for VisionSettings {
             max_frame_pixels: DEFAULT_MAX_PIXELS,
             threads: 1,
             faces: FaceSettings::default(),
+            people: PeopleSettings::default(),
             motion: MotionSettings::default(),
             codes: CodeSettings::default(),
             gaze: GazeSettings::default(),
@@ -370,8 +374,14 @@ impl VisionSettings {
             "gaze.deadband",
             "must be in [0, 0.5)",
         )?;
+        let people = if faces.is_some() {
+            self.people.params()?
+        } else {
+            None
+        };
         Ok(PipelineParams {
             faces,
+            people,
             motion,
             codes,
             code_forget_after_us: self.codes.forget_after_ms * 1000,

@@ -4,7 +4,7 @@
 
 pub use agent_contract::detections::{
     BoxMsg, CodeMsg, CodesMsg, CountersMsg, DetectionsMsg, FacesMsg, FrameRef, GazeCommand,
-    GazeMsg, MotionMsg, PointMsg, TimingMsg,
+    GazeMsg, MotionMsg, PersonMsg, PointMsg, TimingMsg,
 };
 
 use crate::appearance::SeenCode;
@@ -12,6 +12,7 @@ use crate::codes::DecodedCode;
 use crate::gaze::{GazeSource, GazeTarget};
 use crate::geometry::{BoxPx, PointPx};
 use crate::motion::Motion;
+use crate::people::Person;
 use crate::pipeline::{FrameDetections, StageTimings};
 
 /// Which frame `detections` are about.
@@ -41,6 +42,26 @@ impl From<PointPx> for PointMsg {
     }
 }
 
+impl From<&Person> for PersonMsg {
+    fn from(p: &Person) -> Self {
+        // Two decimals say all the measures can tell, and keep the message short.
+        let round = |v: f32| (v * 100.0).round() / 100.0;
+        PersonMsg {
+            id: p.id,
+            face: BoxMsg::from(&p.face),
+            mouth_open: round(p.measures.mouth_open),
+            eyes_open: round(p.measures.eyes_open),
+            yaw_deg: p.measures.yaw_deg.round(),
+            pitch_deg: p.measures.pitch_deg.round(),
+            looking: p.measures.looking(),
+            smile: round(p.measures.smile),
+            smiling: p.measures.smiling(),
+            speaking: p.speaking,
+            name: p.name.clone(),
+        }
+    }
+}
+
 impl From<&GazeTarget> for GazeMsg {
     fn from(g: &GazeTarget) -> Self {
         GazeMsg {
@@ -57,6 +78,7 @@ impl From<&StageTimings> for TimingMsg {
         TimingMsg {
             decode_ms: ms(t.decode),
             faces_ms: t.faces.map(ms),
+            people_ms: t.people.map(ms),
             motion_ms: t.motion.map(ms),
             codes_ms: t.codes.map(ms),
             total_ms: ms(t.total),
@@ -158,6 +180,10 @@ pub fn detections_msg(d: &FrameDetections, counters: CountersMsg) -> DetectionsM
         frame: frame_ref(d),
         faces: faces_msg(d).map(|m| m.faces),
         face_scan_cycles: d.face_cycles,
+        people: d
+            .people
+            .as_ref()
+            .map(|people| people.iter().map(PersonMsg::from).collect()),
         motion: motion_msg(d),
         codes: d
             .codes

@@ -206,6 +206,8 @@ fn facts_of(set: &Set, conversation: &Conversation, turn: &Turn) -> Facts {
             .clone()
             .or_else(|| set.facts.face_where.clone())
             .filter(|_| turn.faces != Some(0)),
+        speaker_where: None,
+        names: Vec::new(),
         code: conversation.code.clone(),
         motion: None,
         time: turn.time.clone().unwrap_or_else(|| set.facts.time.clone()),

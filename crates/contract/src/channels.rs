@@ -78,6 +78,12 @@ pub const DETECTIONS: Channel = stream(
     "Agent.detections",
     "all detections of a frame (vision module)",
 );
+/// Faces the agent was introduced to ([`crate::acquaintance`]): learn the talking person's face under a name, or
+/// forget it (the brain's `learn_face` and `forget_face`).
+pub const ACQUAINTANCES: Channel = service(
+    "Agent.acquaintances",
+    "learn or forget a face by name (vision module)",
+);
 /// The rule trace of the brain.
 pub const RULES: Channel = stream("Agent.rules", "rule trace (brain module)");
 /// Whether the session is being recorded, and where ([`crate::recording::RecordingState`]).
@@ -118,6 +124,7 @@ pub const ALL: &[Channel] = &[
     MOTION,
     CODES,
     DETECTIONS,
+    ACQUAINTANCES,
     RULES,
     LATENCY,
     RECORDING,
@@ -162,6 +169,9 @@ pub mod headers {
     pub const RECORDING: &str = r#"{"format":"json","content":"recording state","source":"recorder","doc":"docs/recording.md"}"#;
     /// `Agent.latency`.
     pub const LATENCY: &str = r#"{"format":"json","content":"turn latencies","source":"observer","doc":"docs/metrics.md"}"#;
+
+    /// `Agent.acquaintances`: what it takes and answers.
+    pub const ACQUAINTANCES: &str = r#"{"request":"agent_contract::acquaintance::AcquaintanceRequest","answer":"agent_contract::acquaintance::AcquaintanceAnswer","doc":"docs/vision.md"}"#;
 
     /// The header of one of the vision module's JSON channels (`content`: faces, motion, codes or detections).
     pub fn vision(content: &str) -> String {

@@ -53,6 +53,12 @@ pub struct Facts {
     /// Where the largest face is (`left`, `centre`, `right`), when there is one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub face_where: Option<String>,
+    /// Where the person talking is (`left`, `centre`, `right`), when the vision sees whose mouth moves.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speaker_where: Option<String>,
+    /// The names of the faces in view that the agent was introduced to (`learn_face`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub names: Vec<String>,
     /// The text of a code seen in the last seconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub code: Option<String>,

@@ -85,11 +85,41 @@ pub struct GazeMsg {
     pub source: String,
 }
 
+/// One person in view: a face the per-face analysis followed (docs/vision.md, "People"). Landmark measures are in
+/// units of the distance between the outer eye corners, so a face's size does not change them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PersonMsg {
+    /// Stays the same while the face stays in view (a face lost for a second gets a new one).
+    pub id: u64,
+    pub face: BoxMsg,
+    /// The inner lips' gap: about 0 closed, 0.1-0.4 talking.
+    pub mouth_open: f32,
+    /// The eyes' height over their width: about 0.25-0.35 open, under 0.15 closed.
+    pub eyes_open: f32,
+    /// Head turn in degrees, positive towards the image's right; an estimate from the landmarks.
+    pub yaw_deg: f32,
+    /// Head tilt in degrees, positive up.
+    pub pitch_deg: f32,
+    /// The face is turned to the camera (yaw and pitch within 25 degrees).
+    pub looking: bool,
+    /// 0 (at rest) to 1 (a broad smile).
+    pub smile: f32,
+    pub smiling: bool,
+    /// This face's mouth moves while a voice is heard: the one who is talking (at most one person at a time).
+    pub speaking: bool,
+    /// The name the person gave, when the agent was introduced to this face (`learn_face`) and knows it again.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
 /// Per-stage time of a frame in milliseconds; a stage that is switched off is `null`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TimingMsg {
     pub decode_ms: f64,
     pub faces_ms: Option<f64>,
+    /// The per-face analysis (landmarks, and a descriptor when one is due).
+    #[serde(default)]
+    pub people_ms: Option<f64>,
     pub motion_ms: Option<f64>,
     pub codes_ms: Option<f64>,
     pub total_ms: f64,
@@ -117,6 +147,9 @@ pub struct DetectionsMsg {
     pub faces: Option<Vec<BoxMsg>>,
     #[serde(default)]
     pub face_scan_cycles: u64,
+    /// The faces analysed: who looks, smiles, speaks, and known names; `null` when the analysis is off.
+    #[serde(default)]
+    pub people: Option<Vec<PersonMsg>>,
     #[serde(default)]
     pub motion: Option<MotionMsg>,
     /// Every code visible in this frame, new or not.

@@ -3,6 +3,7 @@
 //! JSON test vectors in `crates/contract/vectors/`, which a test here writes from these types and the page's `node --test`
 //! suites read (`web/test/`).
 
+pub mod acquaintance;
 pub mod avatar;
 pub mod channels;
 pub mod chat;

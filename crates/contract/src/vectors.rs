@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use crate::avatar::{AvatarCommand, VISEMES, VisemeCue};
 use crate::detections::{
     BoxMsg, CodeMsg, CountersMsg, DetectionsMsg, FrameRef, GazeCommand, GazeMsg, MotionMsg,
-    PointMsg, TimingMsg,
+    PersonMsg, PointMsg, TimingMsg,
 };
 
 /// The folder of the vectors.
@@ -43,8 +43,9 @@ fn frame(seq: u64) -> FrameRef {
     }
 }
 
-/// `Agent.detections` as the vision module publishes it: two faces, motion, a QR code, gaze and figures; a frame
-/// with nothing in it; and one from another detector without gaze or figures.
+/// `Agent.detections` as the vision module publishes it: two faces and the two people they are (one speaking and
+/// named), motion, a QR code, gaze and figures; a frame with nothing in it; and one from another detector without
+/// gaze or figures.
 pub fn detections() -> serde_json::Value {
     let full = DetectionsMsg {
         frame: frame(41),
@@ -63,6 +64,44 @@ pub fn detections() -> serde_json::Value {
             },
         ]),
         face_scan_cycles: 12,
+        people: Some(vec![
+            PersonMsg {
+                id: 7,
+                face: BoxMsg {
+                    x: 412,
+                    y: 96,
+                    w: 120,
+                    h: 120,
+                },
+                mouth_open: 0.25,
+                eyes_open: 0.3,
+                yaw_deg: 4.5,
+                pitch_deg: -2.0,
+                looking: true,
+                smile: 0.75,
+                smiling: true,
+                speaking: true,
+                name: Some("Anna".into()),
+            },
+            PersonMsg {
+                id: 9,
+                face: BoxMsg {
+                    x: 60,
+                    y: 140,
+                    w: 64,
+                    h: 64,
+                },
+                mouth_open: 0.0,
+                eyes_open: 0.28,
+                yaw_deg: -40.0,
+                pitch_deg: 5.0,
+                looking: false,
+                smile: 0.0,
+                smiling: false,
+                speaking: false,
+                name: None,
+            },
+        ]),
         motion: Some(MotionMsg {
             frame: frame(41),
             moving: true,
@@ -97,6 +136,7 @@ pub fn detections() -> serde_json::Value {
         timing: Some(TimingMsg {
             decode_ms: 2.5,
             faces_ms: Some(9.25),
+            people_ms: Some(6.5),
             motion_ms: Some(1.5),
             codes_ms: None,
             total_ms: 13.5,
@@ -111,6 +151,7 @@ pub fn detections() -> serde_json::Value {
         frame: frame(42),
         faces: Some(vec![]),
         face_scan_cycles: 12,
+        people: Some(vec![]),
         motion: Some(MotionMsg {
             frame: frame(42),
             moving: false,

@@ -81,17 +81,27 @@ fn codes() -> Value {
     object(json!({"frame": frame(), "codes": array(code())}))
 }
 
+fn person() -> Value {
+    let boolean = json!({"type": "boolean"});
+    object(json!({
+        "id": integer(), "face": rect(), "mouth_open": number(), "eyes_open": number(), "yaw_deg": number(),
+        "pitch_deg": number(), "looking": boolean, "smile": number(), "smiling": boolean, "speaking": boolean,
+        "name": nullable(json!({"type": "string"})),
+    }))
+}
+
 fn detections() -> Value {
     let ms = nullable(number());
     object(json!({
         "frame": frame(),
         "faces": nullable(array(rect())),
         "face_scan_cycles": integer(),
+        "people": nullable(array(person())),
         "motion": nullable(motion()),
         "codes": nullable(array(code())),
         "gaze": nullable(object(json!({"x": number(), "y": number(), "source": {"type": "string"}}))),
         "timing": nullable(object(json!({
-            "decode_ms": number(), "faces_ms": ms, "motion_ms": ms, "codes_ms": ms, "total_ms": number(),
+            "decode_ms": number(), "faces_ms": ms, "people_ms": ms, "motion_ms": ms, "codes_ms": ms, "total_ms": number(),
         }))),
         "counters": nullable(object(json!({"processed": integer(), "skipped": integer(), "bad": integer()}))),
     }))
@@ -187,6 +197,19 @@ mod tests {
             frame: frame.clone(),
             faces: Some(vec![rect]),
             face_scan_cycles: 2,
+            people: Some(vec![PersonMsg {
+                id: 1,
+                face: rect,
+                mouth_open: 0.2,
+                eyes_open: 0.3,
+                yaw_deg: 5.0,
+                pitch_deg: -3.0,
+                looking: true,
+                smile: 0.6,
+                smiling: true,
+                speaking: true,
+                name: Some("Anna".into()),
+            }]),
             motion: Some(motion.clone()),
             codes: Some(vec![code]),
             gaze: Some(GazeMsg {
@@ -197,6 +220,7 @@ mod tests {
             timing: Some(TimingMsg {
                 decode_ms: 1.0,
                 faces_ms: Some(2.0),
+                people_ms: Some(4.0),
                 motion_ms: None,
                 codes_ms: Some(3.0),
                 total_ms: 6.0,
@@ -207,6 +231,7 @@ mod tests {
             frame,
             faces: None,
             face_scan_cycles: 0,
+            people: None,
             motion: None,
             codes: None,
             gaze: None,

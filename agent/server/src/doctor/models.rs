@@ -86,7 +86,7 @@ pub fn make_target(name: &str) -> Option<String> {
     if file.starts_with("piper/") || file.starts_with("onnxruntime/") {
         return Some("make model-voice".into());
     }
-    if file == "centerface.onnx" {
+    if file == "centerface.onnx" || file.starts_with("dlib/") {
         return Some("make model-face".into());
     }
     let whisper = file.strip_prefix("ggml-")?.strip_suffix(".bin")?;
@@ -98,7 +98,8 @@ pub fn make_target(name: &str) -> Option<String> {
 }
 
 /// The model files the configuration needs: whisper-sat's and llm-sat's defaults always, the face detector unless
-/// the vision module is off or finds faces with cascades, the Piper voice when the TTS module speaks with it.
+/// the vision module is off or finds faces with cascades, dlib's landmarks (and descriptor, for identities) unless
+/// the vision module or its per-face analysis is off, the Piper voice when the TTS module speaks with it.
 /// Every other model is checked only if it is there.
 pub fn required(config: &Config, name: &str) -> bool {
     let setting = |module: &str, table: Option<&str>, key: &str| {
@@ -115,6 +116,20 @@ pub fn required(config: &Config, name: &str) -> bool {
             config.module_enabled("vision")
                 && config.modules.contains_key("vision")
                 && setting("vision", Some("faces"), "detector").as_deref() != Some("cascades")
+        }
+        n if n.starts_with("models/dlib/") => {
+            let people = |key: &str| {
+                config
+                    .modules
+                    .get("vision")
+                    .and_then(|v| v.get("people"))
+                    .and_then(|p| p.get(key))
+                    .and_then(toml::Value::as_bool)
+            };
+            config.module_enabled("vision")
+                && config.modules.contains_key("vision")
+                && people("enabled") != Some(false)
+                && (n.contains("shape_predictor") || people("identities") != Some(false))
         }
         n if n.starts_with("models/piper/") || n.starts_with("models/onnxruntime/") => {
             config.module_enabled("tts")

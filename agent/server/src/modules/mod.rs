@@ -6,6 +6,7 @@ use agent_brain::Language;
 
 use flow_hub::module::Module;
 
+mod acquaintances;
 pub mod audio_fft;
 pub mod brain;
 pub mod echo;

@@ -24,9 +24,13 @@ use tracing::{debug, info, warn};
 
 use flow_hub::module::{Module, ModuleContext, ModuleFuture};
 
+use super::acquaintances::Acquaintances;
 use super::vision_worker::VisionWorker;
 
-use agent_contract::channels::{self, AVATAR, CODES, DETECTIONS, FACES, MOTION};
+use agent_contract::channels::{
+    self, ACQUAINTANCES, AVATAR, CODES, DETECTIONS, FACES, MOTION, TRANSCRIPT,
+};
+use agent_contract::transcript::Heard;
 
 /// How many recent frame times the status report summarises.
 const RECENT_FRAMES: usize = 64;
@@ -47,6 +51,12 @@ impl Module for VisionModule {
         // named, before any module runs.
         if let Some(FaceDetection::CenterFace(net)) = &pipeline.faces {
             net.check_model().context("[modules.vision]")?;
+        }
+        if let Some(people) = &pipeline.people {
+            people
+                .models
+                .check()
+                .context("[modules.vision] people (the per-face analysis; people.enabled = false turns it off)")?;
         }
         Ok(())
     }
@@ -78,6 +88,7 @@ struct Figures {
 async fn run(mut ctx: ModuleContext) -> anyhow::Result<()> {
     let settings = VisionSettings::from_json(&ctx.params).context("[modules.vision]")?;
     let params = settings.pipeline_params().context("[modules.vision]")?;
+    let people = params.people.clone();
     agent_vision::set_opencv_threads(settings.threads).context("[modules.vision] threads")?;
     // The detectors run on their own thread at background priority (vision_worker.rs), so that on a busy machine
     // the spoken turn goes first.
@@ -120,6 +131,29 @@ async fn run(mut ctx: ModuleContext) -> anyhow::Result<()> {
     };
     let source = client.subscribe(&settings.source).await?;
     info!(source = %settings.source, "vision: watching {} for faces, motion and codes", settings.source);
+    // The per-face analysis hears the voice activity (who is talking is the face whose mouth moves while a voice
+    // is heard) and answers for the acquaintances.
+    let (transcripts, mut acquaintances, mut service) = match &people {
+        Some(people) => {
+            let known = Acquaintances::load(&client, people.match_distance).await;
+            pipeline.people().set_known(known.known().to_vec());
+            let service = if people.models.descriptor.is_some() {
+                Some(
+                    client
+                        .serve(ACQUAINTANCES.name, channels::headers::ACQUAINTANCES)
+                        .await?,
+                )
+            } else {
+                None
+            };
+            (
+                Some(client.subscribe(TRANSCRIPT.name).await?),
+                Some(known),
+                service,
+            )
+        }
+        None => (None, None, None),
+    };
 
     let mut figures = Figures::default();
     let mut ticks = ctx.ticks();
@@ -157,14 +191,68 @@ async fn run(mut ctx: ModuleContext) -> anyhow::Result<()> {
                     Err(ProcessError::Detector(e)) => return Err(e).context("vision detector failed"),
                 }
             }
+            heard = next_voice(transcripts.as_ref()) => {
+                match heard {
+                    Some(Voice::Start) => pipeline.people().set_voice(true),
+                    Some(Voice::End) => pipeline.people().set_voice(false),
+                    Some(Voice::Other) => {}
+                    None => break,
+                }
+            }
+            call = next_call(service.as_mut()) => {
+                let Some(call) = call else { break };
+                let answer = match acquaintances.as_mut() {
+                    Some(known) => known.handle(&client, pipeline.people(), &call.payload).await,
+                    None => Err("the per-face analysis is off".to_owned()),
+                };
+                if let Err(reason) = &answer {
+                    info!("vision: {} refused: {reason}", ACQUAINTANCES.name);
+                }
+                if let Err(e) = call.respond(answer).await {
+                    debug!("vision: answer on {} not delivered: {e}", ACQUAINTANCES.name);
+                }
+            }
             tick = ticks.recv() => {
                 if matches!(tick, Ok(Tick::OneSec)) {
-                    ctx.report(status(&figures));
+                    let mut report = status(&figures);
+                    report["acquaintances"] = serde_json::json!(acquaintances.as_ref().map(|a| a.known().len()));
+                    ctx.report(report);
                 }
             }
         }
     }
     Ok(())
+}
+
+/// What a transcript message says of the voice.
+enum Voice {
+    Start,
+    End,
+    Other,
+}
+
+/// The next voice event, or never when the analysis is off; `None` when the subscription ended.
+async fn next_voice(transcripts: Option<&flow::Subscription>) -> Option<Voice> {
+    let Some(transcripts) = transcripts else {
+        return std::future::pending().await;
+    };
+    let data = transcripts.recv().await?;
+    Some(match serde_json::from_slice::<Heard>(&data.payload) {
+        Ok(heard) => match heard.vad.as_deref() {
+            Some("start") => Voice::Start,
+            Some("end") => Voice::End,
+            _ => Voice::Other,
+        },
+        Err(_) => Voice::Other,
+    })
+}
+
+/// The next call on `Agent.acquaintances`, or never when the module does not serve it.
+async fn next_call(service: Option<&mut flow::Service>) -> Option<flow::ServiceCall> {
+    match service {
+        Some(service) => service.next().await,
+        None => std::future::pending().await,
+    }
 }
 
 async fn publish(outputs: &Outputs, detections: &FrameDetections, counters: CountersMsg) {

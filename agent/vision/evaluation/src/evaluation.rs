@@ -131,6 +131,8 @@ pub enum SceneError {
     OpenCv(#[from] opencv::Error),
     #[error("{0} has no annotated face box")]
     NoBox(String),
+    #[error("face analysis: {0}")]
+    Face(String),
 }
 
 /// The photo whose face the appearance trials paste into the empty room.

@@ -6,3 +6,4 @@
 
 pub mod evaluation;
 pub mod fixtures;
+pub mod talking;

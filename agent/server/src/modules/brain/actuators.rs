@@ -6,6 +6,8 @@ use std::process::Stdio;
 use std::time::Duration;
 
 use agent_brain::{Action, Effect, Value};
+use agent_contract::acquaintance::{AcquaintanceAnswer, AcquaintanceRequest};
+use agent_contract::channels::ACQUAINTANCES;
 use flow::{Client, Publisher};
 use tokio::sync::mpsc;
 use tokio::task::AbortHandle;
@@ -110,6 +112,10 @@ impl Actuators {
                     self.running.push((action, task));
                 }
             }
+            Action::LearnFace { name } => {
+                self.acquaint("learn_face", AcquaintanceRequest::Learn(name.clone()));
+            }
+            Action::ForgetFace => self.acquaint("forget_face", AcquaintanceRequest::Forget(true)),
             // The module itself performs chat turns (they need its percepts and memory).
             Action::Chat { .. } | Action::ForgetConversation | Action::Recall { .. } => {}
             Action::Set { key, value } => {
@@ -144,7 +150,9 @@ impl Actuators {
             | Action::Cancel
             | Action::Chat { .. }
             | Action::Recall { .. }
-            | Action::ForgetConversation => {}
+            | Action::ForgetConversation
+            | Action::LearnFace { .. }
+            | Action::ForgetFace => {}
         }
     }
 
@@ -199,6 +207,32 @@ impl Actuators {
             send(&outcomes, outcome);
         })
         .abort_handle()
+    }
+
+    /// Asks the vision module to learn or forget the talking person's face; the outcome is asserted as
+    /// `reply(action, name)` or `failed(action, reason)`.
+    fn acquaint(&self, action: &'static str, request: AcquaintanceRequest) {
+        let client = self.client.clone();
+        let outcomes = self.outcomes.clone();
+        let timeout = self.call_timeout;
+        let body = serde_json::to_vec(&request).unwrap_or_default();
+        tokio::spawn(async move {
+            let failed = |reason: String| Outcome::Failed {
+                name: action.to_owned(),
+                reason,
+            };
+            let outcome = match client.call(ACQUAINTANCES.name, body, timeout).await {
+                Ok(answer) => match serde_json::from_slice::<AcquaintanceAnswer>(&answer) {
+                    Ok(answer) => Outcome::Reply {
+                        service: action.to_owned(),
+                        text: answer.name,
+                    },
+                    Err(e) => failed(format!("{} answered {e}", ACQUAINTANCES.name)),
+                },
+                Err(e) => failed(e.to_string()),
+            };
+            send(&outcomes, outcome);
+        });
     }
 
     fn run(&self, command: String) -> AbortHandle {

@@ -623,9 +623,17 @@ impl Mind {
                 .map(|v| v.to_string())
                 .unwrap_or_default()
         };
+        let names: Vec<String> = store
+            .named("acquaintance")
+            .filter(|fact| fact.is_fresh(now.at, Some(Duration::from_millis(1500))))
+            .filter_map(|fact| text(fact.args.first()))
+            .collect();
         Facts {
             faces,
             face_where: face.as_ref().and_then(|args| text(args.get(1))),
+            speaker_where: fresh("speaker", Duration::from_millis(1500))
+                .and_then(|args| text(args.first())),
+            names,
             code: fresh("code", Duration::from_secs(10)).and_then(|args| text(args.first())),
             motion: fresh("motion", Duration::from_millis(1500))
                 .and_then(|args| text(args.first())),

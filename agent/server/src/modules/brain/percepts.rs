@@ -1,5 +1,6 @@
 //! The serialisation edge from hub channels to percepts: transcripts and detections become `heard(text)`,
-//! `face(count, dir)`, `motion(dir)` and `code(text)` facts for the rule engine.
+//! `face(count, dir)`, `looking(count)`, `smiling`, `speaker(dir)`, `acquaintance(name)`, `motion(dir)` and
+//! `code(text)` facts for the rule engine.
 
 use agent_brain::Value;
 use agent_contract::detections::DetectionsMsg;
@@ -110,6 +111,39 @@ pub fn detections(payload: &[u8]) -> Result<Vec<Percept>, String> {
             args: vec![Value::Num(faces.len() as f64), Value::from(dir)],
         });
     }
+    if let Some(people) = message.people.filter(|people| !people.is_empty()) {
+        let looking = people.iter().filter(|p| p.looking).count();
+        if looking > 0 {
+            percepts.push(Percept::One {
+                name: "looking",
+                args: vec![Value::Num(looking as f64)],
+            });
+        }
+        if people.iter().any(|p| p.smiling) {
+            percepts.push(Percept::One {
+                name: "smiling",
+                args: vec![],
+            });
+        }
+        if let Some(speaker) = people.iter().find(|p| p.speaking) {
+            let centre = f64::from(speaker.face.x) + f64::from(speaker.face.w) / 2.0;
+            percepts.push(Percept::One {
+                name: "speaker",
+                args: vec![Value::from(direction(centre / width))],
+            });
+        }
+        let names: Vec<Vec<Value>> = people
+            .iter()
+            .filter_map(|p| p.name.clone())
+            .map(|name| vec![Value::Text(name)])
+            .collect();
+        if !names.is_empty() {
+            percepts.push(Percept::Set {
+                name: "acquaintance",
+                sets: names,
+            });
+        }
+    }
     if let Some(centre) = message.motion.filter(|m| m.moving).and_then(|m| m.centre) {
         percepts.push(Percept::One {
             name: "motion",
@@ -213,6 +247,47 @@ mod tests {
                     sets: vec![vec![Value::from("HELLO")]]
                 },
             ])
+        );
+    }
+
+    #[test]
+    fn people_become_looking_smiling_speaker_and_acquaintance() {
+        let person = |x: i32, looking: bool, smiling: bool, speaking: bool, name: &str| {
+            serde_json::json!({"id": x, "face": {"x": x, "y": 50, "w": 80, "h": 80}, "mouth_open": 0.1,
+                "eyes_open": 0.3, "yaw_deg": 0.0, "pitch_deg": 0.0, "looking": looking, "smile": 0.0,
+                "smiling": smiling, "speaking": speaking, "name": (!name.is_empty()).then_some(name)})
+        };
+        let message = serde_json::json!({"frame": {"seq": 1, "ts_us": 0, "width": 640, "height": 360},
+            "faces": [{"x": 20, "y": 50, "w": 80, "h": 80}, {"x": 520, "y": 50, "w": 80, "h": 80}],
+            "people": [person(20, true, false, false, ""), person(520, true, true, true, "Anna")]});
+        let percepts = detections(message.to_string().as_bytes()).expect("percepts");
+        assert_eq!(
+            percepts[1..],
+            [
+                Percept::One {
+                    name: "looking",
+                    args: vec![Value::Num(2.0)]
+                },
+                Percept::One {
+                    name: "smiling",
+                    args: vec![]
+                },
+                Percept::One {
+                    name: "speaker",
+                    args: vec![Value::from("right")]
+                },
+                Percept::Set {
+                    name: "acquaintance",
+                    sets: vec![vec![Value::from("Anna")]]
+                },
+            ]
+        );
+        // Faces turned away, nobody smiling or talking, no names: only the faces.
+        let away = serde_json::json!({"frame": {"seq": 1, "ts_us": 0, "width": 640, "height": 360},
+            "faces": [{"x": 20, "y": 50, "w": 80, "h": 80}], "people": [person(20, false, false, false, "")]});
+        assert_eq!(
+            detections(away.to_string().as_bytes()).map(|p| p.len()),
+            Ok(1)
         );
     }
 
