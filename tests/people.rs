@@ -1,0 +1,291 @@
+//! People, not boxes (issue 50), through real robot-agent processes: the vision module's per-face analysis on
+//! camera frames a test satellite publishes on `Agent.video`. Two people taking turns to talk turn the avatar's
+//! gaze to whoever talks; "my name is ..." stores the face in the pair database, a restarted agent greets that face
+//! by name and another face without one, "forget me" erases the entry, and nothing is stored unless asked.
+//!
+//! Build the binaries first: `cargo build -p robot-agent` (`make test` does).
+
+use std::time::Duration;
+
+use agent_contract::acquaintance::{self, AcquaintanceRecord, KEY_PREFIX};
+use agent_contract::channels as ch;
+use agent_contract::detections::DetectionsMsg;
+use agent_tests::fixtures::fixtures;
+use agent_tests::{Agent, DataDir, PATIENCE, next_json, until_subscribed};
+use anyhow::Context;
+use flow::{Client, Publisher, Subscription};
+use vision_evaluation::evaluation::{
+    FRAME_US, Placement, appearing_face, face_patch, motion_frame, paste_face, read_colour,
+};
+use vision_evaluation::fixtures::GroundTruth;
+use vision_evaluation::talking::{Side, talking_pair};
+
+const VIDEO_HEADER: &str =
+    r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"people-test"}"#;
+
+/// A camera that publishes one picture at 15 frames a second until it is dropped.
+struct Camera {
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Camera {
+    async fn start(client: &Client, picture: Vec<u8>) -> anyhow::Result<Camera> {
+        let video = client.publisher(ch::VIDEO.name, VIDEO_HEADER).await?;
+        until_subscribed(&video).await?;
+        let task = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(Duration::from_micros(FRAME_US));
+            loop {
+                tick.tick().await;
+                if video.publish(picture.clone()).await.is_err() {
+                    return;
+                }
+            }
+        });
+        Ok(Camera { task })
+    }
+}
+
+impl Drop for Camera {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+#[tokio::test]
+async fn two_people_taking_turns_turn_the_gaze_to_whoever_talks() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let config = "[modules.brain]\nenabled = false\n[modules.tts]\nenabled = false\n";
+    let agent = Agent::start_configured(&dir, config, "vision: watching").await?;
+    let client = agent.client("people-test").await?;
+    let detections = client.subscribe(ch::DETECTIONS.name).await?;
+    // The voice activity the whisper satellites' relay publishes.
+    let transcript = client
+        .publisher(ch::TRANSCRIPT.name, r#"{"format":"json"}"#)
+        .await?;
+    until_subscribed(&transcript).await?;
+    let turn_frames = 45;
+    let clip = talking_pair(
+        &fixtures(),
+        &[Some(Side::Left), Some(Side::Right), Some(Side::Left)],
+        turn_frames,
+    )?;
+    let video = client.publisher(ch::VIDEO.name, VIDEO_HEADER).await?;
+    until_subscribed(&video).await?;
+    transcript.publish(br#"{"vad":"start"}"#.to_vec()).await?;
+    // Per turn: was the speaker named on the talking side, and did the gaze reach that side, in the frames the
+    // module processed during the turn?
+    let mut seen = [(false, false); 3];
+    let mut tick = tokio::time::interval(Duration::from_micros(FRAME_US));
+    for frame in &clip {
+        tick.tick().await;
+        video.publish(frame.jpeg.clone()).await?;
+        while let Some(data) = detections.try_recv() {
+            let d: DetectionsMsg = serde_json::from_slice(&data.payload)?;
+            let turn = ((d.frame.seq as usize).saturating_sub(1) / turn_frames).min(2);
+            let Some(side) = clip[turn * turn_frames].speaker else {
+                continue;
+            };
+            let on_side = |x: f32| (x < 320.0) == (side == Side::Left);
+            let speaker = d
+                .people
+                .iter()
+                .flatten()
+                .find(|p| p.speaking)
+                .map(|p| p.face.x as f32 + p.face.w as f32 / 2.0);
+            if speaker.is_some_and(on_side) {
+                seen[turn].0 = true;
+            }
+            if d.gaze
+                .as_ref()
+                .is_some_and(|g| g.source == "face" && on_side(g.x * 640.0))
+            {
+                seen[turn].1 = true;
+            }
+        }
+    }
+    transcript.publish(br#"{"vad":"end"}"#.to_vec()).await?;
+    assert_eq!(
+        seen,
+        [(true, true); 3],
+        "per turn (left, right, left): (the talking side named the speaker, the gaze on it)"
+    );
+    Ok(())
+}
+
+/// A colour camera frame of the empty room with one face pasted in: the portrait of the appearing-face trials
+/// (`known`), or a woman from another photo.
+fn one_face(known: bool) -> anyhow::Result<Vec<u8>> {
+    let dir = fixtures();
+    let room = read_colour(&motion_frame(&dir, 1))?;
+    let patch = if known {
+        appearing_face(&dir)?
+    } else {
+        let truth = GroundTruth::load(&dir)?;
+        let other = truth
+            .faces
+            .iter()
+            .find(|t| t.image == "faces/dlib_2008_001009.jpg")
+            .context("the fixture photo dlib_2008_001009.jpg")?;
+        face_patch(&dir, other)?
+    };
+    let (jpeg, _) = paste_face(
+        &room,
+        &patch,
+        Placement {
+            face_px: 120,
+            centre_x: 320,
+            centre_y: 170,
+        },
+    )?;
+    Ok(jpeg)
+}
+
+/// The captions of what the agent says, in order.
+async fn next_caption(avatar: &Subscription) -> anyhow::Result<String> {
+    let command = next_json(avatar, PATIENCE, |c| c["cmd"] == "say").await?;
+    command["text"]
+        .as_str()
+        .map(str::to_owned)
+        .context("a caption without text")
+}
+
+/// A robot-agent on the default program, speaking with espeak-ng (quick to start), hearing a test satellite.
+struct Scene {
+    agent: Agent,
+    client: Client,
+    transcript: Publisher,
+    avatar: Subscription,
+}
+
+impl Scene {
+    async fn start(dir: &DataDir) -> anyhow::Result<Scene> {
+        let config = "[modules.tts]\nengine = \"espeak\"\n";
+        let agent = Agent::start_configured(dir, config, "vision: watching").await?;
+        let client = agent.client("people-test").await?;
+        let avatar = client.subscribe(ch::AVATAR.name).await?;
+        let transcript = client
+            .publisher(ch::TRANSCRIPT.name, r#"{"format":"json"}"#)
+            .await?;
+        // The brain, the TTS module, the observer and the vision module follow transcripts.
+        tokio::time::timeout(PATIENCE, async {
+            loop {
+                if client
+                    .channel(ch::TRANSCRIPT.name)
+                    .await
+                    .is_ok_and(|info| info.stats.subscribers >= 4)
+                {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+        .await
+        .context("Agent.transcript did not get its four subscribers")?;
+        Ok(Scene {
+            agent,
+            client,
+            transcript,
+            avatar,
+        })
+    }
+
+    /// Stops the agent cleanly, so that the next one opens the same pair database.
+    async fn stop(mut self) -> anyhow::Result<()> {
+        self.agent.terminate()?;
+        self.agent.wait_exit(PATIENCE).await?;
+        Ok(())
+    }
+
+    async fn hear(&self, text: &str) -> anyhow::Result<()> {
+        let message = serde_json::json!({ "text": text, "final": true }).to_string();
+        self.transcript.publish(message.into_bytes()).await?;
+        Ok(())
+    }
+
+    async fn stored(&self) -> anyhow::Result<Vec<String>> {
+        Ok(self
+            .client
+            .var_list()
+            .await?
+            .into_iter()
+            .filter(|k| k.starts_with(KEY_PREFIX))
+            .collect())
+    }
+}
+
+#[tokio::test]
+async fn a_face_introduced_by_name_is_greeted_by_it_after_a_restart_and_forgotten_on_request()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let anna = one_face(true)?;
+    let stranger = one_face(false)?;
+
+    // First visit: greeted without a name, and nothing is stored until she says her name.
+    let scene = Scene::start(&dir).await?;
+    let camera = Camera::start(&scene.client, anna.clone()).await?;
+    let greeting = next_caption(&scene.avatar).await?;
+    assert!(
+        greeting.ends_with("! Nice to see you. Ask me anything."),
+        "{greeting:?}"
+    );
+    assert_eq!(
+        scene.stored().await?,
+        Vec::<String>::new(),
+        "stored without being asked"
+    );
+    scene.hear("Hello, my name is Anna.").await?;
+    assert_eq!(
+        next_caption(&scene.avatar).await?,
+        "Nice to meet you, Anna. I will remember your face."
+    );
+    let record: AcquaintanceRecord = serde_json::from_value(
+        scene
+            .client
+            .var_get(&acquaintance::key("Anna"))
+            .await?
+            .context("no entry for Anna in the pair database")?,
+    )?;
+    assert_eq!(
+        (record.name.as_str(), record.descriptor.len()),
+        ("Anna", 128)
+    );
+    drop(camera);
+    scene.stop().await?;
+
+    // The agent starts again: a stranger is greeted without a name.
+    let scene = Scene::start(&dir).await?;
+    let camera = Camera::start(&scene.client, stranger).await?;
+    let greeting = next_caption(&scene.avatar).await?;
+    assert!(
+        greeting.ends_with("! Nice to see you. Ask me anything."),
+        "{greeting:?}"
+    );
+    scene.hear("Do you know me?").await?;
+    assert_eq!(
+        next_caption(&scene.avatar).await?,
+        "I don't know you yet. Tell me your name, and I will remember your face."
+    );
+    drop(camera);
+    scene.stop().await?;
+
+    // And again: Anna is greeted by name, and then forgotten when she asks.
+    let scene = Scene::start(&dir).await?;
+    let camera = Camera::start(&scene.client, anna).await?;
+    let greeting = next_caption(&scene.avatar).await?;
+    assert!(
+        greeting.ends_with(", Anna! Nice to see you again."),
+        "{greeting:?}"
+    );
+    scene.hear("Please forget me.").await?;
+    assert_eq!(
+        next_caption(&scene.avatar).await?,
+        "All right, Anna. I have forgotten your face."
+    );
+    assert_eq!(
+        scene.stored().await?,
+        Vec::<String>::new(),
+        "the entry is still there"
+    );
+    drop(camera);
+    Ok(())
+}
