@@ -82,6 +82,7 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	test -x bench/vision/.venv/bin/python || (python3 -m venv bench/vision/.venv && bench/vision/.venv/bin/pip install -q 'opencv-python-headless<5')
 	VISION_PYTHON=bench/vision/.venv/bin/python $(TARGET_DIR)/release/vision-bench --iterations 15 --rounds 3 --write-doc docs/bench-vision.md | tee $(BENCH_LOGS)/vision-bench.log
 	$(TARGET_DIR)/release/vision-face-bench | tee $(BENCH_LOGS)/vision-face-bench.log
+	$(TARGET_DIR)/release/vision-people-bench | tee $(BENCH_LOGS)/vision-people-bench.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_browser | tee $(BENCH_LOGS)/bench_browser.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/bench_avatar | tee $(BENCH_LOGS)/bench_avatar.log
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/page-bench | tee $(BENCH_LOGS)/page-bench.log

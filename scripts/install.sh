@@ -107,7 +107,8 @@ if [[ "$models_mode" == link ]]; then
 else
     [[ -L "$destdir$pkgdatadir/models" ]] && rm -f "$destdir$pkgdatadir/models"
     shopt -s nullglob
-    model_files=("$root"/models/ggml-*.bin "$root"/models/centerface.onnx "$root"/models/piper/*.durations.onnx
+    model_files=("$root"/models/ggml-*.bin "$root"/models/centerface.onnx "$root"/models/dlib/*.dat
+        "$root"/models/piper/*.durations.onnx
         "$root"/models/piper/*.onnx.json "$root"/models/onnxruntime/libonnxruntime.so* "$root"/models/llm/*.gguf)
     shopt -u nullglob
     for f in "${model_files[@]}"; do
@@ -120,6 +121,8 @@ have_model() { [[ -e "$destdir$pkgdatadir/models/$1" ]]; }
 have_model ggml-tiny.en.bin || missing+=("models/ggml-tiny.en.bin (make model): whisper-sat's default model")
 if [[ "$role" == all ]]; then
     have_model centerface.onnx || missing+=("models/centerface.onnx (make model-face): the faces are found by OpenCV's cascades instead")
+    have_model dlib/shape_predictor_68_face_landmarks.dat ||
+        missing+=("models/dlib (make model-face): the per-face analysis (who looks, smiles, talks) is off")
 fi
 have_model llm/SmolLM2-135M-Instruct.Q4_1.gguf ||
     missing+=("models/llm/SmolLM2-135M-Instruct.Q4_1.gguf (make model-llm): llm-sat's default model")
@@ -137,6 +140,11 @@ if have_model centerface.onnx; then
     lines+=(-e '/^@NO_CENTERFACE@/d')
 else
     lines+=(-e 's/^@NO_CENTERFACE@//')
+fi
+if have_model dlib/shape_predictor_68_face_landmarks.dat && have_model dlib/dlib_face_recognition_resnet_model_v1.dat; then
+    lines+=(-e '/^@NO_DLIB@/d')
+else
+    lines+=(-e 's/^@NO_DLIB@//')
 fi
 scratch="$(mktemp -d)"
 trap 'rm -rf "$scratch"' EXIT

@@ -289,3 +289,26 @@ async fn a_face_introduced_by_name_is_greeted_by_it_after_a_restart_and_forgotte
     drop(camera);
     Ok(())
 }
+
+#[tokio::test]
+async fn a_missing_face_model_stops_the_agent_at_start_naming_the_file_and_the_make_target()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let missing = dir
+        .path()
+        .join("nowhere/shape_predictor_68_face_landmarks.dat");
+    let config = format!(
+        "[modules.vision.people]\nlandmarks = {:?}\n",
+        missing.display().to_string()
+    );
+    let started = Agent::start_configured(&dir, &config, "vision: watching").await;
+    let Err(error) = started else {
+        anyhow::bail!("robot-agent started without its landmark model");
+    };
+    let text = format!("{error:#}");
+    assert!(
+        text.contains(&missing.display().to_string()) && text.contains("make model-face"),
+        "{text}"
+    );
+    Ok(())
+}

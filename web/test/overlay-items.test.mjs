@@ -5,7 +5,7 @@ import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
 import { test } from "node:test";
 
-import { detectionItems, frameToCanvas } from "../js/panels/overlay-items.js";
+import { detectionItems, frameToCanvas, personLabel } from "../js/panels/overlay-items.js";
 
 const vectors = JSON.parse(readFileSync(new URL("../../crates/contract/vectors/detections.json", import.meta.url), "utf8"));
 const [full, empty, otherDetector] = vectors.messages;
@@ -14,7 +14,7 @@ test("every face, moving region, moving centre and code of a message becomes one
   const out = detectionItems(full);
   assert.ok(out);
   assert.deepEqual(out.frame, { width: full.frame.width, height: full.frame.height });
-  const faces = out.items.filter((i) => i.kind === "face");
+  const faces = out.items.filter((i) => i.kind === "face" || i.kind === "speaker");
   assert.deepEqual(
     faces.map((f) => f.box),
     full.faces.map((f) => [f.x, f.y, f.w, f.h]),
@@ -29,6 +29,18 @@ test("every face, moving region, moving centre and code of a message becomes one
     code?.polygon,
     full.codes[0].polygon.map((p) => [p.x, p.y]),
   );
+});
+
+test("the person talking is drawn as the speaker, labelled with the name the agent knows", () => {
+  const out = detectionItems(full);
+  assert.ok(out);
+  const speaker = out.items.find((i) => i.kind === "speaker");
+  const talking = full.people.find((p) => p.speaking);
+  assert.deepEqual(speaker?.box, [talking.face.x, talking.face.y, talking.face.w, talking.face.h]);
+  assert.equal(speaker?.label, "Anna · talking · smiling");
+  const other = out.items.find((i) => i.kind === "face");
+  assert.equal(other?.label, "face · looking away");
+  assert.equal(personLabel({ face: { x: 0, y: 0, w: 1, h: 1 }, name: null }), "face");
 });
 
 test("a frame with nothing seen draws nothing and still counts as a message", () => {

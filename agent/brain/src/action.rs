@@ -39,6 +39,8 @@ pub enum Action {
     /// Erase what was stored of the face of the person talking (or the only one in view).
     #[serde(rename = "forget_face")]
     ForgetFace,
+    /// Show an expression on the avatar for a few seconds (`happy`, `surprised`, `sad`...; docs/browser-link.md).
+    Mood { mood: String },
 }
 
 impl fmt::Display for Action {
@@ -63,6 +65,7 @@ impl fmt::Display for Action {
             Action::Recall { text } => write!(f, "recall({text:?})"),
             Action::LearnFace { name } => write!(f, "learn_face({name:?})"),
             Action::ForgetFace => f.write_str("forget_face"),
+            Action::Mood { mood } => write!(f, "mood({mood:?})"),
         }
     }
 }

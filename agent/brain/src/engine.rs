@@ -538,6 +538,7 @@ fn instantiate(action: &ActionExpr, scope: &Scope<'_>) -> Result<Option<Deed>, S
         Primitive::Recall => Deed::Act(Action::Recall { text: text(0)? }),
         Primitive::LearnFace => Deed::Act(Action::LearnFace { name: text(0)? }),
         Primitive::ForgetFace => Deed::Act(Action::ForgetFace),
+        Primitive::Mood => Deed::Act(Action::Mood { mood: text(0)? }),
         Primitive::Remember | Primitive::Forget => {
             let (name, fact_args) = match &args[0] {
                 Expr::Call(name, fact_args, _) => (name.clone(), Some(fact_args)),

@@ -197,6 +197,8 @@ pub enum Primitive {
     LearnFace,
     /// `forget_face`: erase the talking person's stored face.
     ForgetFace,
+    /// `mood(M)`: an expression on the avatar for a few seconds.
+    Mood,
 }
 
 impl Primitive {
@@ -215,6 +217,7 @@ impl Primitive {
             "recall" => Primitive::Recall,
             "learn_face" => Primitive::LearnFace,
             "forget_face" => Primitive::ForgetFace,
+            "mood" => Primitive::Mood,
             _ => return None,
         })
     }
@@ -234,6 +237,7 @@ impl Primitive {
             Primitive::Recall => "recall",
             Primitive::LearnFace => "learn_face",
             Primitive::ForgetFace => "forget_face",
+            Primitive::Mood => "mood",
         }
     }
 
@@ -245,7 +249,8 @@ impl Primitive {
             | Primitive::Remember
             | Primitive::Forget
             | Primitive::Recall
-            | Primitive::LearnFace => (1, 1),
+            | Primitive::LearnFace
+            | Primitive::Mood => (1, 1),
             Primitive::Publish | Primitive::Call | Primitive::Set => (2, 2),
             Primitive::Cancel | Primitive::ForgetConversation | Primitive::ForgetFace => (0, 0),
             // The optional second argument names the tool the model must call.
@@ -267,6 +272,7 @@ impl Primitive {
                 | Primitive::Recall
                 | Primitive::LearnFace
                 | Primitive::ForgetFace
+                | Primitive::Mood
         )
     }
 }

@@ -354,6 +354,30 @@ fn a_person_who_looks_elsewhere_is_not_greeted_until_they_look() {
 }
 
 #[test]
+fn a_smile_is_smiled_back_once_a_visit() {
+    let mut sim = assistant();
+    person_in_view(&mut sim, 2);
+    for _ in 0..60 {
+        sim.perceive("face", vec![Value::Num(1.0), Value::from("centre")]);
+        sim.perceive("looking", vec![Value::Num(1.0)]);
+        sim.perceive("smiling", vec![]);
+        sim.advance(ms(66));
+    }
+    let moods: Vec<Effect> = sim
+        .effects
+        .iter()
+        .map(|(_, e)| e.clone())
+        .filter(|e| matches!(e.action(), Action::Mood { .. }))
+        .collect();
+    assert_eq!(
+        moods,
+        vec![Effect::Fire(Action::Mood {
+            mood: "happy".into()
+        })]
+    );
+}
+
+#[test]
 fn a_known_face_is_greeted_by_name() {
     let mut sim = assistant();
     for _ in 0..30 {

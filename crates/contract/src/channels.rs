@@ -155,7 +155,7 @@ pub mod headers {
     /// `Agent.avatar`.
     pub const AVATAR: &str = r#"{"format":"json","commands":["blink","gaze","mood","visemes","speech_stop","say"],"source":"tts"}"#;
     /// `Agent.say`: what it takes and answers.
-    pub const SAY: &str = r#"{"request":{"text":"string","voice":"optional espeak-ng voice","rate_wpm":"optional","pitch":"optional"},"cancel":{"cancel":"all | utterance number"},"answer":{"utterance":"number","cancelled":"[numbers]"}}"#;
+    pub const SAY: &str = r#"{"request":{"text":"string","voice":"optional espeak-ng voice","rate_wpm":"optional","pitch":"optional"},"cancel":{"cancel":"all | utterance number"},"mood":{"mood":"happy | surprised | sad | angry | thinking | listening | neutral"},"answer":{"utterance":"number","cancelled":"[numbers]"}}"#;
     /// `Agent.chat`: what it takes and answers.
     pub const CHAT: &str = r#"{"request":"agent_contract::chat::ChatRequest","cancel":{"cancel":"turn"},"answer":"agent_contract::chat::ChatAnswer","doc":"docs/llm.md"}"#;
     /// `Agent.chat.reply`.

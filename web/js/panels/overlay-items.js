@@ -8,14 +8,18 @@
  * @typedef {{seq?: number, ts_us?: number, width: number, height: number}} Frame
  * @typedef {{kind: string, text?: string | null, polygon?: Point[]}} Code
  * @typedef {{moving: boolean, centre?: Point | null, regions?: Box[]}} Motion
- * @typedef {{frame: Frame, faces?: Box[] | null, motion?: Motion | null, codes?: Code[] | null}} Detections
- * @typedef {{kind: "face" | "motion" | "motion_centre" | "code", box?: number[], polygon?: number[][],
+ * @typedef {{face: Box, looking?: boolean, smiling?: boolean, speaking?: boolean, name?: string | null}} Person
+ * @typedef {{frame: Frame, faces?: Box[] | null, people?: Person[] | null, motion?: Motion | null,
+ *   codes?: Code[] | null}} Detections
+ * @typedef {{kind: "face" | "speaker" | "motion" | "motion_centre" | "code", box?: number[], polygon?: number[][],
  *   point?: number[], label?: string}} Item
  */
 
 /**
- * The geometries of a detections message in frame pixels: a box per face, a box per moving region and a point at
- * the moving centre, a polygon per code labelled with its text (or its kind when the payload is not text).
+ * The geometries of a detections message in frame pixels: a box per face (a `speaker` box for the person talking,
+ * labelled with the person's name when the agent knows them, and whether they smile or look away), a box per
+ * moving region and a point at the moving centre, a polygon per code labelled with its text (or its kind when the
+ * payload is not text).
  * Returns null for a message that is not a detections message (no frame size).
  * @param {unknown} message
  * @returns {{frame: {width: number, height: number}, items: Item[]} | null}
@@ -25,8 +29,19 @@ export function detectionItems(message) {
   if (!m || typeof m !== "object" || !m.frame || !(m.frame.width > 0) || !(m.frame.height > 0)) return null;
   /** @type {Item[]} */
   const items = [];
+  /** @type {Map<string, Person>} */
+  const people = new Map();
+  for (const p of m.people ?? []) {
+    if (p && isBox(p.face)) people.set(boxKey(p.face), p);
+  }
   for (const f of m.faces ?? []) {
-    if (isBox(f)) items.push({ kind: "face", box: [f.x, f.y, f.w, f.h], label: "face" });
+    if (!isBox(f)) continue;
+    const person = people.get(boxKey(f));
+    items.push({
+      kind: person?.speaking ? "speaker" : "face",
+      box: [f.x, f.y, f.w, f.h],
+      label: person ? personLabel(person) : "face",
+    });
   }
   const motion = m.motion;
   if (motion && motion.moving) {
@@ -59,6 +74,23 @@ export function frameToCanvas(frame, canvasW, canvasH) {
   const ox = (canvasW - frame.width * s) / 2;
   const oy = (canvasH - frame.height * s) / 2;
   return (x, y) => [canvasW - (ox + x * s), oy + y * s];
+}
+
+/**
+ * What the overlay writes by a person's face: their name (or "face"), then "talking", "smiling", "looking away".
+ * @param {Person} p
+ */
+export function personLabel(p) {
+  const parts = [typeof p.name === "string" && p.name ? p.name : "face"];
+  if (p.speaking) parts.push("talking");
+  if (p.smiling) parts.push("smiling");
+  if (p.looking === false) parts.push("looking away");
+  return parts.join(" · ");
+}
+
+/** @param {Box} b */
+function boxKey(b) {
+  return `${b.x},${b.y},${b.w},${b.h}`;
 }
 
 /** @param {any} b */

@@ -1,4 +1,5 @@
-//! The detection overlay on the camera preview: the faces, motion and codes of each `Agent.detections` message.
+//! The detection overlay on the camera preview: the faces (the person talking in its own colour, names of known
+//! people), motion and codes of each `Agent.detections` message.
 //
 // Detections arrive in the camera frame's pixels (640x360); the preview is mirrored (like a mirror, so moving
 // right moves right on screen) and scaled to the card's size, so each point is mapped through the same transform
@@ -11,7 +12,7 @@ import { detectionItems, frameToCanvas } from "./overlay-items.js";
 const FADE_MS = 500;
 /** Boxes fade at 15 fps, the camera's own rate. */
 const FADE_FRAME_MS = 66;
-const COLOURS = { face: "#5fd4c4", motion: "#f2b86b", motion_centre: "#f2b86b", code: "#7aa2ff" };
+const COLOURS = { face: "#5fd4c4", speaker: "#ff7ab6", motion: "#f2b86b", motion_centre: "#f2b86b", code: "#7aa2ff" };
 
 export class Overlay {
   constructor(canvas) {

@@ -223,6 +223,10 @@ impl Tts {
             }
             // The service loop hands these to `prepare::Preparations`, which answers them when they are done.
             SayRequest::Prepare { .. } => Err("prepare is taken on Agent.say only".into()),
+            SayRequest::Mood(mood) => {
+                self.behaviour.send(Event::Mood(mood));
+                Ok(Bytes::from_static(b"{}"))
+            }
         }
     }
 

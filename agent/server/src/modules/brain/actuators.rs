@@ -116,6 +116,7 @@ impl Actuators {
                 self.acquaint("learn_face", AcquaintanceRequest::Learn(name.clone()));
             }
             Action::ForgetFace => self.acquaint("forget_face", AcquaintanceRequest::Forget(true)),
+            Action::Mood { mood } => self.speech.mood(mood).await,
             // The module itself performs chat turns (they need its percepts and memory).
             Action::Chat { .. } | Action::ForgetConversation | Action::Recall { .. } => {}
             Action::Set { key, value } => {
@@ -152,7 +153,8 @@ impl Actuators {
             | Action::Recall { .. }
             | Action::ForgetConversation
             | Action::LearnFace { .. }
-            | Action::ForgetFace => {}
+            | Action::ForgetFace
+            | Action::Mood { .. } => {}
         }
     }
 

@@ -34,6 +34,9 @@ enum Request {
         text: String,
     },
     CancelAll,
+    Mood {
+        mood: String,
+    },
 }
 
 /// A handle on the speech task, which sends requests to the TTS module in order.
@@ -88,6 +91,13 @@ impl Speech {
         self.send(Request::CancelAll);
     }
 
+    /// Shows an expression on the avatar for a few seconds, in the order of the speech requests.
+    pub async fn mood(&self, mood: &str) {
+        self.send(Request::Mood {
+            mood: mood.to_owned(),
+        });
+    }
+
     fn send(&self, request: Request) {
         if let Err(e) = self.requests.try_send(request) {
             warn!("brain: speech request dropped, the TTS module is not keeping up: {e}");
@@ -118,6 +128,7 @@ async fn speak_in_order(client: Client, mut queue: mpsc::Receiver<Request>) {
                 durative.clear();
                 serde_json::json!({ "cancel": "all" })
             }
+            Request::Mood { mood } => serde_json::json!({ "mood": mood }),
         };
         let body = serde_json::to_vec(&body).unwrap_or_default();
         match client.call(SAY.name, body, REQUEST_TIMEOUT).await {

@@ -55,13 +55,34 @@ pub enum SayRequest {
     Prepare {
         text: String,
     },
+    /// Show an expression on the avatar for a few seconds (one the page knows: `MOODS`).
+    Mood(&'static str),
 }
+
+/// The expressions a `{"mood": ...}` request may ask for (web/js/avatar/moods.js has each one's face).
+pub const MOODS: [&str; 7] = [
+    "neutral",
+    "happy",
+    "sad",
+    "surprised",
+    "angry",
+    "thinking",
+    "listening",
+];
 
 /// Parses an `Agent.say` call: `{"text": "...", "voice"?, "rate_wpm"?, "pitch"?}` or
 /// `{"cancel": "all"}` / `{"cancel": N}`.
 pub fn say_request(payload: &[u8]) -> Result<SayRequest, String> {
     let value: serde_json::Value =
         serde_json::from_slice(payload).map_err(|e| format!("not JSON: {e}"))?;
+    if let Some(mood) = value.get("mood") {
+        let name = mood.as_str().unwrap_or_default();
+        return MOODS
+            .iter()
+            .find(|m| **m == name)
+            .map(|m| SayRequest::Mood(m))
+            .ok_or_else(|| format!("mood: {mood} is not one of {}", MOODS.join(", ")));
+    }
     if let Some(cancel) = value.get("cancel") {
         return match cancel {
             serde_json::Value::String(all) if all == "all" => {
@@ -320,6 +341,12 @@ mod tests {
             Ok(SayRequest::Cancel(CancelTarget::One(7)))
         );
         assert!(say_request(br#"{"cancel":"some"}"#).is_err());
+        assert_eq!(
+            say_request(br#"{"mood":"happy"}"#),
+            Ok(SayRequest::Mood("happy"))
+        );
+        assert!(say_request(br#"{"mood":"smug"}"#).is_err());
+        assert!(say_request(br#"{"mood":3}"#).is_err());
         assert!(say_request(br#"{"text":"  "}"#).is_err());
         assert!(say_request(br#"{"txt":"hi"}"#).is_err_and(|e| e.contains("txt")));
         assert!(say_request(b"hello").is_err());

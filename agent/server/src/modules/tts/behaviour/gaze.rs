@@ -23,6 +23,8 @@ const NOD_DEPTH: f64 = 0.07;
 const NOD_TIME: Duration = Duration::from_millis(250);
 /// Only speech at least this long earns a nod at its pause.
 const NOD_AFTER: Duration = Duration::from_millis(600);
+/// An expression a rule asked for (`mood(M)`) is shown this long.
+const ASKED_MOOD_FADES: Duration = Duration::from_secs(3);
 /// The listening mood fades this long after the user's last pause if no transcript follows.
 const LISTENING_FADES: Duration = Duration::from_secs(2);
 const MOOD_INTENSITY: f64 = 0.7;
@@ -128,6 +130,11 @@ impl Gazer {
                 self.set_mood("neutral", out);
                 was_thinking && self.look_back(now, out)
             }
+            Event::Mood(mood) => {
+                self.set_mood(mood, out);
+                self.mood_fades_at = Some(now + ASKED_MOOD_FADES);
+                false
+            }
             Event::Seen(None) | Event::PhraseBoundary { .. } | Event::SpeechEnded { .. } => false,
         }
     }
@@ -152,7 +159,7 @@ impl Gazer {
         }
         if self.mood_fades_at.is_some_and(|at| at <= now) {
             self.mood_fades_at = None;
-            if self.mood == "listening" {
+            if self.mood != "thinking" {
                 self.set_mood("neutral", out);
             }
         }

@@ -100,4 +100,6 @@ pub enum Event {
     PhraseBoundary { at: Instant },
     /// The reply stops being audible at `at`.
     SpeechEnded { at: Instant },
+    /// A rule asked for an expression (`mood(M)`): shown for a few seconds, then back to neutral.
+    Mood(&'static str),
 }
