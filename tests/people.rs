@@ -1,10 +1,12 @@
 //! People, not boxes (issue 50), through real robot-agent processes: the vision module's per-face analysis on
 //! camera frames a test satellite publishes on `Agent.video`. Two people taking turns to talk turn the avatar's
-//! gaze to whoever talks; "my name is ..." stores the face in the pair database, a restarted agent greets that face
-//! by name and another face without one, "forget me" erases the entry, and nothing is stored unless asked.
+//! gaze to whoever talks; a face turned away is not greeted until it looks; "my name is ..." stores the face in the
+//! pair database, a restarted agent greets that face by name and another face without one, "forget me" erases the
+//! entry, and nothing is stored unless asked; a missing model stops the agent at start.
 //!
 //! Build the binaries first: `cargo build -p robot-agent` (`make test` does).
 
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
 
 use agent_contract::acquaintance::{self, AcquaintanceRecord, KEY_PREFIX};
@@ -17,14 +19,15 @@ use flow::{Client, Publisher, Subscription};
 use vision_evaluation::evaluation::{
     FRAME_US, Placement, appearing_face, face_patch, motion_frame, paste_face, read_colour,
 };
-use vision_evaluation::fixtures::GroundTruth;
+use vision_evaluation::fixtures::{FaceTruth, GroundTruth};
 use vision_evaluation::talking::{Side, talking_pair};
 
 const VIDEO_HEADER: &str =
     r#"{"format":"jpeg","width":640,"height":360,"fps":15,"source":"people-test"}"#;
 
-/// A camera that publishes one picture at 15 frames a second until it is dropped.
+/// A camera that publishes its picture at 15 frames a second until it is dropped.
 struct Camera {
+    picture: Arc<Mutex<Vec<u8>>>,
     task: tokio::task::JoinHandle<()>,
 }
 
@@ -32,16 +35,24 @@ impl Camera {
     async fn start(client: &Client, picture: Vec<u8>) -> anyhow::Result<Camera> {
         let video = client.publisher(ch::VIDEO.name, VIDEO_HEADER).await?;
         until_subscribed(&video).await?;
+        let picture = Arc::new(Mutex::new(picture));
+        let shown = picture.clone();
         let task = tokio::spawn(async move {
             let mut tick = tokio::time::interval(Duration::from_micros(FRAME_US));
             loop {
                 tick.tick().await;
-                if video.publish(picture.clone()).await.is_err() {
+                let frame = shown.lock().unwrap_or_else(PoisonError::into_inner).clone();
+                if video.publish(frame).await.is_err() {
                     return;
                 }
             }
         });
-        Ok(Camera { task })
+        Ok(Camera { picture, task })
+    }
+
+    /// From now on the camera shows `picture`.
+    fn show(&self, picture: Vec<u8>) {
+        *self.picture.lock().unwrap_or_else(PoisonError::into_inner) = picture;
     }
 }
 
@@ -115,22 +126,35 @@ async fn two_people_taking_turns_turn_the_gaze_to_whoever_talks() -> anyhow::Res
 /// A colour camera frame of the empty room with one face pasted in: the portrait of the appearing-face trials
 /// (`known`), or a woman from another photo.
 fn one_face(known: bool) -> anyhow::Result<Vec<u8>> {
-    let dir = fixtures();
-    let room = read_colour(&motion_frame(&dir, 1))?;
-    let patch = if known {
-        appearing_face(&dir)?
+    if known {
+        pasted(&appearing_face(&fixtures())?)
     } else {
-        let truth = GroundTruth::load(&dir)?;
-        let other = truth
-            .faces
-            .iter()
-            .find(|t| t.image == "faces/dlib_2008_001009.jpg")
-            .context("the fixture photo dlib_2008_001009.jpg")?;
-        face_patch(&dir, other)?
+        fixture_face("faces/dlib_2008_001009.jpg", 0)
+    }
+}
+
+/// Face `index` of an annotated fixture photo, pasted into the empty room.
+fn fixture_face(image: &str, index: usize) -> anyhow::Result<Vec<u8>> {
+    let dir = fixtures();
+    let truth = GroundTruth::load(&dir)?;
+    let photo = truth
+        .faces
+        .iter()
+        .find(|t| t.image == image)
+        .with_context(|| format!("the fixture photo {image}"))?;
+    let face = FaceTruth {
+        image: photo.image.clone(),
+        face_count: 1,
+        boxes: vec![*photo.boxes.get(index).context("no such face")?],
     };
+    pasted(&face_patch(&dir, &face)?)
+}
+
+fn pasted(patch: &vision_evaluation::evaluation::FacePatch) -> anyhow::Result<Vec<u8>> {
+    let room = read_colour(&motion_frame(&fixtures(), 1))?;
     let (jpeg, _) = paste_face(
         &room,
-        &patch,
+        patch,
         Placement {
             face_px: 120,
             centre_x: 320,
@@ -310,5 +334,37 @@ async fn a_missing_face_model_stops_the_agent_at_start_naming_the_file_and_the_m
         text.contains(&missing.display().to_string()) && text.contains("make model-face"),
         "{text}"
     );
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_face_turned_away_is_not_greeted_until_it_looks_at_the_agent() -> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let scene = Scene::start(&dir).await?;
+    let detections = scene.client.subscribe(ch::DETECTIONS.name).await?;
+    // A young man in a group photo, his head turned well away from the camera (yaw about 55 degrees).
+    let camera = Camera::start(&scene.client, fixture_face("faces/dlib_2008_002079.jpg", 5)?).await?;
+    // Three seconds of him: seen as a person who does not look, and not greeted.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(3);
+    let mut turned_away = 0;
+    while tokio::time::Instant::now() < deadline {
+        let Ok(Some(data)) = tokio::time::timeout_at(deadline, detections.recv()).await else {
+            break;
+        };
+        let d: DetectionsMsg = serde_json::from_slice(&data.payload)?;
+        let people = d.people.unwrap_or_default();
+        anyhow::ensure!(people.iter().all(|p| !p.looking), "a person looking: {people:?}");
+        turned_away += usize::from(!people.is_empty());
+    }
+    while let Some(data) = scene.avatar.try_recv() {
+        let command: serde_json::Value = serde_json::from_slice(&data.payload)?;
+        anyhow::ensure!(command["cmd"] != "say", "the agent spoke: {command}");
+    }
+    assert!(turned_away >= 5, "the turned face was analysed in {turned_away} frames");
+    // The portrait, facing the camera: now the greeting comes.
+    camera.show(one_face(true)?);
+    let greeting = next_caption(&scene.avatar).await?;
+    assert!(greeting.ends_with("! Nice to see you. Ask me anything."), "{greeting:?}");
+    drop(camera);
     Ok(())
 }
