@@ -343,7 +343,11 @@ async fn a_face_turned_away_is_not_greeted_until_it_looks_at_the_agent() -> anyh
     let scene = Scene::start(&dir).await?;
     let detections = scene.client.subscribe(ch::DETECTIONS.name).await?;
     // A young man in a group photo, his head turned well away from the camera (yaw about 55 degrees).
-    let camera = Camera::start(&scene.client, fixture_face("faces/dlib_2008_002079.jpg", 5)?).await?;
+    let camera = Camera::start(
+        &scene.client,
+        fixture_face("faces/dlib_2008_002079.jpg", 5)?,
+    )
+    .await?;
     // Three seconds of him: seen as a person who does not look, and not greeted.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(3);
     let mut turned_away = 0;
@@ -353,18 +357,27 @@ async fn a_face_turned_away_is_not_greeted_until_it_looks_at_the_agent() -> anyh
         };
         let d: DetectionsMsg = serde_json::from_slice(&data.payload)?;
         let people = d.people.unwrap_or_default();
-        anyhow::ensure!(people.iter().all(|p| !p.looking), "a person looking: {people:?}");
+        anyhow::ensure!(
+            people.iter().all(|p| !p.looking),
+            "a person looking: {people:?}"
+        );
         turned_away += usize::from(!people.is_empty());
     }
     while let Some(data) = scene.avatar.try_recv() {
         let command: serde_json::Value = serde_json::from_slice(&data.payload)?;
         anyhow::ensure!(command["cmd"] != "say", "the agent spoke: {command}");
     }
-    assert!(turned_away >= 5, "the turned face was analysed in {turned_away} frames");
+    assert!(
+        turned_away >= 5,
+        "the turned face was analysed in {turned_away} frames"
+    );
     // The portrait, facing the camera: now the greeting comes.
     camera.show(one_face(true)?);
     let greeting = next_caption(&scene.avatar).await?;
-    assert!(greeting.ends_with("! Nice to see you. Ask me anything."), "{greeting:?}");
+    assert!(
+        greeting.ends_with("! Nice to see you. Ask me anything."),
+        "{greeting:?}"
+    );
     drop(camera);
     Ok(())
 }
