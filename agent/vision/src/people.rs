@@ -148,12 +148,13 @@ impl People {
         self.last_speaker = None;
     }
 
-    /// Analyses the faces of one frame.
+    /// Analyses the faces of one frame; a descriptor that is due is computed only when `may_describe`.
     pub fn observe(
         &mut self,
         frame: &GreyFrame,
         frame_us: u64,
         faces: &[BoxPx],
+        may_describe: bool,
     ) -> Result<Vec<Person>, VisionError> {
         if frame_us < self.last_frame_us {
             self.reset();
@@ -191,7 +192,9 @@ impl People {
             track.mouth.push(frame_us, measures.mouth_open, window);
             seen.push((index, measures, points));
         }
-        self.describe_one(&image, frame_us, &seen)?;
+        if may_describe {
+            self.describe_one(&image, frame_us, &seen)?;
+        }
 
         let movements: Vec<(u64, f32)> = seen
             .iter()

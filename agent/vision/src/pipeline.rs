@@ -120,6 +120,8 @@ pub struct FrameDetections {
 #[derive(Debug)]
 pub struct VisionPipeline {
     faces: Option<FaceDetector>,
+    /// Full face scans completed up to the last frame: a frame that completes one carried the detector's cost.
+    face_cycles: u64,
     people: Option<People>,
     motion: Option<MotionDetector>,
     codes: Option<CodeReader>,
@@ -138,6 +140,7 @@ impl VisionPipeline {
                 _ => None,
             },
             faces: params.faces.map(FaceDetector::new).transpose()?,
+            face_cycles: 0,
             motion: params.motion.map(MotionDetector::new).transpose()?,
             codes: params.codes.map(CodeReader::new).transpose()?,
             appearances: AppearanceTracker::new(params.code_forget_after_us),
@@ -218,9 +221,13 @@ impl VisionPipeline {
             }
             None => (None, 0),
         };
+        // A descriptor (about 20 ms) waits for a frame on which the face detector did not run (the network, about
+        // 60 ms, runs on one frame in three), so that no frame carries both.
+        let detector_ran = face_cycles != self.face_cycles;
+        self.face_cycles = face_cycles;
         let people = match (self.people.as_mut(), faces.as_deref()) {
             (Some(analysis), Some(found)) => Some(timed(&mut timings.people, || {
-                analysis.observe(frame, frame_us, found)
+                analysis.observe(frame, frame_us, found, !detector_ran)
             })?),
             _ => None,
         };
