@@ -30,6 +30,11 @@ impl Default for SpeakerParams {
     }
 }
 
+/// The fewest samples the movement is measured on: a module that processes few frames a second (a busy machine
+/// skips frames) reaches further back than the window for them, up to [`MAX_REACH`] windows.
+const MIN_SAMPLES: usize = 4;
+const MAX_REACH: u64 = 3;
+
 /// One face's mouth openness over the last window.
 #[derive(Debug, Clone, Default)]
 pub struct MouthHistory {
@@ -39,11 +44,10 @@ pub struct MouthHistory {
 impl MouthHistory {
     pub fn push(&mut self, at_us: u64, mouth_open: f32, window_us: u64) {
         self.samples.push_back((at_us, mouth_open));
-        while self
-            .samples
-            .front()
-            .is_some_and(|&(t, _)| at_us.saturating_sub(t) > window_us)
-        {
+        while self.samples.front().is_some_and(|&(t, _)| {
+            let age = at_us.saturating_sub(t);
+            age > window_us * MAX_REACH || (age > window_us && self.samples.len() > MIN_SAMPLES)
+        }) {
             self.samples.pop_front();
         }
     }
@@ -153,6 +157,20 @@ mod tests {
         }
         assert!(rest.movement() < 1e-6);
         assert!(talk.movement() > 0.1, "{}", talk.movement());
+    }
+
+    #[test]
+    fn a_slow_frame_rate_still_gives_enough_samples_but_not_old_ones() {
+        let mut h = MouthHistory::default();
+        // Four frames a second: the last four samples reach back 750 ms, past the 500 ms window.
+        for i in 0..8 {
+            h.push(i * 250_000, talking(i), 500_000);
+        }
+        assert_eq!(h.samples.len(), MIN_SAMPLES);
+        assert!(h.movement() > 0.05, "{}", h.movement());
+        // One frame in two seconds: samples older than three windows go whatever their number.
+        h.push(10_000_000, 0.0, 500_000);
+        assert_eq!(h.samples.len(), 1);
     }
 
     #[test]
