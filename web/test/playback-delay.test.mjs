@@ -149,6 +149,16 @@ test("the heard clock's shift jumps while nothing plays and never runs the clock
   assert.equal(h.at(now), 0.19);
 });
 
+test("a shift history on a clock that went back starts again, so a later clock's shifts are found", () => {
+  const h = new HeardShift();
+  // Drawn on the page's clock before the audio context existed: no route, no shift.
+  h.follow(5.3, 0, false);
+  // The context's clock starts from 0; speech through the loopback begins there.
+  h.follow(1.2, 0.07, false);
+  assert.equal(h.at(1.5), 0.07);
+  assert.equal(h.at(0.5), 0.07, "before the first shift on this clock: that shift");
+});
+
 test("before any match the delay is the guessed fixed part plus the jitter buffer's reading, if there is one", () => {
   const e = new DelayEstimator(0.09, 0.035);
   assert.equal(e.delayS, 0.09);

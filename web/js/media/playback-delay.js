@@ -300,6 +300,13 @@ export class HeardShift {
    * @param {boolean} playing speech is being heard, so the shift may not jump
    */
   follow(nowS, targetS, playing) {
+    // A clock that went back is another clock: the page draws on its own clock until the audio context exists,
+    // whose clock then starts from 0. Shifts recorded on the first would hide those of the second from `at`
+    // (CI's playback test saw a first stretch reported with no shift, though it was drawn with the right one).
+    if (nowS < this.atS) {
+      this.history = [];
+      this.atS = -Infinity;
+    }
     const elapsed = nowS - this.atS;
     let s = targetS;
     if (playing && Number.isFinite(elapsed) && elapsed >= 0) {
