@@ -10,8 +10,11 @@
 //!   (Speex has no such gate either), target >= 25 dB and >= 1.0x Speex; CPU per second of audio for both;
 //! - double talk: recorded people's sentences (the fixtures) spoken over a Piper reply's 0 dB echo, cleaned by the
 //!   canceller as `make run` configures it, transcribed by whisper (base, the satellite's path): WER against the
-//!   same sentences with no echo, target ratio <= 1.2; the uncancelled mix and Speex beside it.
+//!   same sentences with no echo, target ratio <= 1.2; the uncancelled mix and Speex beside it, and AEC3's block
+//!   processor driven directly (`aec3_blocks.rs`): its linear filter's output before the suppressor, and a longer
+//!   filter with a suppressor tuned for the near end (what `sonora`'s audio processing does not expose).
 
+mod aec3_blocks;
 mod speex;
 
 use std::path::{Path, PathBuf};
@@ -146,7 +149,7 @@ fn main() -> anyhow::Result<()> {
         )
     })?;
     let echo = room_echo(&piper_reply, PLAYED_MS + 150, 0.0, scratch.path())?;
-    let mut errors = [0usize; 5];
+    let mut errors = [0usize; 8];
     let mut words = 0;
     println!(
         "double talk over the Piper reply's 0 dB echo (150 ms, reverb): alone | raw mix | ours | speex | ours \
@@ -156,6 +159,24 @@ fn main() -> anyhow::Result<()> {
         residual_gate: false,
         ..CancellerConfig::default()
     };
+    for (name, config) in [
+        ("default", aec3_blocks::default_config()),
+        ("long filter, near-end tuned", aec3_blocks::nearend_config()),
+    ] {
+        let alone = aec3_blocks::run(&config, &piper_reply, &echo)?;
+        let echo16: Vec<f32> = aec3_blocks::run(&config, &[], &echo)?.suppressed;
+        let energy = |x: &[f32]| {
+            x.iter()
+                .skip(32_000)
+                .map(|&s| f64::from(s).powi(2))
+                .sum::<f64>()
+        };
+        println!(
+            "AEC3's block processor, {name}: ERLE suppressed {:.1} dB, linear {:.1} dB",
+            10.0 * (energy(&echo16) / energy(&alone.suppressed).max(1e-12)).log10(),
+            10.0 * (energy(&echo16) / energy(&alone.linear).max(1e-12)).log10()
+        );
+    }
     for person in PEOPLE {
         let (samples, text) = person_clip(&options.fixtures, person)?;
         let at = (PERSON_AT_S * f64::from(RATE)) as usize;
@@ -163,12 +184,17 @@ fn main() -> anyhow::Result<()> {
         let (ours, _) = cancel(CancellerConfig::default(), &piper_reply, &mic);
         let (theirs, _) = speex_cancel(&piper_reply, &mic)?;
         let (ungated, _) = cancel(filter_only, &piper_reply, &mic);
+        let blocks = aec3_blocks::run(&aec3_blocks::default_config(), &piper_reply, &mic)?;
+        let nearend = aec3_blocks::run(&aec3_blocks::nearend_config(), &piper_reply, &mic)?;
         let heard = [
             hear(&mut transcriber, &samples)?,
             hear(&mut transcriber, &mic)?,
             hear(&mut transcriber, &ours)?,
             hear(&mut transcriber, &theirs)?,
             hear(&mut transcriber, &ungated)?,
+            hear16(&mut transcriber, &blocks.suppressed)?,
+            hear16(&mut transcriber, &blocks.linear)?,
+            hear16(&mut transcriber, &nearend.suppressed)?,
         ];
         for (e, h) in errors.iter_mut().zip(&heard) {
             *e += word_errors(&text, h).0;
@@ -183,6 +209,13 @@ fn main() -> anyhow::Result<()> {
         wer(errors[2]),
         wer(errors[3]),
         wer(errors[4]),
+    );
+    println!(
+        "AEC3's block processor at 16 kHz: suppressed {:.1}%, linear output {:.1}%, long filter and near-end \
+         tuned suppressor {:.1}%",
+        wer(errors[5]) * 100.0,
+        wer(errors[6]) * 100.0,
+        wer(errors[7]) * 100.0
     );
     // With no error at all alone, the ratio is taken against one error.
     let ratio = errors[2] as f64 / errors[0].max(1) as f64;
@@ -295,6 +328,17 @@ fn person_clip(fixtures: &Path, name: &str) -> anyhow::Result<(Vec<i16>, String)
 fn hear(transcriber: &mut Transcriber, pcm: &[i16]) -> anyhow::Result<String> {
     let samples: Vec<f32> = pcm.iter().map(|&s| f32::from(s) / 32768.0).collect();
     let results = transcribe_clip(&samples, RATE, SegmenterConfig::default(), transcriber)?;
+    Ok(joined_text(&results))
+}
+
+/// The same for 16 kHz samples in [-1, 1].
+fn hear16(transcriber: &mut Transcriber, samples: &[f32]) -> anyhow::Result<String> {
+    let results = transcribe_clip(
+        samples,
+        aec3_blocks::RATE_16K,
+        SegmenterConfig::default(),
+        transcriber,
+    )?;
     Ok(joined_text(&results))
 }
 
