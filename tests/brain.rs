@@ -9,7 +9,7 @@ use agent_contract::channels as ch;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use agent_tests::{Agent, DataDir, PATIENCE, next_json};
+use agent_tests::{Agent, DataDir, PATIENCE, next_json, until_subscribers};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Service, ServiceCall, Subscription};
 use serde_json::{Value, json};
@@ -76,21 +76,7 @@ impl Rig {
     }
 
     async fn until_subscribers(&self, channel: &str, count: u32) -> anyhow::Result<()> {
-        tokio::time::timeout(PATIENCE, async {
-            loop {
-                if self
-                    .satellite
-                    .channel(channel)
-                    .await
-                    .is_ok_and(|info| info.stats.subscribers >= count)
-                {
-                    return;
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        })
-        .await
-        .with_context(|| format!("{channel} did not get {count} subscriber(s)"))
+        until_subscribers(&self.satellite, channel, count, PATIENCE).await
     }
 
     /// Publishes a final transcript, as the ASR satellite does.

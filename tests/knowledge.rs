@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use agent_contract::channels as ch;
 use agent_knowledge::{Knowledge, Language};
-use agent_tests::{Agent, DataDir, PATIENCE, next_json, until};
+use agent_tests::{Agent, DataDir, PATIENCE, next_json, until, until_subscribers};
 use anyhow::Context;
 use flow::{Publisher, Subscription};
 use serde_json::json;
@@ -47,29 +47,10 @@ impl Rig {
         let _pauses = user
             .publisher(ch::TRANSCRIPT_PAUSE.name, ch::headers::TRANSCRIPT)
             .await?;
-        until(
-            "the brain's subscription to the transcripts",
-            PATIENCE,
-            async {
-                while !user
-                    .channel(ch::TRANSCRIPT_PAUSE.name)
-                    .await
-                    .is_ok_and(|info| info.stats.subscribers >= 1)
-                {
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                }
-                // Agent.rules comes after: a question heard before our subscription was attached to it would
-                // have its rule trace go nowhere.
-                while !user
-                    .channel(ch::RULES.name)
-                    .await
-                    .is_ok_and(|info| info.stats.subscribers >= 1)
-                {
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                }
-            },
-        )
-        .await?;
+        until_subscribers(&user, ch::TRANSCRIPT_PAUSE.name, 1, PATIENCE).await?;
+        // Agent.rules comes after: a question heard before our subscription was attached to it would have its rule
+        // trace go nowhere.
+        until_subscribers(&user, ch::RULES.name, 1, PATIENCE).await?;
         Ok(Rig {
             _dir: dir,
             _agent: agent,

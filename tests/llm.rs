@@ -14,7 +14,9 @@ use std::process::Stdio;
 use std::time::Duration;
 
 use agent_tests::satellite::{LlmSat, llm_model};
-use agent_tests::{Agent, DataDir, PATIENCE, command, free_port, metrics, next_json, until};
+use agent_tests::{
+    Agent, DataDir, PATIENCE, command, free_port, metrics, next_json, until, until_subscribers,
+};
 use anyhow::{Context, bail};
 use flow::{Client, Publisher, Subscription};
 use serde_json::{Value, json};
@@ -112,21 +114,7 @@ impl Rig {
     }
 
     async fn until_subscribers(&self, channel: &str, count: u32) -> anyhow::Result<()> {
-        tokio::time::timeout(PATIENCE, async {
-            loop {
-                if self
-                    .user
-                    .channel(channel)
-                    .await
-                    .is_ok_and(|info| info.stats.subscribers >= count)
-                {
-                    return;
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        })
-        .await
-        .with_context(|| format!("{channel} did not get {count} subscriber(s)"))
+        until_subscribers(&self.user, channel, count, PATIENCE).await
     }
 
     /// A final transcript, as the ASR satellite publishes it.

@@ -13,7 +13,7 @@ use agent_contract::acquaintance::{self, AcquaintanceRecord, KEY_PREFIX};
 use agent_contract::channels as ch;
 use agent_contract::detections::DetectionsMsg;
 use agent_tests::fixtures::fixtures;
-use agent_tests::{Agent, DataDir, PATIENCE, next_json, until_subscribed};
+use agent_tests::{Agent, DataDir, PATIENCE, next_json, until_subscribed, until_subscribers};
 use anyhow::Context;
 use flow::{Client, Publisher, Subscription};
 use vision_evaluation::evaluation::{
@@ -198,20 +198,7 @@ impl Scene {
             .publisher(ch::TRANSCRIPT.name, r#"{"format":"json"}"#)
             .await?;
         // The brain, the TTS module, the observer and the vision module follow transcripts.
-        tokio::time::timeout(PATIENCE, async {
-            loop {
-                if client
-                    .channel(ch::TRANSCRIPT.name)
-                    .await
-                    .is_ok_and(|info| info.stats.subscribers >= 4)
-                {
-                    return;
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        })
-        .await
-        .context("Agent.transcript did not get its four subscribers")?;
+        until_subscribers(&client, ch::TRANSCRIPT.name, 4, PATIENCE).await?;
         Ok(Scene {
             agent,
             client,

@@ -32,5 +32,5 @@ pub fn artifacts_dir() -> std::path::PathBuf {
 }
 pub use wait::{
     free_port, json_message, next_json, next_payload, recv, recv_until, until, until_channel,
-    until_subscribed, until_unsubscribed,
+    until_subscribed, until_subscribers, until_unsubscribed,
 };

@@ -169,6 +169,27 @@ pub async fn until_channel(
     .with_context(|| format!("{name} did not appear"))
 }
 
+/// Waits until `name` on the hub of `client` has at least `count` subscribers (a module or satellite has attached to
+/// it, so what is published next reaches it); `patience` bounds the wait.
+pub async fn until_subscribers(
+    client: &flow::Client,
+    name: &str,
+    count: u32,
+    patience: Duration,
+) -> anyhow::Result<()> {
+    tokio::time::timeout(patience, async {
+        while !client
+            .channel(name)
+            .await
+            .is_ok_and(|info| info.stats.subscribers >= count)
+        {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    })
+    .await
+    .with_context(|| format!("{name} did not get {count} subscriber(s)"))
+}
+
 /// A free TCP port on loopback, for a listener a test configures (a Zenoh endpoint): bound and released, so the
 /// process it is handed to binds it again at once.
 pub fn free_port() -> anyhow::Result<u16> {

@@ -10,6 +10,18 @@ pub struct BoxPx {
     pub height: i32,
 }
 
+/// The face analyser takes its boxes in the same frame pixels.
+impl From<BoxPx> for agent_face::FaceBox {
+    fn from(b: BoxPx) -> Self {
+        Self {
+            x: b.x,
+            y: b.y,
+            width: b.width,
+            height: b.height,
+        }
+    }
+}
+
 impl BoxPx {
     pub fn area(&self) -> i64 {
         i64::from(self.width.max(0)) * i64::from(self.height.max(0))

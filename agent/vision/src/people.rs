@@ -175,15 +175,7 @@ impl People {
         let mut seen: Vec<(usize, FaceMeasures, agent_face::Landmarks)> = Vec::new();
         for face in largest {
             let index = self.track_for(face, frame_us, &seen);
-            let points = self.analyzer.landmarks(
-                &image,
-                FaceBox {
-                    x: face.x,
-                    y: face.y,
-                    width: face.width,
-                    height: face.height,
-                },
-            )?;
+            let points = self.analyzer.landmarks(&image, FaceBox::from(face))?;
             let Some(measures) = measure(&points) else {
                 continue;
             };

@@ -60,12 +60,7 @@ fn labelled_faces(dir: &Path) -> anyhow::Result<Vec<LabelledFace>> {
         for (i, b) in t.boxes.iter().enumerate() {
             out.push(LabelledFace {
                 photo: photo.clone(),
-                face: FaceBox {
-                    x: b.x,
-                    y: b.y,
-                    width: b.width,
-                    height: b.height,
-                },
+                face: FaceBox::from(*b),
                 person: format!("{}#{i}", t.image),
             });
         }
@@ -79,12 +74,7 @@ fn labelled_faces(dir: &Path) -> anyhow::Result<Vec<LabelledFace>> {
     {
         out.push(LabelledFace {
             photo: pair.clone(),
-            face: FaceBox {
-                x: b.x,
-                y: b.y,
-                width: b.width,
-                height: b.height,
-            },
+            face: FaceBox::from(*b),
             person: person.into(),
         });
     }

@@ -132,15 +132,7 @@ fn mouths(photo: &Mat) -> Result<[Mouth; 2], SceneError> {
     .map_err(failed)?;
     let mouth = |face: BoxPx| -> Result<Mouth, SceneError> {
         let points = analyzer
-            .landmarks(
-                &image,
-                FaceBox {
-                    x: face.x,
-                    y: face.y,
-                    width: face.width,
-                    height: face.height,
-                },
-            )
+            .landmarks(&image, FaceBox::from(face))
             .map_err(failed)?;
         let centre = points.point(62).midpoint(points.point(66));
         Ok(Mouth {
