@@ -7,7 +7,9 @@
 //! address, or it is dropped and counted, never answered: garbage and spoofed datagrams cost a decode each and
 //! nothing else. Sessions are at most [`MAX_SESSIONS`]; those not logged in are held by the table of strangers
 //! (`admission.rs`), which evicts the oldest of a crowded address, so a flood of hellos turns over a bounded set.
-//! Each session's queue holds [`SESSION_QUEUE`] datagrams; beyond that they are dropped (and counted), which the
+//! The demultiplexer puts each datagram straight into its session's engine and wakes the session's waiting half
+//! (`flow::transport::udp::Inbox`): no queue and no task between the socket and the connection. A session whose
+//! reader has fallen `DELIVERED_BACKLOG` frames behind has further datagrams dropped (and counted), which the
 //! sender's retransmission covers for reliable data.
 
 use std::collections::HashMap;
@@ -15,9 +17,8 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-use bytes::Bytes;
 use flow::transport::udp::datagram::{Datagram, Kind};
-use flow::transport::udp::{UdpStats, UdpTransport};
+use flow::transport::udp::{Inbox, UdpStats, UdpTransport};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
 use prometheus_client::metrics::counter::ConstCounter;
@@ -34,15 +35,13 @@ use crate::shared::Shared;
 
 /// Sessions open at once, logged in or not; a hello beyond it is dropped.
 pub const MAX_SESSIONS: usize = 4096;
-/// Datagrams queued for one session before more are dropped.
-pub const SESSION_QUEUE: usize = 512;
 
 /// A live session as the demultiplexer knows it.
 #[derive(Debug)]
 struct Entry {
     addr: SocketAddr,
     nonce: u32,
-    inbound: mpsc::Sender<Bytes>,
+    inbox: Inbox,
 }
 
 /// The sessions, by id and by address (one session per client socket).
@@ -53,11 +52,13 @@ struct Sessions {
 }
 
 impl Sessions {
+    /// Forgets session `id` and ends it (a session replaced from the same address no longer hears anything).
     fn remove(&mut self, id: u32) {
-        if let Some(e) = self.by_id.remove(&id)
-            && self.by_addr.get(&e.addr) == Some(&id)
-        {
-            self.by_addr.remove(&e.addr);
+        if let Some(e) = self.by_id.remove(&id) {
+            e.inbox.end();
+            if self.by_addr.get(&e.addr) == Some(&id) {
+                self.by_addr.remove(&e.addr);
+            }
         }
     }
 }
@@ -95,11 +96,7 @@ pub async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
                         continue;
                     }
                     match sessions.by_id.get(&d.session) {
-                        Some(e) if e.addr == from && d.kind != Kind::HelloAck => {
-                            if e.inbound.try_send(Bytes::copy_from_slice(bytes)).is_err() {
-                                UdpStats::add(&stats.dropped, 1);
-                            }
-                        }
+                        Some(e) if e.addr == from && d.kind != Kind::HelloAck => e.inbox.push(bytes),
                         _ => UdpStats::add(&stats.spoofed, 1),
                     }
                 }
@@ -152,27 +149,25 @@ async fn hello(
         }
     };
     let ack = Datagram::bare(Kind::HelloAck, id, nonce).to_vec();
-    let (inbound, queue) = mpsc::channel(SESSION_QUEUE);
+    let transport = UdpTransport::accepted(
+        socket.clone(),
+        from,
+        id,
+        len.saturating_sub(ack.len()),
+        stats.clone(),
+    );
     sessions.by_id.insert(
         id,
         Entry {
             addr: from,
             nonce,
-            inbound,
+            inbox: transport.inbox(),
         },
     );
     sessions.by_addr.insert(from, id);
     stats
         .sessions
         .store(sessions.by_id.len() as u64, Ordering::Relaxed);
-    let transport = UdpTransport::accepted(
-        socket.clone(),
-        from,
-        id,
-        queue,
-        len.saturating_sub(ack.len()),
-        stats.clone(),
-    );
     let stranger = shared.admission.admit(Origin::ip(from.ip()));
     let shared = shared.clone();
     let ended = ended.clone();

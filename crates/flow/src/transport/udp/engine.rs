@@ -1,5 +1,5 @@
 //! One end of a FlowProtocol UDP session as a state machine without I/O: whole frames in, datagrams out, and the
-//! other way round. Time is passed in, so that the driver (`mod.rs`) and the tests decide when it moves.
+//! other way round. Time is passed in, so that the session (`session.rs`) and the tests decide when it moves.
 //!
 //! Frames travel on two lanes, chosen by opcode (byte 4 of the frame):
 //!
@@ -464,6 +464,16 @@ impl Engine {
         self.delivered.len()
     }
 
+    /// Reliable datagrams not yet acknowledged, sent or waiting to be.
+    pub fn unacknowledged(&self) -> usize {
+        self.in_flight.len() + self.waiting.len()
+    }
+
+    /// Whether something waits to be sent now (an acknowledgement, fragments asked for again).
+    pub fn has_output(&self) -> bool {
+        self.ack_due || !self.out.is_empty()
+    }
+
     /// Whether the peer said goodbye.
     pub fn peer_closed(&self) -> bool {
         self.peer_closed
@@ -728,7 +738,7 @@ impl Engine {
     pub fn deadline(&self) -> Instant {
         let mut at = self.last_heard + self.settings.idle_timeout;
         // A keepalive is due only when nothing else waits to go out (which, held by the budget before login, may
-        // wait long: that must not wake the driver over and over).
+        // wait long: that must not wake the keeper over and over).
         if self.out.is_empty() {
             at = at.min(self.last_sent + self.settings.keepalive);
         }

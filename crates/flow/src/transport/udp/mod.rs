@@ -1,22 +1,21 @@
 //! FlowProtocol over UDP (`udp://HOST:PORT`): sessions of datagrams (`datagram.rs`) carrying the same frames as
-//! every other transport, with a reliable lane and a best-effort one (`engine.rs`), driven by one task per session
-//! that sends each burst in one system call (`batch.rs`).
+//! every other transport, with a reliable lane and a best-effort one (`engine.rs`): the writer sends its own frames
+//! and the reader takes frames straight from the session's state, a keeper task fires the timers (`session.rs`),
+//! and each burst goes out in one system call (`batch.rs`).
 //!
 //! A client opens a session with a hello padded to 1200 bytes, sent again with back-off until the hub answers with
 //! a session id; from then on every datagram carries that id. [`UdpTransport::connect`] is the client's end; the
-//! hub builds its end of each session with [`UdpTransport::accepted`], feeding it the datagrams its one socket
-//! received for that session. Either way the halves look like a byte stream of whole frames: the reader hands
-//! over whole frames as they are delivered, the writer takes whole frames.
+//! hub builds its end of each session with [`UdpTransport::accepted`], and its demultiplexer puts in the datagrams
+//! its one socket received for that session ([`UdpTransport::inbox`]). Either way the halves look like a byte
+//! stream of whole frames: the reader hands over whole frames as they are delivered, the writer takes whole frames.
 
 use std::io;
 use std::net::SocketAddr;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
-use bytes::{Bytes, BytesMut};
+use bytes::BytesMut;
 use tokio::net::UdpSocket;
-use tokio::sync::mpsc;
-use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::traits::{Transport, TransportRead, TransportWrite};
@@ -24,39 +23,23 @@ use super::traits::{Transport, TransportRead, TransportWrite};
 pub mod batch;
 pub mod datagram;
 pub mod engine;
+mod session;
 
 use datagram::{Datagram, Kind};
 pub use engine::{DEFAULT_MTU, Engine, Settings, UdpStats};
+use session::{CLOSE_GRACE, Ended, Session, Source};
+pub use session::{DELIVERED_BACKLOG, Inbox};
 
 /// How long a client waits for the hub to answer its hello, sending it again with back-off.
 const HELLO_PATIENCE: Duration = Duration::from_secs(5);
-/// Frames delivered and not yet read before the session stops taking datagrams (they wait in the socket or the
-/// hub's per-session queue, and beyond that are dropped and sent again).
-const DELIVERED_BACKLOG: usize = 256;
-/// Writes queued for the driver before a writer waits.
-const WRITE_QUEUE: usize = 64;
-/// How long a closing writer waits for its reliable data to be acknowledged.
-const CLOSE_GRACE: Duration = Duration::from_secs(2);
-
-/// Where a session's datagrams come from.
-#[derive(Debug)]
-enum Source {
-    /// A client's connected socket.
-    Socket,
-    /// The hub's demultiplexer, which checked the session id and the address.
-    Queue(mpsc::Receiver<Bytes>),
-}
+/// The most bytes one read hands over.
+const READ_MAX: usize = 64 * 1024;
 
 /// One FlowProtocol session over UDP, not yet split.
 #[derive(Debug)]
 pub struct UdpTransport {
-    engine: Engine,
-    socket: Arc<UdpSocket>,
-    /// The peer's address when the socket is shared (the hub); `None` on a client's connected socket.
-    to: Option<SocketAddr>,
-    source: Source,
+    session: Arc<Session>,
     peer: String,
-    stats: Arc<UdpStats>,
 }
 
 impl UdpTransport {
@@ -112,44 +95,55 @@ impl UdpTransport {
             wait = (wait * 2).min(settings.rto_max);
         };
         Ok(UdpTransport {
-            engine: Engine::client(session, settings, stats.clone(), Instant::now()),
-            socket: Arc::new(socket),
-            to: None,
-            source: Source::Socket,
+            session: Arc::new(Session::new(
+                Engine::client(session, settings, stats.clone(), Instant::now()),
+                Arc::new(socket),
+                None,
+                Source::Socket,
+                stats,
+            )),
             peer: format!("udp:{addr}"),
-            stats,
         })
     }
 
-    /// The hub's end of `session` with the client at `peer`, whose datagrams come through `inbound`; `budget` is
-    /// what it may send before it hears more (the hello's size less the hello-ack's).
+    /// The hub's end of `session` with the client at `peer`, whose datagrams its demultiplexer puts in through
+    /// [`UdpTransport::inbox`]; `budget` is what it may send before it hears more (the hello's size less the
+    /// hello-ack's).
     pub fn accepted(
         socket: Arc<UdpSocket>,
         peer: SocketAddr,
         session: u32,
-        inbound: mpsc::Receiver<Bytes>,
         budget: usize,
         stats: Arc<UdpStats>,
     ) -> Self {
         UdpTransport {
-            engine: Engine::hub(
-                session,
-                Settings::default(),
-                stats.clone(),
-                Instant::now(),
-                budget,
-            ),
-            socket,
-            to: Some(peer),
-            source: Source::Queue(inbound),
+            session: Arc::new(Session::new(
+                Engine::hub(
+                    session,
+                    Settings::default(),
+                    stats.clone(),
+                    Instant::now(),
+                    budget,
+                ),
+                socket,
+                Some(peer),
+                Source::Pushed,
+                stats,
+            )),
             peer: format!("udp:{peer}"),
-            stats,
+        }
+    }
+
+    /// Where the hub's demultiplexer puts this session's datagrams.
+    pub fn inbox(&self) -> Inbox {
+        Inbox {
+            session: self.session.clone(),
         }
     }
 
     /// The session's counters; they stay readable after the transport is split and gone.
     pub fn stats(&self) -> Arc<UdpStats> {
-        self.stats.clone()
+        self.session.stats().clone()
     }
 }
 
@@ -167,15 +161,6 @@ fn random_u32() -> u32 {
     h.finish() as u32
 }
 
-/// Why a session ended, when it failed; shared by the driver and both halves.
-type End = Arc<Mutex<Option<String>>>;
-
-fn ended(end: &End) -> Option<String> {
-    end.lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-        .clone()
-}
-
 impl Transport for UdpTransport {
     type Reader = UdpReader;
     type Writer = UdpWriter;
@@ -185,246 +170,146 @@ impl Transport for UdpTransport {
     }
 
     fn split(self) -> (UdpReader, UdpWriter) {
-        let (frames_tx, frames_rx) = mpsc::channel(DELIVERED_BACKLOG);
-        let (writes_tx, writes_rx) = mpsc::channel(WRITE_QUEUE);
-        let end = End::default();
-        let driver = Driver {
-            engine: self.engine,
-            socket: self.socket,
-            to: self.to,
-            source: self.source,
-            frames: frames_tx,
-            writes: writes_rx,
-            stats: self.stats,
-        };
-        let task = tokio::spawn(driver.run(end.clone()));
+        tokio::spawn(self.session.clone().keep());
         (
             UdpReader {
-                frames: frames_rx,
-                end: end.clone(),
+                session: self.session.clone(),
             },
             UdpWriter {
-                writes: Some(writes_tx),
-                end,
-                task: Some(task),
+                session: self.session,
+                shut: false,
             },
         )
-    }
-}
-
-/// The task that owns a session's engine: datagrams in and out, timers, and the halves' queues.
-#[derive(Debug)]
-struct Driver {
-    engine: Engine,
-    socket: Arc<UdpSocket>,
-    to: Option<SocketAddr>,
-    source: Source,
-    frames: mpsc::Sender<Bytes>,
-    writes: mpsc::Receiver<Bytes>,
-    stats: Arc<UdpStats>,
-}
-
-impl Driver {
-    async fn run(mut self, end: End) {
-        if let Err(why) = self.serve().await {
-            tracing::debug!(session = self.engine.session(), "udp session failed: {why}");
-            *end.lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(why);
-        }
-    }
-
-    /// Sends a burst of datagrams in as few system calls as the kernel takes (`batch.rs`).
-    async fn send(&self, datagrams: &[impl AsRef<[u8]>]) -> Result<(), String> {
-        match batch::send_all(&self.socket, self.to, datagrams).await {
-            Ok(sent) => {
-                batch::count(sent, &self.stats.sent, &self.stats.send_calls);
-                Ok(())
-            }
-            // A connected socket hears of a closed port: nobody listens there any more.
-            Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => Err(format!("udp: {e}")),
-            // Anything else (the socket's readiness failing) loses the burst, as the wire could.
-            Err(_) => Ok(()),
-        }
-    }
-
-    async fn serve(&mut self) -> Result<(), String> {
-        let mut writes_open = true;
-        let mut reader_open = true;
-        let mut closing_since: Option<Instant> = None;
-        let mut buf = vec![0u8; 65536];
-        let mut burst: Vec<Bytes> = Vec::new();
-        loop {
-            let now = Instant::now();
-            // Everything the engine has to send now goes out together: a frame's fragments, acknowledgements.
-            burst.clear();
-            while let Some(d) = self.engine.poll_send(now) {
-                burst.push(d);
-            }
-            if !burst.is_empty() {
-                self.send(&burst).await?;
-            }
-            if !reader_open {
-                while self.engine.poll_frame().is_some() {}
-            }
-            if !writes_open {
-                let since = *closing_since.get_or_insert(now);
-                if self.engine.all_acknowledged() || now >= since + CLOSE_GRACE || !reader_open {
-                    let close = self.engine.close_datagram();
-                    // Twice: a lost close costs the peer its idle timeout.
-                    self.send(&[&close, &close]).await?;
-                    return Ok(());
-                }
-            }
-            if self.engine.peer_closed() && (self.engine.frames_waiting() == 0 || !reader_open) {
-                return Ok(());
-            }
-            let deadline = if closing_since.is_some() {
-                self.engine.deadline().min(now + Duration::from_millis(50))
-            } else {
-                self.engine.deadline()
-            };
-            let has_frames = reader_open && self.engine.frames_waiting() > 0;
-            let may_receive = self.engine.frames_waiting() < DELIVERED_BACKLOG;
-            tokio::select! {
-                permit = self.frames.reserve(), if has_frames => match permit {
-                    Ok(permit) => {
-                        if let Some(f) = self.engine.poll_frame() {
-                            permit.send(f);
-                        }
-                        while self.engine.frames_waiting() > 0 {
-                            let Ok(permit) = self.frames.try_reserve() else { break };
-                            if let Some(f) = self.engine.poll_frame() {
-                                permit.send(f);
-                            }
-                        }
-                    }
-                    Err(_) => reader_open = false,
-                },
-                got = recv(&self.socket, &mut self.source, &mut buf), if may_receive => {
-                    let bytes = got?;
-                    take(&mut self.engine, &self.stats, &bytes)?;
-                    // What else is queued now goes in before one acknowledgement answers it all.
-                    for _ in 0..64 {
-                        let Some(bytes) = try_recv(&self.socket, &mut self.source, &mut buf)? else { break };
-                        take(&mut self.engine, &self.stats, &bytes)?;
-                    }
-                }
-                w = self.writes.recv(), if writes_open && self.engine.can_take() => match w {
-                    Some(data) => self.engine.send_frames(&data)?,
-                    None => writes_open = false,
-                },
-                () = tokio::time::sleep_until(deadline) => self.engine.on_timer(Instant::now())?,
-            }
-        }
-    }
-}
-
-/// Takes one received datagram into `engine`.
-fn take(engine: &mut Engine, stats: &UdpStats, bytes: &[u8]) -> Result<(), String> {
-    match Datagram::decode(bytes) {
-        Err(_) => UdpStats::add(&stats.malformed, 1),
-        Ok(d) if d.session != engine.session() || d.kind == Kind::Hello => {
-            // A late hello-ack on the client is harmless; anything else names another session.
-            if d.kind != Kind::HelloAck {
-                UdpStats::add(&stats.spoofed, 1);
-            }
-        }
-        Ok(d) => engine.on_datagram(&d, Instant::now())?,
-    }
-    Ok(())
-}
-
-async fn recv(socket: &UdpSocket, source: &mut Source, buf: &mut [u8]) -> Result<Bytes, String> {
-    match source {
-        Source::Socket => match socket.recv(buf).await {
-            Ok(n) => Ok(Bytes::copy_from_slice(&buf[..n])),
-            Err(e) => Err(format!("udp: {e}")),
-        },
-        Source::Queue(rx) => rx
-            .recv()
-            .await
-            .ok_or_else(|| "the hub's UDP edge ended the session".to_string()),
-    }
-}
-
-fn try_recv(
-    socket: &UdpSocket,
-    source: &mut Source,
-    buf: &mut [u8],
-) -> Result<Option<Bytes>, String> {
-    match source {
-        Source::Socket => match socket.try_recv(buf) {
-            Ok(n) => Ok(Some(Bytes::copy_from_slice(&buf[..n]))),
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => Ok(None),
-            Err(e) => Err(format!("udp: {e}")),
-        },
-        Source::Queue(rx) => Ok(rx.try_recv().ok()),
     }
 }
 
 /// Reading half: whole frames as the session delivers them.
 #[derive(Debug)]
 pub struct UdpReader {
-    frames: mpsc::Receiver<Bytes>,
-    end: End,
+    session: Arc<Session>,
 }
 
 impl TransportRead for UdpReader {
     async fn read_into(&mut self, buf: &mut BytesMut) -> io::Result<usize> {
-        let Some(first) = self.frames.recv().await else {
-            return match ended(&self.end) {
-                Some(why) => Err(io::Error::new(io::ErrorKind::ConnectionAborted, why)),
-                None => Ok(0),
+        let s = &self.session;
+        loop {
+            let change = s.change();
+            let (frames, output) = {
+                let engine = s.engine();
+                (engine.frames_waiting(), engine.has_output())
             };
-        };
-        let mut n = first.len();
-        buf.extend_from_slice(&first);
-        while n < 64 * 1024 {
-            let Ok(more) = self.frames.try_recv() else {
-                break;
-            };
-            n += more.len();
-            buf.extend_from_slice(&more);
+            if frames > 0 || output {
+                // The acknowledgement of what is read goes out first (on the hub nobody else sends it); nothing is
+                // taken before the last await, so a read given up there loses nothing.
+                s.flush().await;
+            }
+            if frames > 0 {
+                let mut engine = s.engine();
+                let mut n = 0;
+                while n < READ_MAX {
+                    let Some(frame) = engine.poll_frame() else {
+                        break;
+                    };
+                    n += frame.len();
+                    buf.extend_from_slice(&frame);
+                }
+                drop(engine);
+                if frames >= DELIVERED_BACKLOG {
+                    s.made_room();
+                }
+                return Ok(n);
+            }
+            match s.ended() {
+                Some(Ended::Closed) => return Ok(0),
+                Some(Ended::Failed(why)) => {
+                    return Err(io::Error::new(io::ErrorKind::ConnectionAborted, why));
+                }
+                None => change.await,
+            }
         }
-        Ok(n)
+    }
+}
+
+impl Drop for UdpReader {
+    fn drop(&mut self) {
+        self.session.reader_gone();
     }
 }
 
 /// Writing half: whole frames to the session.
 #[derive(Debug)]
 pub struct UdpWriter {
-    writes: Option<mpsc::Sender<Bytes>>,
-    end: End,
-    task: Option<JoinHandle<()>>,
+    session: Arc<Session>,
+    /// `shutdown` ran: nothing more may be written.
+    shut: bool,
 }
 
 impl UdpWriter {
     fn gone(&self) -> io::Error {
-        io::Error::new(
-            io::ErrorKind::BrokenPipe,
-            ended(&self.end).unwrap_or_else(|| "udp session closed".into()),
-        )
+        let why = match self.session.ended() {
+            Some(Ended::Failed(why)) => why,
+            _ => "udp session closed".into(),
+        };
+        io::Error::new(io::ErrorKind::BrokenPipe, why)
     }
 }
 
 impl TransportWrite for UdpWriter {
     async fn write_all(&mut self, data: &[u8]) -> io::Result<()> {
-        let Some(writes) = &self.writes else {
-            return Err(self.gone());
-        };
-        if writes.send(Bytes::copy_from_slice(data)).await.is_err() {
-            return Err(self.gone());
+        let s = &self.session;
+        loop {
+            let change = s.change();
+            if self.shut || s.ended().is_some() {
+                return Err(self.gone());
+            }
+            // Taken at once when the window has room, else after acknowledgements have freed it.
+            let taken = {
+                let mut engine = s.engine();
+                engine.can_take().then(|| engine.send_frames(data))
+            };
+            match taken {
+                Some(Ok(())) => {
+                    s.flush().await;
+                    s.rearm();
+                    return Ok(());
+                }
+                Some(Err(why)) => {
+                    s.fail(why);
+                    return Err(self.gone());
+                }
+                None => change.await,
+            }
         }
-        Ok(())
     }
 
     async fn shutdown(&mut self) -> io::Result<()> {
-        self.writes = None;
-        if let Some(task) = self.task.take() {
-            // The driver sends what is unacknowledged, then the close; it ends on its own if this wait is cut.
-            let _ = tokio::time::timeout(CLOSE_GRACE + Duration::from_millis(500), task).await;
+        if self.shut {
+            return Ok(());
         }
+        self.shut = true;
+        let s = &self.session;
+        s.writer_done();
+        // The keeper sends what is unacknowledged, then the close; the session ends on its own if this wait is cut.
+        let _ = tokio::time::timeout(CLOSE_GRACE + Duration::from_millis(500), async {
+            loop {
+                let change = s.change();
+                if s.ended().is_some() {
+                    return;
+                }
+                change.await;
+            }
+        })
+        .await;
         Ok(())
+    }
+}
+
+impl Drop for UdpWriter {
+    /// A writer dropped without `shutdown` still has the keeper close the session gracefully.
+    fn drop(&mut self) {
+        if !self.shut {
+            self.session.writer_done();
+        }
     }
 }
 
@@ -462,7 +347,7 @@ mod tests {
         let (give, take) = tokio::sync::oneshot::channel();
         tokio::spawn(async move {
             let mut give = Some(give);
-            let mut inbound: Option<(SocketAddr, mpsc::Sender<Bytes>)> = None;
+            let mut inbound: Option<(SocketAddr, Inbox)> = None;
             let mut buf = vec![0u8; 65536];
             while let Ok((n, from)) = socket.recv_from(&mut buf).await {
                 let Ok(d) = Datagram::decode(&buf[..n]) else {
@@ -470,24 +355,22 @@ mod tests {
                 };
                 if d.kind == Kind::Hello {
                     let ack = Datagram::bare(Kind::HelloAck, 77, d.session).to_vec();
-                    let (tx, rx) = mpsc::channel(512);
                     let t = UdpTransport::accepted(
                         socket.clone(),
                         from,
                         77,
-                        rx,
                         n - ack.len(),
                         Arc::default(),
                     );
                     if let Some(give) = give.take() {
+                        inbound = Some((from, t.inbox()));
                         let _ = give.send(t);
-                        inbound = Some((from, tx));
                     }
                     let _ = socket.send_to(&ack, from).await;
-                } else if let Some((peer, tx)) = &inbound
+                } else if let Some((peer, inbox)) = &inbound
                     && *peer == from
                 {
-                    let _ = tx.send(Bytes::copy_from_slice(&buf[..n])).await;
+                    inbox.push(&buf[..n]);
                 }
             }
         });
@@ -525,5 +408,43 @@ mod tests {
         cli_w.shutdown().await.expect("shutdown");
         let mut rest = BytesMut::new();
         assert_eq!(hub_r.read_into(&mut rest).await.expect("end"), 0);
+    }
+
+    /// The keeper moves a session that neither half waits on: with its reader never read, more reliable frames
+    /// than the window holds go out (acknowledgements free it), arrive in order, and the close still ends the peer.
+    #[tokio::test]
+    async fn a_session_whose_reader_is_never_read_still_sends_more_than_a_window_and_closes() {
+        let (addr, hub) = one_session_hub().await;
+        let client = UdpTransport::connect(&addr.to_string())
+            .await
+            .expect("connect");
+        let hub = hub.await.expect("session");
+        let (mut hub_r, _hub_w) = hub.split();
+        let (_cli_r, mut cli_w) = client.split();
+        let login = frame(op::LOGIN, 1, 60);
+        cli_w.write_all(&login).await.expect("write");
+        assert_eq!(read_exactly(&mut hub_r, login.len()).await, login);
+        // Twice the window of calls, each its own write, while the hub's end is read on a task of its own.
+        let calls: Vec<Vec<u8>> = (0..2 * Settings::default().window as u32)
+            .map(|i| frame(op::CALL, i + 2, 100))
+            .collect();
+        let want = calls.concat();
+        let read = tokio::spawn(async move {
+            let got = read_exactly(&mut hub_r, want.len()).await;
+            assert!(got == want, "the calls arrived changed or out of order");
+            hub_r
+        });
+        let writes = tokio::time::timeout(Duration::from_secs(30), async {
+            for c in &calls {
+                cli_w.write_all(c).await.expect("write");
+            }
+        })
+        .await;
+        assert!(writes.is_ok(), "the writer was stalled by a full window");
+        let mut hub_r = read.await.expect("reader");
+        cli_w.shutdown().await.expect("shutdown");
+        let mut rest = BytesMut::new();
+        let end = tokio::time::timeout(Duration::from_secs(30), hub_r.read_into(&mut rest)).await;
+        assert_eq!(end.expect("the close reached the hub").expect("end"), 0);
     }
 }
