@@ -314,8 +314,9 @@ async fn through_a_lossy_relay_calls_are_answered_once_and_stream_messages_arriv
     };
     let list: Vec<u32> = seen(&got).into_iter().filter(|&s| s < SENT).collect();
     println!(
-        "relay: {:?}; {delivered} of {SENT} delivered, {lost} counted lost",
-        mangled
+        "relay: {:?}; {delivered} of {SENT} delivered, {lost} counted lost, {} fragments asked for again",
+        mangled,
+        metric(&hub, "flow_udp_nacks_total").await?
     );
     ensure!(
         mangled.dropped.load(Ordering::Relaxed) > 0

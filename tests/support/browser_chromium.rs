@@ -41,13 +41,16 @@ pub enum Devices {
 
 type Pending = Arc<Mutex<HashMap<u64, oneshot::Sender<Result<Value, String>>>>>;
 
-/// A running headless Chromium and its DevTools connection; killed on drop.
+/// A running headless Chromium and its DevTools connection; killed on drop with every process it started, and its
+/// profile removed.
 #[derive(Debug)]
 pub struct Chromium {
     child: Child,
     out: mpsc::Sender<String>,
     pending: Pending,
     next_id: AtomicU64,
+    /// The browser's process group (its pid), killed whole on drop.
+    group: Option<u32>,
     _profile: tempfile::TempDir,
 }
 
@@ -99,9 +102,13 @@ impl Chromium {
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
+            // Its own process group: the renderers and the crash handler go with it, instead of writing into the
+            // profile after it was removed (which left `agent-chromium-*` folders behind in the temporary folder).
+            .process_group(0)
             .kill_on_drop(true)
             .spawn()
             .with_context(|| format!("starting {exe} (apt-get install chromium)"))?;
+        let group = child.id();
         let stderr = child.stderr.take().context("chromium stderr")?;
         let url = devtools_url(stderr).await?;
         let (ws, _) = tokio_tungstenite::connect_async(url.as_str())
@@ -143,6 +150,7 @@ impl Chromium {
             out,
             pending,
             next_id: AtomicU64::new(1),
+            group,
             _profile: profile,
         })
     }
@@ -298,6 +306,26 @@ impl Chromium {
     /// Stops the browser.
     pub async fn quit(mut self) {
         let _ = self.child.kill().await;
+    }
+}
+
+impl Drop for Chromium {
+    /// Kills the browser's whole process group, then removes its profile, trying again for a second while the last
+    /// of its processes let go of it.
+    fn drop(&mut self) {
+        if let Some(pid) = self.group {
+            let _ = std::process::Command::new("kill")
+                .args(["-KILL", "--", &format!("-{pid}")])
+                .stderr(Stdio::null())
+                .status();
+        }
+        let profile = self._profile.path();
+        for _ in 0..20 {
+            if std::fs::remove_dir_all(profile).is_ok() || !profile.exists() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
 }
 

@@ -17,6 +17,7 @@ pub mod motion;
 pub mod people;
 pub mod people_settings;
 pub mod pipeline;
+mod setting_check;
 pub mod settings;
 pub mod speaker;
 pub mod wire;

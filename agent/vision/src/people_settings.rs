@@ -8,6 +8,7 @@ use serde::Deserialize;
 
 use crate::error::VisionError;
 use crate::people::PeopleParams;
+use crate::setting_check::check;
 use crate::speaker::SpeakerParams;
 
 /// `[modules.vision.people]`.
@@ -58,16 +59,6 @@ impl PeopleSettings {
         if !self.enabled {
             return Ok(None);
         }
-        let check = |ok: bool, key: &'static str, reason: &str| {
-            if ok {
-                Ok(())
-            } else {
-                Err(VisionError::InvalidSetting {
-                    key,
-                    reason: reason.to_owned(),
-                })
-            }
-        };
         check(
             (1..=16).contains(&self.max_faces),
             "people.max_faces",

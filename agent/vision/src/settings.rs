@@ -16,6 +16,7 @@ use crate::gaze::GazeParams;
 use crate::motion::{MotionMethod, MotionParams};
 use crate::people_settings::PeopleSettings;
 use crate::pipeline::{FaceDetection, PipelineParams};
+use crate::setting_check::{check, invalid};
 
 /// `[modules.vision]`.
 #[derive(Debug, Clone, Deserialize)]
@@ -184,21 +185,6 @@ impl Default for GazeSettings {
             deadband: gaze.deadband,
             hold_ms: gaze.hold_us / 1000,
         }
-    }
-}
-
-fn invalid(key: &'static str, reason: impl Into<String>) -> VisionError {
-    VisionError::InvalidSetting {
-        key,
-        reason: reason.into(),
-    }
-}
-
-fn check(ok: bool, key: &'static str, reason: &str) -> Result<(), VisionError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(invalid(key, reason))
     }
 }
 

@@ -186,11 +186,17 @@ impl Session {
         }
     }
 
-    /// After a write has been sent (its reliable datagrams in flight with their retransmission times): wakes the
-    /// keeper when the engine now has work due before the deadline it sleeps until.
+    /// After a write has been sent (its reliable datagrams in flight with their retransmission times) or a datagram
+    /// pushed in (a frame begun): wakes the keeper when the engine now has work due before the deadline it sleeps
+    /// until.
     pub(super) fn rearm(&self) {
-        let deadline = self.engine().deadline();
-        if lock(&self.armed).is_some_and(|armed| deadline < armed) {
+        // Read under the engine's lock, under which the keeper also sets what it sleeps until: no change is missed
+        // between the two (a notification the keeper is not yet waiting for is kept for it).
+        let (deadline, armed) = {
+            let engine = self.engine();
+            (engine.deadline(), *lock(&self.armed))
+        };
+        if armed.is_some_and(|armed| deadline < armed) {
             self.keeper.notify_one();
         }
     }
@@ -208,8 +214,10 @@ impl Session {
             let now = Instant::now();
             let (deadline, may_receive, acknowledged, peer_closed) = {
                 let engine = self.engine();
+                let deadline = engine.deadline();
+                *lock(&self.armed) = Some(deadline);
                 (
-                    engine.deadline(),
+                    deadline,
                     engine.frames_waiting() < DELIVERED_BACKLOG,
                     engine.all_acknowledged(),
                     engine.peer_closed(),
@@ -239,7 +247,6 @@ impl Session {
                 Some(_) => deadline.min(now + Duration::from_millis(50)),
                 None => deadline,
             };
-            *lock(&self.armed) = Some(deadline);
             let receive = self.source == Source::Socket && may_receive;
             tokio::select! {
                 got = self.socket.recv(&mut buf), if receive => match got {
@@ -328,7 +335,7 @@ impl Inbox {
             UdpStats::add(&self.session.stats.dropped, 1);
             return;
         }
-        // A fragment of a frame still incomplete wakes nobody: a 52 KB picture is 44 datagrams and one wake-up.
+        // A fragment of a frame still incomplete wakes no half: a 52 KB picture is 44 datagrams and one wake-up.
         if self.session.take(bytes) {
             self.session.changed.notify_waiters();
             // A goodbye ends the keeper too.
@@ -336,6 +343,9 @@ impl Inbox {
                 self.session.keeper.notify_one();
             }
         }
+        // It may bring the keeper's work forward: a frame begun and not finished asks for its missing fragments
+        // after `nack_delay`.
+        self.session.rearm();
     }
 
     /// Ends the session: the edge no longer routes its datagrams (a new session from the same address replaced it).
