@@ -320,7 +320,11 @@ async fn fixture_speech_through_the_hub_has_low_word_error_rate() -> anyhow::Res
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_satellites_share_consecutive_utterances_each_once() -> anyhow::Result<()> {
     let dir = DataDir::new()?;
-    let agent = Agent::start(&dir).await?;
+    // Nobody answers: what is measured is two satellites sharing the utterances. With the brain on, a reply spoken
+    // in a 700 ms pause once made the echo canceller take the microphone (which holds no echo here) for an echo it
+    // had found, and its suppressor garbled the next sentence (CI, 2026-12-07: "in being comparatively modern" heard
+    // as "are using water. Or, Orbs"; docs/voice.md, Known limits).
+    let agent = Agent::with_config(&dir, "[modules.brain]\nenabled = false\n").await?;
     let transcripts = Transcripts::collect(&agent).await?;
     let _a = start_satellite(&agent, "asr-a").await?;
     let _b = start_satellite(&agent, "asr-b").await?;
