@@ -354,7 +354,9 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
 #[tokio::test]
 async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<()> {
     let _one = ONE_RIG.lock().await;
-    // A long reply: many sentences, one thread, so that it is still generating when the user speaks.
+    // A long reply: many sentences, one thread, and the model's end masked for 400 tokens, so that it is still
+    // generating when the user speaks (CI's run of 3cc7af8 had the small model end its second story after 14
+    // tokens, before "stop" was heard).
     let rig = Rig::start_with("en", LONG_REPLIES).await?;
     let _llm = LlmSat::start(
         &rig.agent,
@@ -363,6 +365,8 @@ async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<
             "40",
             "--max-tokens",
             "800",
+            "--min-tokens",
+            "400",
             "--threads",
             "1",
         ],
@@ -411,6 +415,31 @@ async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<
     })
     .await
     .context("the conversation does not keep both replies as interrupted")?;
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_reply_held_to_a_minimum_length_runs_on_past_the_models_own_end() -> anyhow::Result<()> {
+    let _one = ONE_RIG.lock().await;
+    let rig = Rig::start_with("en", LONG_REPLIES).await?;
+    // A question the small model answers in a few words, held to 48 tokens and allowed 48 at most: the reply ends
+    // on the token limit, never on the model's end.
+    let _llm = LlmSat::start(
+        &rig.agent,
+        &[
+            "--max-sentences",
+            "40",
+            "--max-tokens",
+            "48",
+            "--min-tokens",
+            "48",
+        ],
+    )
+    .await?;
+    rig.hear("Say yes.").await?;
+    let end = next_json(&rig.reply, PATIENCE, |m| m["event"] == "end").await?;
+    assert_eq!(end["finish"], "tokens", "{end}");
+    assert_eq!(end["stats"]["tokens"], 48, "{end}");
     Ok(())
 }
 

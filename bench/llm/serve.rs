@@ -29,6 +29,7 @@ pub fn serve(model: &Path, threads: u32) -> anyhow::Result<()> {
             context: CONTEXT,
             temperature: 0.0,
             seed: 0,
+            min_tokens: 0,
         },
     )?;
     let mut out = std::io::stdout().lock();

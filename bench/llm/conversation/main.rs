@@ -171,6 +171,7 @@ fn main() -> anyhow::Result<()> {
             context: args.context,
             temperature: args.temperature,
             seed: 1,
+            min_tokens: 0,
         },
     )?;
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();

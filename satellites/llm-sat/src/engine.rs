@@ -16,6 +16,7 @@ use llama_cpp_2::model::params::LlamaModelParams;
 use llama_cpp_2::model::{LlamaChatMessage, LlamaChatTemplate, LlamaModel};
 use llama_cpp_2::sampling::LlamaSampler;
 use llama_cpp_2::token::LlamaToken;
+use llama_cpp_2::token::logit_bias::LlamaLogitBias;
 
 use crate::generator::{
     Constraint, Ended, Flow, GenerateError, Generated, Generator, Limits, Message,
@@ -31,6 +32,10 @@ pub struct EngineOptions {
     /// 0 samples greedily (the same reply every time); above 0, that temperature with top-k 40 and top-p 0.95.
     pub temperature: f32,
     pub seed: u32,
+    /// A free reply (no grammar) holds at least this many tokens: the model's end-of-generation tokens are masked
+    /// until then. 0 lets the model end when it likes; tests and benches that must interrupt or time a long
+    /// generation set it (as vLLM's `min_tokens`).
+    pub min_tokens: u32,
 }
 
 /// Tokens decoded per batch while reading a prompt.
@@ -107,8 +112,22 @@ impl Engine {
         })
     }
 
-    fn sampler(&self, constraint: Option<&Constraint>) -> Result<LlamaSampler, GenerateError> {
+    /// The sampler chain for one reply; with `end_masked`, the model's end-of-generation tokens cannot be drawn.
+    fn sampler(
+        &self,
+        constraint: Option<&Constraint>,
+        end_masked: bool,
+    ) -> Result<LlamaSampler, GenerateError> {
         let mut chain = Vec::new();
+        if end_masked {
+            let vocab = self.model.vocab();
+            let ends: Vec<LlamaLogitBias> = (0..self.model.n_vocab())
+                .map(LlamaToken)
+                .filter(|&token| vocab.is_eog(token))
+                .map(|token| LlamaLogitBias::new(token, f32::NEG_INFINITY))
+                .collect();
+            chain.push(LlamaSampler::logit_bias(self.model.n_vocab(), &ends));
+        }
         if let Some(constraint) = constraint {
             let grammar = LlamaSampler::grammar(self.model, &constraint.gbnf, "root")
                 .map_err(|e| GenerateError::Model(format!("grammar: {e}")))?;
@@ -243,7 +262,13 @@ impl Generator for Engine {
                 context,
             });
         }
-        let mut sampler = self.sampler(constraint)?;
+        let mut sampler = self.sampler(constraint, false)?;
+        // Until `min_tokens`, a second chain that cannot end draws the tokens; the first is told each one, so its
+        // repeat penalty sees the whole reply.
+        let mut held = match constraint {
+            None if self.options.min_tokens > 0 => Some(self.sampler(None, true)?),
+            _ => None,
+        };
         let mut generated = Generated {
             ended: Ended::Cancelled,
             prompt_tokens: prompt.len() as u32,
@@ -271,7 +296,14 @@ impl Generator for Engine {
             if generated.tokens as usize >= max_tokens {
                 break Ended::MaxTokens;
             }
-            let token = sampler.sample(&self.context, logits_at);
+            let token = match held.as_mut() {
+                Some(chain) if generated.tokens < self.options.min_tokens => {
+                    let token = chain.sample(&self.context, logits_at);
+                    sampler.accept(token);
+                    token
+                }
+                _ => sampler.sample(&self.context, logits_at),
+            };
             if vocab.is_eog(token) {
                 break Ended::EndOfText;
             }

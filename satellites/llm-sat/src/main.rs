@@ -66,6 +66,10 @@ struct Args {
     /// Tokens per reply at most.
     #[arg(long, default_value_t = 160)]
     max_tokens: u32,
+    /// A free reply from the local model holds at least this many tokens (its end is masked until then): for tests
+    /// and benches that interrupt or time a long generation. 0: the model ends when it likes.
+    #[arg(long, default_value_t = 0)]
+    min_tokens: u32,
     /// A reply ends after this many seconds, whatever it has said.
     #[arg(long, default_value_t = 15.0)]
     timeout_s: f64,
@@ -111,6 +115,7 @@ fn main() -> anyhow::Result<()> {
                     context: args.context,
                     temperature: args.temperature,
                     seed: 1,
+                    min_tokens: args.min_tokens,
                 },
             )
             .context("llm-sat cannot start")?,
