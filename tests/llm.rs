@@ -351,6 +351,26 @@ async fn an_open_question_is_spoken_sentence_by_sentence_before_generation_ends(
     Ok(())
 }
 
+/// An llm-sat for long replies (40 sentences at most) of `min_tokens` to `max_tokens` tokens, with `more` flags.
+async fn long_reply_llm(
+    rig: &Rig,
+    max_tokens: u32,
+    min_tokens: u32,
+    more: &[&str],
+) -> anyhow::Result<LlmSat> {
+    let (max_tokens, min_tokens) = (max_tokens.to_string(), min_tokens.to_string());
+    let mut args = vec![
+        "--max-sentences",
+        "40",
+        "--max-tokens",
+        &max_tokens,
+        "--min-tokens",
+        &min_tokens,
+    ];
+    args.extend_from_slice(more);
+    LlmSat::start(&rig.agent, &args).await
+}
+
 #[tokio::test]
 async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<()> {
     let _one = ONE_RIG.lock().await;
@@ -358,20 +378,7 @@ async fn talking_over_the_reply_stops_generation_and_speech() -> anyhow::Result<
     // generating when the user speaks (CI's run of 3cc7af8 had the small model end its second story after 14
     // tokens, before "stop" was heard).
     let rig = Rig::start_with("en", LONG_REPLIES).await?;
-    let _llm = LlmSat::start(
-        &rig.agent,
-        &[
-            "--max-sentences",
-            "40",
-            "--max-tokens",
-            "800",
-            "--min-tokens",
-            "400",
-            "--threads",
-            "1",
-        ],
-    )
-    .await?;
+    let _llm = long_reply_llm(&rig, 800, 400, &["--threads", "1"]).await?;
     for (question, interrupt) in [
         ("Tell me a long story about a dragon and a knight.", "voice"),
         ("Tell me a long story about a ship at sea.", "stop"),
@@ -424,18 +431,7 @@ async fn a_reply_held_to_a_minimum_length_runs_on_past_the_models_own_end() -> a
     let rig = Rig::start_with("en", LONG_REPLIES).await?;
     // A question the small model answers in a few words, held to 48 tokens and allowed 48 at most: the reply ends
     // on the token limit, never on the model's end.
-    let _llm = LlmSat::start(
-        &rig.agent,
-        &[
-            "--max-sentences",
-            "40",
-            "--max-tokens",
-            "48",
-            "--min-tokens",
-            "48",
-        ],
-    )
-    .await?;
+    let _llm = long_reply_llm(&rig, 48, 48, &[]).await?;
     rig.hear("Say yes.").await?;
     let end = next_json(&rig.reply, PATIENCE, |m| m["event"] == "end").await?;
     assert_eq!(end["finish"], "tokens", "{end}");

@@ -188,9 +188,10 @@ pub async fn start(config: Config, app: Application) -> anyhow::Result<RunningSe
         let socket = {
             let _io = io.handle().enter();
             tokio::net::UdpSocket::from_std(std_socket)
+                .and_then(flow::transport::udp::batch::BatchSocket::new)
                 .with_context(|| format!("binding flow UDP {addr}"))?
         };
-        let bound = socket.local_addr()?;
+        let bound = socket.socket().local_addr()?;
         tasks.push(
             io.handle()
                 .spawn(crate::net::udp::serve(socket, shared.clone())),

@@ -17,6 +17,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
+use flow::transport::udp::batch::{BatchSocket, Received};
 use flow::transport::udp::datagram::{Datagram, Kind};
 use flow::transport::udp::{Inbox, UdpStats, UdpTransport};
 use prometheus_client::collector::Collector;
@@ -24,7 +25,6 @@ use prometheus_client::encoding::{DescriptorEncoder, EncodeMetric};
 use prometheus_client::metrics::counter::ConstCounter;
 use prometheus_client::metrics::gauge::ConstGauge;
 use rand::Rng;
-use tokio::net::UdpSocket;
 use tokio::sync::mpsc;
 use tokio::task::JoinSet;
 use tracing::debug;
@@ -64,7 +64,7 @@ impl Sessions {
 }
 
 /// Serves the UDP edge until shutdown, then routes datagrams until every session has said goodbye.
-pub async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
+pub async fn serve(socket: BatchSocket, shared: Arc<Shared>) {
     let socket = Arc::new(socket);
     let stats = Arc::new(UdpStats::default());
     shared.metrics.register_collector(Box::new(UdpCollector {
@@ -75,29 +75,30 @@ pub async fn serve(socket: UdpSocket, shared: Arc<Shared>) {
     let mut sessions = Sessions::default();
     let mut connections = JoinSet::new();
     let (ended_tx, mut ended_rx) = mpsc::unbounded_channel::<u32>();
-    let mut buf = vec![0u8; 65536];
+    let mut received = Received::default();
     loop {
         if stopping && connections.is_empty() {
             break;
         }
         tokio::select! {
-            got = socket.recv_from(&mut buf) => match got {
-                Ok((n, from)) => {
-                    let bytes = &buf[..n];
-                    let Ok(d) = Datagram::decode(bytes) else {
-                        UdpStats::add(&stats.malformed, 1);
-                        continue;
-                    };
-                    if d.kind == Kind::Hello {
-                        if stopping {
+            got = socket.recv(&mut received) => match got {
+                // A receive holds several datagrams (a picture's fragments coalesced by the kernel, `batch.rs`).
+                Ok(()) => {
+                    for (from, bytes) in received.datagrams() {
+                        let Ok(d) = Datagram::decode(bytes) else {
+                            UdpStats::add(&stats.malformed, 1);
+                            continue;
+                        };
+                        if d.kind == Kind::Hello {
+                            if !stopping {
+                                hello(&d, bytes.len(), from, &socket, &shared, &stats, &mut sessions, &mut connections, &ended_tx).await;
+                            }
                             continue;
                         }
-                        hello(&d, n, from, &socket, &shared, &stats, &mut sessions, &mut connections, &ended_tx).await;
-                        continue;
-                    }
-                    match sessions.by_id.get(&d.session) {
-                        Some(e) if e.addr == from && d.kind != Kind::HelloAck => e.inbox.push(bytes),
-                        _ => UdpStats::add(&stats.spoofed, 1),
+                        match sessions.by_id.get(&d.session) {
+                            Some(e) if e.addr == from && d.kind != Kind::HelloAck => e.inbox.push(bytes),
+                            _ => UdpStats::add(&stats.spoofed, 1),
+                        }
                     }
                 }
                 // An ICMP error for an earlier send (a client gone); the socket itself is fine.
@@ -119,7 +120,7 @@ async fn hello(
     d: &Datagram<'_>,
     len: usize,
     from: SocketAddr,
-    socket: &Arc<UdpSocket>,
+    socket: &Arc<BatchSocket>,
     shared: &Arc<Shared>,
     stats: &Arc<UdpStats>,
     sessions: &mut Sessions,
@@ -131,6 +132,7 @@ async fn hello(
         if sessions.by_id.get(&id).is_some_and(|e| e.nonce == nonce) {
             // Our answer was lost: the same session again.
             let _ = socket
+                .socket()
                 .send_to(&Datagram::bare(Kind::HelloAck, id, nonce).to_vec(), from)
                 .await;
             return;
@@ -175,7 +177,7 @@ async fn hello(
         serve_connection(transport, shared, false, stranger).await;
         let _ = ended.send(id);
     });
-    let _ = socket.send_to(&ack, from).await;
+    let _ = socket.socket().send_to(&ack, from).await;
 }
 
 /// The edge's counters, read at each scrape.
@@ -230,7 +232,7 @@ impl Collector for UdpCollector {
             ),
             (
                 "flow_udp_send_calls",
-                "System calls that sent them: a burst (a message's fragments) goes out in one sendmmsg",
+                "System calls that sent them: a message's fragments go out in one segmented send, other bursts in one sendmmsg",
                 &s.send_calls,
             ),
         ] {

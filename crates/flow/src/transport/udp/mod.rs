@@ -25,6 +25,7 @@ pub mod datagram;
 pub mod engine;
 mod session;
 
+use batch::BatchSocket;
 use datagram::{Datagram, Kind};
 pub use engine::{DEFAULT_MTU, Engine, Settings, UdpStats};
 use session::{CLOSE_GRACE, Ended, Session, Source};
@@ -97,7 +98,7 @@ impl UdpTransport {
         Ok(UdpTransport {
             session: Arc::new(Session::new(
                 Engine::client(session, settings, stats.clone(), Instant::now()),
-                Arc::new(socket),
+                Arc::new(BatchSocket::new(socket)?),
                 None,
                 Source::Socket,
                 stats,
@@ -110,7 +111,7 @@ impl UdpTransport {
     /// [`UdpTransport::inbox`]; `budget` is what it may send before it hears more (the hello's size less the
     /// hello-ack's).
     pub fn accepted(
-        socket: Arc<UdpSocket>,
+        socket: Arc<BatchSocket>,
         peer: SocketAddr,
         session: u32,
         budget: usize,
@@ -342,54 +343,65 @@ mod tests {
 
     /// A one-session hub end on a real socket: answers the first hello and feeds the session its datagrams.
     async fn one_session_hub() -> (SocketAddr, tokio::sync::oneshot::Receiver<UdpTransport>) {
-        let socket = Arc::new(UdpSocket::bind("127.0.0.1:0").await.expect("bind"));
-        let addr = socket.local_addr().expect("addr");
+        let socket = Arc::new(
+            BatchSocket::new(UdpSocket::bind("127.0.0.1:0").await.expect("bind")).expect("batches"),
+        );
+        let addr = socket.socket().local_addr().expect("addr");
         let (give, take) = tokio::sync::oneshot::channel();
         tokio::spawn(async move {
             let mut give = Some(give);
             let mut inbound: Option<(SocketAddr, Inbox)> = None;
-            let mut buf = vec![0u8; 65536];
-            while let Ok((n, from)) = socket.recv_from(&mut buf).await {
-                let Ok(d) = Datagram::decode(&buf[..n]) else {
-                    continue;
-                };
-                if d.kind == Kind::Hello {
-                    let ack = Datagram::bare(Kind::HelloAck, 77, d.session).to_vec();
-                    let t = UdpTransport::accepted(
-                        socket.clone(),
-                        from,
-                        77,
-                        n - ack.len(),
-                        Arc::default(),
-                    );
-                    if let Some(give) = give.take() {
-                        inbound = Some((from, t.inbox()));
-                        let _ = give.send(t);
+            let mut received = batch::Received::default();
+            while socket.recv(&mut received).await.is_ok() {
+                for (from, bytes) in received.datagrams() {
+                    let Ok(d) = Datagram::decode(bytes) else {
+                        continue;
+                    };
+                    if d.kind == Kind::Hello {
+                        let ack = Datagram::bare(Kind::HelloAck, 77, d.session).to_vec();
+                        let t = UdpTransport::accepted(
+                            socket.clone(),
+                            from,
+                            77,
+                            bytes.len() - ack.len(),
+                            Arc::default(),
+                        );
+                        if let Some(give) = give.take() {
+                            inbound = Some((from, t.inbox()));
+                            let _ = give.send(t);
+                        }
+                        let _ = socket.socket().send_to(&ack, from).await;
+                    } else if let Some((peer, inbox)) = &inbound
+                        && *peer == from
+                    {
+                        inbox.push(bytes);
                     }
-                    let _ = socket.send_to(&ack, from).await;
-                } else if let Some((peer, inbox)) = &inbound
-                    && *peer == from
-                {
-                    inbox.push(&buf[..n]);
                 }
             }
         });
         (addr, take)
     }
 
-    #[tokio::test]
-    async fn frames_cross_a_real_socket_whole_both_ways_and_a_close_ends_the_peer() {
+    /// A client connected to [`one_session_hub`], both ends split, after the client's login reached the hub's end
+    /// (before login the hub's end may not answer more than it heard). Returns the hub's reader and writer, then
+    /// the client's.
+    async fn logged_in_pair() -> (UdpReader, UdpWriter, UdpReader, UdpWriter) {
         let (addr, hub) = one_session_hub().await;
         let client = UdpTransport::connect(&addr.to_string())
             .await
             .expect("connect");
         let hub = hub.await.expect("session");
-        let (mut hub_r, mut hub_w) = hub.split();
-        let (mut cli_r, mut cli_w) = client.split();
-        // Before login the hub's end could not answer more than it heard: log in first.
+        let (mut hub_r, hub_w) = hub.split();
+        let (cli_r, mut cli_w) = client.split();
         let login = frame(op::LOGIN, 1, 60);
         cli_w.write_all(&login).await.expect("write");
         assert_eq!(read_exactly(&mut hub_r, login.len()).await, login);
+        (hub_r, hub_w, cli_r, cli_w)
+    }
+
+    #[tokio::test]
+    async fn frames_cross_a_real_socket_whole_both_ways_and_a_close_ends_the_peer() {
+        let (mut hub_r, mut hub_w, mut cli_r, mut cli_w) = logged_in_pair().await;
         let ok = frame(op::REPLY, 1, 1);
         hub_w.write_all(&ok).await.expect("write");
         assert_eq!(read_exactly(&mut cli_r, ok.len()).await, ok);
@@ -414,16 +426,7 @@ mod tests {
     /// than the window holds go out (acknowledgements free it), arrive in order, and the close still ends the peer.
     #[tokio::test]
     async fn a_session_whose_reader_is_never_read_still_sends_more_than_a_window_and_closes() {
-        let (addr, hub) = one_session_hub().await;
-        let client = UdpTransport::connect(&addr.to_string())
-            .await
-            .expect("connect");
-        let hub = hub.await.expect("session");
-        let (mut hub_r, _hub_w) = hub.split();
-        let (_cli_r, mut cli_w) = client.split();
-        let login = frame(op::LOGIN, 1, 60);
-        cli_w.write_all(&login).await.expect("write");
-        assert_eq!(read_exactly(&mut hub_r, login.len()).await, login);
+        let (mut hub_r, _hub_w, _cli_r, mut cli_w) = logged_in_pair().await;
         // Twice the window of calls, each its own write, while the hub's end is read on a task of its own.
         let calls: Vec<Vec<u8>> = (0..2 * Settings::default().window as u32)
             .map(|i| frame(op::CALL, i + 2, 100))

@@ -14,19 +14,18 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use bytes::Bytes;
-use tokio::net::UdpSocket;
 use tokio::sync::Notify;
 use tokio::time::Instant;
 
-use super::batch;
+use super::batch::{self, BatchSocket, Received};
 use super::datagram::{Datagram, Kind};
 use super::engine::{Engine, UdpStats};
 
 /// Frames delivered and not yet read before the session stops taking datagrams (they wait in the socket, or on
 /// the hub are dropped and counted; the sender's retransmission covers reliable data).
 pub const DELIVERED_BACKLOG: usize = 256;
-/// Datagrams taken from the socket at once, before one acknowledgement answers them all.
-const RECEIVE_BURST: usize = 64;
+/// Receives (each of several datagrams) taken from the socket at once, before one acknowledgement answers them all.
+const RECEIVE_BURST: usize = 16;
 /// How long a closing writer waits for its reliable data to be acknowledged.
 pub(super) const CLOSE_GRACE: Duration = Duration::from_secs(2);
 
@@ -43,7 +42,7 @@ pub(super) enum Source {
 #[derive(Debug)]
 pub(super) struct Session {
     engine: Mutex<Engine>,
-    socket: Arc<UdpSocket>,
+    socket: Arc<BatchSocket>,
     /// The peer's address when the socket is shared (the hub); `None` on a client's connected socket.
     to: Option<SocketAddr>,
     source: Source,
@@ -77,7 +76,7 @@ pub(super) enum Ended {
 impl Session {
     pub(super) fn new(
         engine: Engine,
-        socket: Arc<UdpSocket>,
+        socket: Arc<BatchSocket>,
         to: Option<SocketAddr>,
         source: Source,
         stats: Arc<UdpStats>,
@@ -175,7 +174,7 @@ impl Session {
 
     /// Sends `datagrams` in as few system calls as the kernel takes (`batch.rs`).
     async fn send(&self, datagrams: &[impl AsRef<[u8]>]) {
-        match batch::send_all(&self.socket, self.to, datagrams).await {
+        match self.socket.send_all(self.to, datagrams).await {
             Ok(sent) => batch::count(sent, &self.stats.sent, &self.stats.send_calls),
             // A connected socket hears of a closed port: nobody listens there any more.
             Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => {
@@ -205,20 +204,20 @@ impl Session {
     /// socket, sends what is due, and closes the session once the writer is done (after its reliable data is
     /// acknowledged, for at most [`CLOSE_GRACE`]).
     pub(super) async fn keep(self: Arc<Self>) {
-        let mut buf = vec![0u8; 65536];
+        let mut received = Received::default();
         let mut closing_since: Option<Instant> = None;
         loop {
             if lock(&self.failure).is_some() {
                 return;
             }
             let now = Instant::now();
-            let (deadline, may_receive, acknowledged, peer_closed) = {
+            let (deadline, waiting, acknowledged, peer_closed) = {
                 let engine = self.engine();
                 let deadline = engine.deadline();
                 *lock(&self.armed) = Some(deadline);
                 (
                     deadline,
-                    engine.frames_waiting() < DELIVERED_BACKLOG,
+                    engine.frames_waiting(),
                     engine.all_acknowledged(),
                     engine.peer_closed(),
                 )
@@ -237,9 +236,7 @@ impl Session {
                     return;
                 }
             }
-            if peer_closed
-                && (self.engine().frames_waiting() == 0 || self.reader_gone.load(Ordering::Acquire))
-            {
+            if peer_closed && (waiting == 0 || self.reader_gone.load(Ordering::Acquire)) {
                 self.wake_all();
                 return;
             }
@@ -247,14 +244,14 @@ impl Session {
                 Some(_) => deadline.min(now + Duration::from_millis(50)),
                 None => deadline,
             };
-            let receive = self.source == Source::Socket && may_receive;
+            let receive = self.source == Source::Socket && waiting < DELIVERED_BACKLOG;
             tokio::select! {
-                got = self.socket.recv(&mut buf), if receive => match got {
-                    Ok(n) => {
-                        let mut news = self.take(&buf[..n]);
+                got = self.socket.recv(&mut received), if receive => match got {
+                    Ok(()) => {
+                        let mut news = self.take_all(&received);
                         for _ in 1..RECEIVE_BURST {
-                            match self.socket.try_recv(&mut buf) {
-                                Ok(n) => news |= self.take(&buf[..n]),
+                            match self.socket.try_recv(&mut received) {
+                                Ok(()) => news |= self.take_all(&received),
                                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
                                 Err(e) => {
                                     self.fail(format!("udp: {e}"));
@@ -280,12 +277,24 @@ impl Session {
         }
     }
 
-    /// Takes one received datagram into the engine; returns whether a half has something to do now: frames to
-    /// read, acknowledgements that freed the window, a goodbye, or something to send.
-    fn take(&self, bytes: &[u8]) -> bool {
-        let (taken, news) = {
+    /// Takes the datagrams of a client socket's receive into the engine; returns whether a half has something to do.
+    fn take_all(&self, received: &Received) -> bool {
+        received.datagrams().fold(false, |news, (_, d)| {
+            self.take(d, Source::Socket).news | news
+        })
+    }
+
+    /// Takes one received datagram into the engine, all under one hold of its lock, and says what it asks of the
+    /// session's tasks. A datagram `Pushed` by the hub's edge is dropped and counted when the reader has fallen
+    /// [`DELIVERED_BACKLOG`] frames behind (a client's keeper stops reading its socket instead).
+    fn take(&self, bytes: &[u8], source: Source) -> Taken {
+        let (taken, outcome) = {
             let mut engine = self.engine();
             let before = (engine.frames_waiting(), engine.unacknowledged());
+            if source == Source::Pushed && before.0 >= DELIVERED_BACKLOG {
+                UdpStats::add(&self.stats.dropped, 1);
+                return Taken::default();
+            }
             let taken = match Datagram::decode(bytes) {
                 Err(_) => {
                     UdpStats::add(&self.stats.malformed, 1);
@@ -303,17 +312,37 @@ impl Session {
             if self.reader_gone.load(Ordering::Acquire) {
                 while engine.poll_frame().is_some() {}
             }
-            let news = engine.frames_waiting() > before.0
-                || engine.unacknowledged() < before.1
-                || engine.has_output()
-                || engine.peer_closed();
-            (taken, news)
+            let peer_closed = engine.peer_closed();
+            let outcome = Taken {
+                news: engine.frames_waiting() > before.0
+                    || engine.unacknowledged() < before.1
+                    || engine.has_output()
+                    || peer_closed,
+                peer_closed,
+                // Read under the engine's lock, under which the keeper sets what it sleeps until (`rearm`). A
+                // client's keeper took the datagram itself and looks again before it sleeps.
+                sooner: source == Source::Pushed
+                    && lock(&self.armed).is_some_and(|armed| engine.deadline() < armed),
+            };
+            (taken, outcome)
         };
         if let Err(why) = taken {
             self.fail(why);
         }
-        news
+        outcome
     }
+}
+
+/// What one datagram taken into the engine asks of the session's tasks.
+#[derive(Debug, Default, Clone, Copy)]
+struct Taken {
+    /// A half has something to do now: frames to read, acknowledgements that freed the window, a goodbye, or
+    /// something to send.
+    news: bool,
+    /// The peer said goodbye: the keeper ends too.
+    peer_closed: bool,
+    /// The engine's next deadline moved before the one the keeper sleeps until.
+    sooner: bool,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -331,21 +360,16 @@ impl Inbox {
     /// when there is something to do; the datagram is dropped and counted when the reader has fallen
     /// [`DELIVERED_BACKLOG`] frames behind.
     pub fn push(&self, bytes: &[u8]) {
-        if self.session.engine().frames_waiting() >= DELIVERED_BACKLOG {
-            UdpStats::add(&self.session.stats.dropped, 1);
-            return;
-        }
+        let taken = self.session.take(bytes, Source::Pushed);
         // A fragment of a frame still incomplete wakes no half: a 52 KB picture is 44 datagrams and one wake-up.
-        if self.session.take(bytes) {
+        if taken.news {
             self.session.changed.notify_waiters();
-            // A goodbye ends the keeper too.
-            if self.session.engine().peer_closed() {
-                self.session.keeper.notify_one();
-            }
         }
-        // It may bring the keeper's work forward: a frame begun and not finished asks for its missing fragments
-        // after `nack_delay`.
-        self.session.rearm();
+        // A goodbye ends the keeper too; a frame begun asks for its missing fragments after `nack_delay`, which
+        // may be sooner than the keeper sleeps until.
+        if taken.peer_closed || taken.sooner {
+            self.session.keeper.notify_one();
+        }
     }
 
     /// Ends the session: the edge no longer routes its datagrams (a new session from the same address replaced it).
