@@ -110,8 +110,9 @@ async fn a_satellite_over_udp_publishes_to_a_tcp_subscriber_and_hears_a_tcp_publ
 }
 
 /// Pictures sent to a UDP subscriber leave the hub a burst at a time: each 60 kB frame's fragments go out in one
-/// `sendmmsg`, so the hub makes several times fewer send calls than it sends datagrams, and every frame arrives
-/// whole and in order.
+/// call (a segmented send, or `sendmmsg`), so the hub makes several times fewer send calls than it sends datagrams,
+/// and every frame arrives whole and in order. Pictures a UDP publisher sends arrive at the hub in batches too: its
+/// edge makes several times fewer receive calls than it receives datagrams.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_burst_of_pictures_to_a_udp_subscriber_leaves_in_batched_calls_and_arrives_whole_in_order()
 -> anyhow::Result<()> {
@@ -146,6 +147,33 @@ async fn a_burst_of_pictures_to_a_udp_subscriber_leaves_in_batched_calls_and_arr
     ensure!(
         calls * 4.0 <= sent,
         "{calls} send calls for {sent} datagrams: not batched"
+    );
+
+    // The other way: the satellite publishes pictures over UDP to a TCP subscriber.
+    let back = satellite
+        .publisher("Udp.back", r#"{"mime":"image/jpeg"}"#)
+        .await?;
+    let back_sub = camera.subscribe("Udp.back").await?;
+    let mut active = back.subscribers();
+    tokio::time::timeout(PATIENCE, active.wait_for(|&a| a))
+        .await
+        .context("the TCP subscription never reached the UDP publisher")??;
+    let received_before = metric(&hub, "flow_udp_received_datagrams_total").await?;
+    let receives_before = metric(&hub, "flow_udp_receive_calls_total").await?;
+    for seq in 0..20u32 {
+        back.publish(payload(seq, 60_000)).await?;
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    for expected in 0..20u32 {
+        assert_eq!(check(&next(&back_sub).await?)?, expected);
+    }
+    let received = metric(&hub, "flow_udp_received_datagrams_total").await? - received_before;
+    let receives = metric(&hub, "flow_udp_receive_calls_total").await? - receives_before;
+    println!("the hub sent {sent} datagrams in {calls} calls, received {received} in {receives}");
+    ensure!(received >= 20.0 * 40.0, "{received} datagrams received");
+    ensure!(
+        receives * 4.0 <= received,
+        "{receives} receive calls for {received} datagrams: not batched"
     );
     ensure!(metric(&hub, "flow_udp_lost_messages_total").await? == 0.0);
     satellite.close_and_wait(Duration::from_secs(5)).await;

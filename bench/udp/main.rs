@@ -517,6 +517,16 @@ async fn main() -> anyhow::Result<()> {
     );
 
     let tcp = run_bounded(&hub, &hub.tcp(), Link::Tcp, &payloads, &args).await;
+    let calls = [
+        "flow_udp_sent_datagrams_total",
+        "flow_udp_send_calls_total",
+        "flow_udp_received_datagrams_total",
+        "flow_udp_receive_calls_total",
+    ];
+    let mut calls_before = [0.0; 4];
+    for (value, name) in calls_before.iter_mut().zip(calls) {
+        *value = counter(&hub, name).await;
+    }
     let direct = run_bounded(
         &hub,
         &FlowAddr::Udp(udp.to_string()),
@@ -525,6 +535,19 @@ async fn main() -> anyhow::Result<()> {
         &args,
     )
     .await;
+    let mut calls_after = [0.0; 4];
+    for (value, name) in calls_after.iter_mut().zip(calls) {
+        *value = counter(&hub, name).await;
+    }
+    let d: Vec<f64> = calls_after
+        .iter()
+        .zip(calls_before)
+        .map(|(a, b)| a - b)
+        .collect();
+    println!(
+        "hub during the direct UDP run: sent {} datagrams in {} calls, received {} in {} calls",
+        d[0], d[1], d[2], d[3]
+    );
     let before = udp_counters(&hub).await;
     let lossy = run_bounded(
         &hub,

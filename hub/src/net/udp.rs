@@ -84,6 +84,7 @@ pub async fn serve(socket: BatchSocket, shared: Arc<Shared>) {
             got = socket.recv(&mut received) => match got {
                 // A receive holds several datagrams (a picture's fragments coalesced by the kernel, `batch.rs`).
                 Ok(()) => {
+                    received.count(&stats.received, &stats.receive_calls);
                     for (from, bytes) in received.datagrams() {
                         let Ok(d) = Datagram::decode(bytes) else {
                             UdpStats::add(&stats.malformed, 1);
@@ -234,6 +235,16 @@ impl Collector for UdpCollector {
                 "flow_udp_send_calls",
                 "System calls that sent them: a message's fragments go out in one segmented send, other bursts in one sendmmsg",
                 &s.send_calls,
+            ),
+            (
+                "flow_udp_received_datagrams",
+                "UDP datagrams the hub's edge received",
+                &s.received,
+            ),
+            (
+                "flow_udp_receive_calls",
+                "System calls that received them: recvmmsg, with the kernel coalescing a segmented send into one buffer",
+                &s.receive_calls,
             ),
         ] {
             ConstCounter::new(UdpStats::get(counter)).encode(encoder.encode_descriptor(

@@ -233,6 +233,12 @@ impl Default for Received {
 }
 
 impl Received {
+    /// Adds the last receive to `datagrams` and `calls`.
+    pub fn count(&self, datagrams: &AtomicU64, calls: &AtomicU64) {
+        datagrams.fetch_add(self.datagrams().count() as u64, Ordering::Relaxed);
+        calls.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// The datagrams of the last receive, in order, with their sources.
     pub fn datagrams(&self) -> impl Iterator<Item = (SocketAddr, &[u8])> {
         self.buffers

@@ -111,8 +111,12 @@ pub struct UdpStats {
     pub sessions: AtomicU64,
     /// Datagrams sent (every session's, retransmissions included).
     pub sent: AtomicU64,
-    /// System calls that sent them (`sendmmsg` takes a burst at once: `batch.rs`).
+    /// System calls that sent them (a segmented send or a `sendmmsg` takes a burst at once: `batch.rs`).
     pub send_calls: AtomicU64,
+    /// Datagrams received from the socket (the hub's edge, a client's link).
+    pub received: AtomicU64,
+    /// System calls that received them (`recvmmsg`, with the kernel's coalescing: `batch.rs`).
+    pub receive_calls: AtomicU64,
 }
 
 impl UdpStats {

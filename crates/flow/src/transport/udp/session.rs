@@ -279,6 +279,7 @@ impl Session {
 
     /// Takes the datagrams of a client socket's receive into the engine; returns whether a half has something to do.
     fn take_all(&self, received: &Received) -> bool {
+        received.count(&self.stats.received, &self.stats.receive_calls);
         received.datagrams().fold(false, |news, (_, d)| {
             self.take(d, Source::Socket).news | news
         })
