@@ -175,6 +175,7 @@ impl Transport for UdpTransport {
         (
             UdpReader {
                 session: self.session.clone(),
+                received: None,
             },
             UdpWriter {
                 session: self.session,
@@ -188,6 +189,8 @@ impl Transport for UdpTransport {
 #[derive(Debug)]
 pub struct UdpReader {
     session: Arc<Session>,
+    /// A client's receive buffers, made at its first wait on the socket.
+    received: Option<Box<batch::Received>>,
 }
 
 impl TransportRead for UdpReader {
@@ -224,6 +227,15 @@ impl TransportRead for UdpReader {
                 Some(Ended::Closed) => return Ok(0),
                 Some(Ended::Failed(why)) => {
                     return Err(io::Error::new(io::ErrorKind::ConnectionAborted, why));
+                }
+                None if s.source() == Source::Socket => {
+                    // The frame comes through this task: the reader reads the socket while it waits.
+                    let received = self.received.get_or_insert_with(Box::default);
+                    let _listening = s.listen();
+                    tokio::select! {
+                        () = change => {}
+                        () = s.receive(received) => {}
+                    }
                 }
                 None => change.await,
             }

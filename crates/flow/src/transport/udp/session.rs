@@ -3,8 +3,11 @@
 //! The writer puts its frames into the engine and sends the burst itself. The reader takes frames straight out of
 //! the engine. On the hub the edge's demultiplexer puts each datagram into the engine ([`Inbox`]) and wakes the
 //! reader only when there is something to read or send: a frame goes from the socket to the connection with one
-//! wake-up. The keeper task ([`Session::keep`]) fires the engine's timers (retransmission, missing fragments asked
-//! for, keepalive, the idle end), reads a client's socket, and closes the session gracefully once the writer is done.
+//! wake-up. On a client the reader waiting for a frame reads the socket itself ([`Session::receive`]), so a frame
+//! reaches it with no wake-up between tasks. The keeper task ([`Session::keep`]) fires the engine's timers
+//! (retransmission, missing fragments asked for, keepalive, the idle end), reads a client's socket while the reader
+//! does not (acknowledgements for the writer while the application is busy), and closes the session gracefully once
+//! the writer is done.
 //! The engine's lock (`std::sync::Mutex`) is never held across an `await`.
 
 use std::io;
@@ -32,10 +35,21 @@ pub(super) const CLOSE_GRACE: Duration = Duration::from_secs(2);
 /// Where a session's datagrams come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Source {
-    /// A client's connected socket, read by the keeper.
+    /// A client's connected socket, read by the reader while it waits for a frame, else by the keeper.
     Socket,
     /// The hub's demultiplexer, which checked the session id and the address and puts them in ([`Inbox`]).
     Pushed,
+}
+
+/// Who takes a datagram into the engine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Taker {
+    /// The hub's demultiplexer, through [`Inbox`].
+    Edge,
+    /// A client's keeper, reading the socket while the reader does not.
+    Keeper,
+    /// A client's reader, reading the socket itself while it waits for a frame.
+    Reader,
 }
 
 /// One session's state.
@@ -63,6 +77,9 @@ pub(super) struct Session {
     closed: AtomicBool,
     /// The reader is gone: frames delivered from now on are dropped.
     reader_gone: AtomicBool,
+    /// A client's reader waits on the socket itself: the keeper leaves the socket to it, so that a frame goes from
+    /// the socket to the reader without a hand-over between tasks.
+    listening: AtomicBool,
 }
 
 /// How a session ended, as its halves see it.
@@ -95,6 +112,35 @@ impl Session {
             closing: AtomicBool::new(false),
             closed: AtomicBool::new(false),
             reader_gone: AtomicBool::new(false),
+            listening: AtomicBool::new(false),
+        }
+    }
+
+    pub(super) fn source(&self) -> Source {
+        self.source
+    }
+
+    /// The reader waits on a client's socket until the returned guard is dropped (a frame came, or the read was
+    /// given up): the keeper reads it again from then on.
+    pub(super) fn listen(&self) -> Listening<'_> {
+        self.listening.store(true, Ordering::Release);
+        Listening { session: self }
+    }
+
+    /// Waits for datagrams on a client's socket and takes them into the engine, as the reader (cancel-safe: nothing
+    /// is taken before the socket has data).
+    pub(super) async fn receive(&self, received: &mut Received) {
+        match self.socket.recv(received).await {
+            Ok(()) => {
+                let taken = self.take_all(received, Taker::Reader);
+                if taken.news {
+                    self.changed.notify_waiters();
+                }
+                if taken.peer_closed || taken.sooner {
+                    self.keeper.notify_one();
+                }
+            }
+            Err(e) => self.fail(format!("udp: {e}")),
         }
     }
 
@@ -244,14 +290,16 @@ impl Session {
                 Some(_) => deadline.min(now + Duration::from_millis(50)),
                 None => deadline,
             };
-            let receive = self.source == Source::Socket && waiting < DELIVERED_BACKLOG;
+            let receive = self.source == Source::Socket
+                && waiting < DELIVERED_BACKLOG
+                && !self.listening.load(Ordering::Acquire);
             tokio::select! {
                 got = self.socket.recv(&mut received), if receive => match got {
                     Ok(()) => {
-                        let mut news = self.take_all(&received);
+                        let mut news = self.take_all(&received, Taker::Keeper).news;
                         for _ in 1..RECEIVE_BURST {
                             match self.socket.try_recv(&mut received) {
-                                Ok(()) => news |= self.take_all(&received),
+                                Ok(()) => news |= self.take_all(&received, Taker::Keeper).news,
                                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
                                 Err(e) => {
                                     self.fail(format!("udp: {e}"));
@@ -277,22 +325,22 @@ impl Session {
         }
     }
 
-    /// Takes the datagrams of a client socket's receive into the engine; returns whether a half has something to do.
-    fn take_all(&self, received: &Received) -> bool {
+    /// Takes the datagrams of a client socket's receive into the engine; says what they ask of the tasks.
+    fn take_all(&self, received: &Received, taker: Taker) -> Taken {
         received.count(&self.stats.received, &self.stats.receive_calls);
-        received.datagrams().fold(false, |news, (_, d)| {
-            self.take(d, Source::Socket).news | news
-        })
+        received
+            .datagrams()
+            .fold(Taken::default(), |all, (_, d)| all.and(self.take(d, taker)))
     }
 
     /// Takes one received datagram into the engine, all under one hold of its lock, and says what it asks of the
     /// session's tasks. A datagram `Pushed` by the hub's edge is dropped and counted when the reader has fallen
     /// [`DELIVERED_BACKLOG`] frames behind (a client's keeper stops reading its socket instead).
-    fn take(&self, bytes: &[u8], source: Source) -> Taken {
+    fn take(&self, bytes: &[u8], taker: Taker) -> Taken {
         let (taken, outcome) = {
             let mut engine = self.engine();
             let before = (engine.frames_waiting(), engine.unacknowledged());
-            if source == Source::Pushed && before.0 >= DELIVERED_BACKLOG {
+            if taker == Taker::Edge && before.0 >= DELIVERED_BACKLOG {
                 UdpStats::add(&self.stats.dropped, 1);
                 return Taken::default();
             }
@@ -322,7 +370,7 @@ impl Session {
                 peer_closed,
                 // Read under the engine's lock, under which the keeper sets what it sleeps until (`rearm`). A
                 // client's keeper took the datagram itself and looks again before it sleeps.
-                sooner: source == Source::Pushed
+                sooner: taker != Taker::Keeper
                     && lock(&self.armed).is_some_and(|armed| engine.deadline() < armed),
             };
             (taken, outcome)
@@ -331,6 +379,18 @@ impl Session {
             self.fail(why);
         }
         outcome
+    }
+}
+
+/// The reader's wait on a client's socket; dropped, it hands the socket back to the keeper.
+pub(super) struct Listening<'a> {
+    session: &'a Session,
+}
+
+impl Drop for Listening<'_> {
+    fn drop(&mut self) {
+        self.session.listening.store(false, Ordering::Release);
+        self.session.keeper.notify_one();
     }
 }
 
@@ -344,6 +404,17 @@ struct Taken {
     peer_closed: bool,
     /// The engine's next deadline moved before the one the keeper sleeps until.
     sooner: bool,
+}
+
+impl Taken {
+    /// What two datagrams ask, together.
+    fn and(self, other: Taken) -> Taken {
+        Taken {
+            news: self.news || other.news,
+            peer_closed: self.peer_closed || other.peer_closed,
+            sooner: self.sooner || other.sooner,
+        }
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -361,7 +432,7 @@ impl Inbox {
     /// when there is something to do; the datagram is dropped and counted when the reader has fallen
     /// [`DELIVERED_BACKLOG`] frames behind.
     pub fn push(&self, bytes: &[u8]) {
-        let taken = self.session.take(bytes, Source::Pushed);
+        let taken = self.session.take(bytes, Taker::Edge);
         // A fragment of a frame still incomplete wakes no half: a 52 KB picture is 44 datagrams and one wake-up.
         if taken.news {
             self.session.changed.notify_waiters();
