@@ -109,6 +109,22 @@ async fn a_satellite_over_udp_publishes_to_a_tcp_subscriber_and_hears_a_tcp_publ
     Ok(())
 }
 
+/// A picture channel `name` published by `from` and subscribed to by `to`, once the publisher knows of the
+/// subscriber (what it publishes next reaches it).
+async fn pictures(
+    from: &Client,
+    to: &Client,
+    name: &str,
+) -> anyhow::Result<(flow::Publisher, Subscription)> {
+    let publisher = from.publisher(name, r#"{"mime":"image/jpeg"}"#).await?;
+    let sub = to.subscribe(name).await?;
+    let mut active = publisher.subscribers();
+    tokio::time::timeout(PATIENCE, active.wait_for(|&a| a))
+        .await
+        .with_context(|| format!("the subscription to {name} never reached its publisher"))??;
+    Ok((publisher, sub))
+}
+
 /// Pictures sent to a UDP subscriber leave the hub a burst at a time: each 60 kB frame's fragments go out in one
 /// call (a segmented send, or `sendmmsg`), so the hub makes several times fewer send calls than it sends datagrams,
 /// and every frame arrives whole and in order. Pictures a UDP publisher sends arrive at the hub in batches too: its
@@ -120,14 +136,7 @@ async fn a_burst_of_pictures_to_a_udp_subscriber_leaves_in_batched_calls_and_arr
     let (hub, udp) = hub_with_udp(&dir, "").await?;
     let satellite = udp_client(&hub, udp, "udp-eyes").await?;
     let camera = hub.client("camera").await?;
-    let publisher = camera
-        .publisher("Udp.pictures", r#"{"mime":"image/jpeg"}"#)
-        .await?;
-    let sub = satellite.subscribe("Udp.pictures").await?;
-    let mut active = publisher.subscribers();
-    tokio::time::timeout(PATIENCE, active.wait_for(|&a| a))
-        .await
-        .context("the UDP subscription never reached the publisher")??;
+    let (publisher, sub) = pictures(&camera, &satellite, "Udp.pictures").await?;
     let sent_before = metric(&hub, "flow_udp_sent_datagrams_total").await?;
     let calls_before = metric(&hub, "flow_udp_send_calls_total").await?;
     for seq in 0..20u32 {
@@ -150,14 +159,7 @@ async fn a_burst_of_pictures_to_a_udp_subscriber_leaves_in_batched_calls_and_arr
     );
 
     // The other way: the satellite publishes pictures over UDP to a TCP subscriber.
-    let back = satellite
-        .publisher("Udp.back", r#"{"mime":"image/jpeg"}"#)
-        .await?;
-    let back_sub = camera.subscribe("Udp.back").await?;
-    let mut active = back.subscribers();
-    tokio::time::timeout(PATIENCE, active.wait_for(|&a| a))
-        .await
-        .context("the TCP subscription never reached the UDP publisher")??;
+    let (back, back_sub) = pictures(&satellite, &camera, "Udp.back").await?;
     let received_before = metric(&hub, "flow_udp_received_datagrams_total").await?;
     let receives_before = metric(&hub, "flow_udp_receive_calls_total").await?;
     for seq in 0..20u32 {

@@ -27,7 +27,7 @@ pub const MAX_BATCH: usize = 64;
 /// The most bytes one segmented send carries: an IP packet's limit, less its headers.
 const MAX_SEGMENTED: usize = 65_000;
 /// Receive buffers per `recvmmsg`, each large enough for the most a coalesced receive holds (64 KiB).
-const RECEIVE_BUFFERS: usize = 4;
+pub const RECEIVE_BUFFERS: usize = 4;
 const RECEIVE_BUFFER: usize = 64 * 1024;
 
 /// What sending a burst cost.
@@ -224,15 +224,20 @@ pub struct Received {
 
 impl Default for Received {
     fn default() -> Self {
-        Received {
-            buffers: vec![vec![0u8; RECEIVE_BUFFER]; RECEIVE_BUFFERS],
-            meta: vec![RecvMeta::default(); RECEIVE_BUFFERS],
-            filled: 0,
-        }
+        Received::with_buffers(RECEIVE_BUFFERS)
     }
 }
 
 impl Received {
+    /// `buffers` receive buffers of 64 KiB (0 for a session that never reads a socket).
+    pub fn with_buffers(buffers: usize) -> Self {
+        Received {
+            buffers: vec![vec![0u8; RECEIVE_BUFFER]; buffers],
+            meta: vec![RecvMeta::default(); buffers],
+            filled: 0,
+        }
+    }
+
     /// Adds the last receive to `datagrams` and `calls`.
     pub fn count(&self, datagrams: &AtomicU64, calls: &AtomicU64) {
         datagrams.fetch_add(self.datagrams().count() as u64, Ordering::Relaxed);

@@ -131,15 +131,7 @@ impl Session {
     /// is taken before the socket has data).
     pub(super) async fn receive(&self, received: &mut Received) {
         match self.socket.recv(received).await {
-            Ok(()) => {
-                let taken = self.take_all(received, Taker::Reader);
-                if taken.news {
-                    self.changed.notify_waiters();
-                }
-                if taken.peer_closed || taken.sooner {
-                    self.keeper.notify_one();
-                }
-            }
+            Ok(()) => self.wake_for(self.take_all(received, Taker::Reader)),
             Err(e) => self.fail(format!("udp: {e}")),
         }
     }
@@ -250,7 +242,11 @@ impl Session {
     /// socket, sends what is due, and closes the session once the writer is done (after its reliable data is
     /// acknowledged, for at most [`CLOSE_GRACE`]).
     pub(super) async fn keep(self: Arc<Self>) {
-        let mut received = Received::default();
+        // The hub's sessions are put their datagrams by the edge: only a client's keeper needs receive buffers.
+        let mut received = Received::with_buffers(match self.source {
+            Source::Socket => batch::RECEIVE_BUFFERS,
+            Source::Pushed => 0,
+        });
         let mut closing_since: Option<Instant> = None;
         loop {
             if lock(&self.failure).is_some() {
@@ -322,6 +318,18 @@ impl Session {
                 }
             }
             self.flush().await;
+        }
+    }
+
+    /// Wakes the tasks that datagrams taken by the edge or the reader ask for. A fragment of a frame still incomplete
+    /// wakes no half (a 52 KB picture is 44 datagrams and one wake-up); a goodbye ends the keeper too, and a frame
+    /// begun asks for its missing fragments after `nack_delay`, which may be sooner than the keeper sleeps until.
+    fn wake_for(&self, taken: Taken) {
+        if taken.news {
+            self.changed.notify_waiters();
+        }
+        if taken.peer_closed || taken.sooner {
+            self.keeper.notify_one();
         }
     }
 
@@ -432,16 +440,7 @@ impl Inbox {
     /// when there is something to do; the datagram is dropped and counted when the reader has fallen
     /// [`DELIVERED_BACKLOG`] frames behind.
     pub fn push(&self, bytes: &[u8]) {
-        let taken = self.session.take(bytes, Taker::Edge);
-        // A fragment of a frame still incomplete wakes no half: a 52 KB picture is 44 datagrams and one wake-up.
-        if taken.news {
-            self.session.changed.notify_waiters();
-        }
-        // A goodbye ends the keeper too; a frame begun asks for its missing fragments after `nack_delay`, which
-        // may be sooner than the keeper sleeps until.
-        if taken.peer_closed || taken.sooner {
-            self.session.keeper.notify_one();
-        }
+        self.session.wake_for(self.session.take(bytes, Taker::Edge));
     }
 
     /// Ends the session: the edge no longer routes its datagrams (a new session from the same address replaced it).
