@@ -18,11 +18,12 @@ use anyhow::{Context, anyhow, bail};
 use bytes::{BufMut, Bytes, BytesMut};
 use flow::protocol::frame::{self, Check};
 use flow::protocol::{
-    ChannelKind, Command, DEFAULT_MAX_FRAME, Envelope, ErrorCode, ErrorReply, Event,
-    PROTOCOL_VERSION, Reply, decode_event, encode_command,
+    ChanRef, ChannelKind, Command, DEFAULT_MAX_FRAME, Envelope, ErrorCode, ErrorReply, Event,
+    PROTOCOL_VERSION, Reply, SlotRef, decode_event, encode_command,
 };
 use flow::shm::fdpass::recv_with_fds;
-use flow::shm::is_shared;
+use flow::shm::ring::{self, Pushed, RingWriter};
+use flow::shm::{Mapping, is_shared};
 use flow::{Client, Publisher, Subscription};
 use rand::seq::SliceRandom;
 use rand::{RngCore, SeedableRng};
@@ -37,6 +38,8 @@ const THRESHOLD: usize = 4096;
 const SETTLE: Duration = Duration::from_secs(60);
 /// What the hub's memfd segments are called in `/proc/PID/maps` and `/proc/PID/fd`.
 const MEMFD: &str = "memfd:flow-shm";
+/// What a subscriber's release ring is called there.
+const RING_MEMFD: &str = "memfd:flow-release";
 
 // ---------------------------------------------------------------- the hub seen from outside
 
@@ -118,6 +121,35 @@ fn hub_memfds(agent: &Agent) -> anyhow::Result<Memfds> {
         }
     }
     Ok(Memfds { maps, fds })
+}
+
+/// The hub's release rings (one per shared-memory subscriber) as open descriptors.
+fn hub_rings(agent: &Agent) -> anyhow::Result<usize> {
+    let pid = agent.pid().context("the hub has exited")?;
+    let mut rings = 0;
+    for entry in std::fs::read_dir(format!("/proc/{pid}/fd"))? {
+        if let Ok(target) = std::fs::read_link(entry?.path())
+            && target.to_string_lossy().contains(RING_MEMFD)
+        {
+            rings += 1;
+        }
+    }
+    Ok(rings)
+}
+
+/// Polls the hub's release rings until there are `expected`.
+async fn until_rings(agent: &Agent, expected: usize) -> anyhow::Result<()> {
+    let deadline = tokio::time::Instant::now() + SETTLE;
+    loop {
+        let now = hub_rings(agent)?;
+        if now == expected {
+            return Ok(());
+        }
+        if tokio::time::Instant::now() > deadline {
+            bail!("the hub holds {now} release rings, expected {expected}");
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
 }
 
 /// Polls the hub's memfd mappings and descriptors until `ok` holds.
@@ -609,6 +641,7 @@ async fn kill_9_of_a_subscriber_process_mid_stream_releases_its_slots_and_the_re
     until_count(&mut live_seen, 20, "the live subscriber").await?;
     let segments_before = metric(&agent, "flow_shm_segments").await?;
     let memfds_before = hub_memfds(&agent)?;
+    let rings_before = hub_rings(&agent)?;
 
     // The victim: flowctl echo over the Unix socket. Stopped, it reads nothing, so what the hub queues for it keeps
     // its slots; then it is killed.
@@ -660,6 +693,8 @@ async fn kill_9_of_a_subscriber_process_mid_stream_releases_its_slots_and_the_re
         m == memfds_before
     })
     .await?;
+    // Its release ring went with it.
+    until_rings(&agent, rings_before).await?;
     check_consumer(live_task).await?;
     drop(publisher);
     Ok(())
@@ -1032,5 +1067,141 @@ async fn a_session_that_did_not_log_in_cannot_get_a_segment() -> anyhow::Result<
     until_metric(&agent, "flow_shm_segments", "0", |v| v == 0.0).await?;
     until_memfds(&agent, "none", |m| m.total() == 0).await?;
     drop(theirs);
+    Ok(())
+}
+
+#[tokio::test]
+async fn a_subscriber_gives_its_slots_back_through_its_release_ring_and_none_is_left_held()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::hub(&dir).await?;
+    let producer = agent.unix_client("producer").await?;
+    let reader = agent.unix_client("ring-sub").await?;
+    let publisher = producer.publisher("Shm.ring", "{}").await?;
+    let sub = reader.subscribe("Shm.ring").await?;
+    until_subscribed(&publisher).await?;
+    until_by_reference(&publisher, &sub, &[], 64 * 1024).await?;
+    until_rings(&agent, 1).await?;
+
+    // 300 messages, each dropped as it comes: every slot goes back, most of them through the ring. (The stream
+    // numbers its messages from 1 again, past the channel's sequence, so they are not checked against it.)
+    let (mut seen, task) = consume(sub, false);
+    let streamer = stream(publisher, 64 * 1024, Duration::from_millis(1));
+    until_count(&mut seen, 300, "the subscriber").await?;
+    let (publisher, sent) = streamer.finish().await?;
+    until_count(&mut seen, sent, "the subscriber's last message").await?;
+    until_metric(&agent, "flow_shm_slots_held", "0", |v| v == 0.0).await?;
+    let by_ring = metric_with(&agent, "flow_shm_released_total", "via=\"ring\"").await?;
+    let by_frame = metric_with(&agent, "flow_shm_released_total", "via=\"frame\"").await?;
+    println!("{sent} sent: {by_ring} slots given back through the ring, {by_frame} in frames");
+    assert!(
+        by_ring > 0.0,
+        "no slot came back through the ring ({by_frame} in frames)"
+    );
+    check_consumer(task).await?;
+    drop(publisher);
+    // The subscriber's connection ends: its ring goes with it.
+    reader.close_and_wait(PATIENCE).await;
+    until_rings(&agent, 0).await?;
+    Ok(())
+}
+
+/// A raw subscriber on the Unix socket, after `ShmAccept` and `Subscribe` of `chan`.
+async fn raw_subscriber(agent: &Agent, chan: &str) -> anyhow::Result<RawUnix> {
+    let mut raw = RawUnix::login(agent).await?;
+    let accepted = raw.request(Command::ShmAccept).await?;
+    anyhow::ensure!(accepted.is_ok(), "ShmAccept: {accepted:?}");
+    let subscribed = raw
+        .request(Command::Subscribe {
+            chan: ChanRef::Name(chan.into()),
+        })
+        .await?;
+    anyhow::ensure!(subscribed.is_ok(), "Subscribe: {subscribed:?}");
+    Ok(raw)
+}
+
+/// Publishes numbered 64 KB messages one at a time until one reaches `raw` by reference (the SDK sends a channel's
+/// first large message inline while it asks for its segment); that message's ring (from the descriptor beside
+/// `ReleaseRing`) and slot.
+async fn raw_by_reference(
+    publisher: &Publisher,
+    raw: &mut RawUnix,
+) -> anyhow::Result<(OwnedFd, u32, SlotRef)> {
+    let mut ring = None;
+    until("a message by reference", SETTLE, async {
+        for n in 1..=1000 {
+            publisher.publish(numbered(n, 64 * 1024)).await?;
+            loop {
+                match raw.next_event().await? {
+                    Some(Event::ReleaseRing { capacity }) => {
+                        let fd = raw
+                            .fds
+                            .pop_front()
+                            .context("the ring came without its descriptor")?;
+                        ring = Some((fd, capacity));
+                    }
+                    Some(Event::Segment(_)) => {
+                        raw.fds
+                            .pop_front()
+                            .context("a segment came without its descriptor")?;
+                    }
+                    Some(Event::DataRef { slot, .. }) => {
+                        let (fd, capacity) = ring
+                            .take()
+                            .context("a message by reference before the ring")?;
+                        return Ok((fd, capacity, slot));
+                    }
+                    Some(Event::Data { .. }) => break,
+                    Some(_) => {}
+                    None => bail!("the hub closed the connection"),
+                }
+            }
+        }
+        bail!("1000 messages and none came by reference")
+    })
+    .await?
+}
+
+#[tokio::test]
+async fn a_release_written_into_the_ring_frees_the_slot_without_a_frame_and_a_broken_ring_closes_the_connection()
+-> anyhow::Result<()> {
+    let dir = DataDir::new()?;
+    let agent = Agent::hub(&dir).await?;
+    let producer = agent.unix_client("producer").await?;
+    let publisher = producer.publisher("Shm.raw", "{}").await?;
+    let mut raw = raw_subscriber(&agent, "Shm.raw").await?;
+    until_subscribed(&publisher).await?;
+    let (fd, capacity, slot) = raw_by_reference(&publisher, &mut raw).await?;
+    until_metric(&agent, "flow_shm_slots_held", "1", |v| v == 1.0).await?;
+
+    // Written into the ring: the hub frees the slot. If its writer was already idle it asked to be rung, and an
+    // empty Release rings it; otherwise its writer takes the release when it goes idle. Either way no frame names
+    // the slot.
+    let mut ring = RingWriter::open(fd.try_clone()?, capacity)?;
+    if ring.push(slot.segment, slot.slot) == Pushed::Ring {
+        raw.send(Command::Release { slots: Vec::new() }).await?;
+    }
+    until_metric(&agent, "flow_shm_slots_held", "0", |v| v == 0.0).await?;
+    assert_eq!(
+        metric_with(&agent, "flow_shm_released_total", "via=\"ring\"").await?,
+        1.0
+    );
+    assert_eq!(
+        metric_with(&agent, "flow_shm_released_total", "via=\"frame\"").await?,
+        0.0
+    );
+
+    // A head written far past what the hub took is a broken protocol: the connection closes, the hub goes on.
+    let scribble = Mapping::open(fd, ring::ring_len(capacity), true)?;
+    scribble
+        .word(64)
+        .context("the ring's head")?
+        .store(capacity * 3, std::sync::atomic::Ordering::Release);
+    raw.send(Command::Release { slots: Vec::new() }).await?;
+    raw.until_closed().await?;
+    until_rings(&agent, 0).await?;
+    let mut other = raw_subscriber(&agent, "Shm.raw").await?;
+    let after = raw_by_reference(&publisher, &mut other).await?;
+    assert_eq!(after.1, capacity);
     Ok(())
 }

@@ -21,23 +21,26 @@ pub struct FlowRig {
     clients: Vec<Client>,
 }
 
-fn options(name: &str, token: &str) -> ConnectOptions {
+fn options(name: &str, token: &str, ring: bool) -> ConnectOptions {
     let mut opts = ConnectOptions::new(name, token);
     opts.reconnect = false;
+    opts.release_ring = ring;
     // Far above the publisher's window, so that a subscriber's own drop-oldest queue never drops.
     opts.queue = 1024;
     opts
 }
 
-/// Connects a publisher of `channel` and `n` subscribers at `addr`; returns once every subscription is in place.
+/// Connects a publisher of `channel` and `n` subscribers at `addr` (giving slots back through the hub's release ring
+/// if `ring`); returns once every subscription is in place.
 pub async fn connect(
     addr: &FlowAddr,
     token: &str,
     channel: &str,
     n: usize,
+    ring: bool,
     tally: Arc<Tally>,
 ) -> anyhow::Result<FlowRig> {
-    let client = Client::connect(addr, options("shm-bench-pub", token))
+    let client = Client::connect(addr, options("shm-bench-pub", token, ring))
         .await
         .with_context(|| format!("publisher connecting to flow-hub at {addr}"))?;
     let publisher = client
@@ -46,7 +49,7 @@ pub async fn connect(
     let mut clients = Vec::new();
     let mut subscribers = Vec::new();
     for i in 0..n {
-        let sub_client = Client::connect(addr, options(&format!("shm-bench-sub-{i}"), token))
+        let sub_client = Client::connect(addr, options(&format!("shm-bench-sub-{i}"), token, ring))
             .await
             .with_context(|| format!("subscriber connecting to flow-hub at {addr}"))?;
         let sub = sub_client.subscribe(channel).await?;

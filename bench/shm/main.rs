@@ -5,7 +5,8 @@
 //! latency. Subscribers touch the stamp and the last byte of each payload only. See docs/bench-shm.md.
 //!
 //! The modes: `shm` is the hub with every client on its Unix socket, where the SDK negotiates shared memory after
-//! login (without it the mode runs over bytes, and the SUMMARY says which it was); `hub-tcp` the same hub over
+//! login (without it the mode runs over bytes, and the SUMMARY says which it was); `shm-frames` the same with the
+//! subscribers giving slots back in `Release` frames instead of the hub's release ring; `hub-tcp` the same hub over
 //! loopback TCP; `raw-tcp` one writer to N sockets (hub-bench's ceiling); `iceoryx2` the floor.
 
 use std::path::{Path, PathBuf};
@@ -51,11 +52,11 @@ struct Args {
     /// Subscriber counts to measure.
     #[arg(long, value_delimiter = ',', default_value = "1,4,16")]
     subs: Vec<usize>,
-    /// Modes to measure (shm, hub-tcp, raw-tcp, iceoryx2); the ratios need all four.
+    /// Modes to measure (shm, shm-frames, hub-tcp, raw-tcp, iceoryx2); the ratios need all of them.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "shm,hub-tcp,raw-tcp,iceoryx2"
+        default_value = "shm,shm-frames,hub-tcp,raw-tcp,iceoryx2"
     )]
     modes: Vec<String>,
     /// Sending before each flat-out measurement window (ms).

@@ -158,7 +158,7 @@ pub fn print_summary(r: &Results) {
             let Some(shm) = r.cell(p.name, n, Mode::Shm) else {
                 continue;
             };
-            let others: Vec<String> = [Mode::HubTcp, Mode::RawTcp, Mode::Iceoryx2]
+            let others: Vec<String> = [Mode::ShmFrames, Mode::HubTcp, Mode::RawTcp, Mode::Iceoryx2]
                 .into_iter()
                 .map(|m| format!("{} {}", m.label(), flat(r.cell(p.name, n, m))))
                 .collect();
@@ -187,15 +187,24 @@ pub fn print_summary(r: &Results) {
         "SUMMARY shm cpu per delivery over hub-tcp, {TARGET_SUBS} subs: {}",
         per_payload(&|p| r.ratio(p, Mode::HubTcp, cpu))
     );
+    if r.modes.contains(&Mode::ShmFrames) {
+        println!(
+            "SUMMARY shm release ring over Release frames (shm-frames), {TARGET_SUBS} subs: deliveries/s {}; cpu per \
+             delivery {}",
+            per_payload(&|p| r.ratio(p, Mode::ShmFrames, rate)),
+            per_payload(&|p| r.ratio(p, Mode::ShmFrames, cpu))
+        );
+    }
     println!(
         "SUMMARY shm against the iceoryx2 floor, {TARGET_SUBS} subs: deliveries/s {}; cpu per delivery {}",
         per_payload(&|p| r.ratio(p, Mode::Iceoryx2, rate)),
         per_payload(&|p| r.ratio(p, Mode::Iceoryx2, cpu))
     );
     println!(
-        "SUMMARY shm latency {}: {} (hub-tcp {}; raw-tcp {}; iceoryx2 {})",
+        "SUMMARY shm latency {}: {} (shm-frames {}; hub-tcp {}; raw-tcp {}; iceoryx2 {})",
         r.latency_label,
         lat(r.latency(Mode::Shm)),
+        lat(r.latency(Mode::ShmFrames)),
         lat(r.latency(Mode::HubTcp)),
         lat(r.latency(Mode::RawTcp)),
         lat(r.latency(Mode::Iceoryx2)),

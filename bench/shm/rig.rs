@@ -14,6 +14,9 @@ use crate::tally::Tally;
 pub enum Mode {
     /// Through the hub, every client on its Unix socket (the shared-memory data path once the SDK negotiates it).
     Shm,
+    /// As `Shm`, but the subscribers give slots back in `Release` frames, not through the hub's release ring: the
+    /// path before the ring, in the same run.
+    ShmFrames,
     /// Through the hub over loopback TCP.
     HubTcp,
     /// One writer to N loopback sockets, no hub.
@@ -23,11 +26,18 @@ pub enum Mode {
 }
 
 impl Mode {
-    pub const ALL: [Mode; 4] = [Mode::Shm, Mode::HubTcp, Mode::RawTcp, Mode::Iceoryx2];
+    pub const ALL: [Mode; 5] = [
+        Mode::Shm,
+        Mode::ShmFrames,
+        Mode::HubTcp,
+        Mode::RawTcp,
+        Mode::Iceoryx2,
+    ];
 
     pub fn label(self) -> &'static str {
         match self {
             Mode::Shm => "shm",
+            Mode::ShmFrames => "shm-frames",
             Mode::HubTcp => "hub-tcp",
             Mode::RawTcp => "raw-tcp",
             Mode::Iceoryx2 => "iceoryx2",
@@ -68,15 +78,22 @@ impl Rig {
     pub async fn connect(mode: Mode, t: Target<'_>) -> anyhow::Result<Rig> {
         let tally = Arc::new(Tally::new(t.subscribers));
         let (sender, hub_pid) = match mode {
-            Mode::Shm | Mode::HubTcp => {
-                let addr = if mode == Mode::Shm {
-                    &t.hub.unix
-                } else {
+            Mode::Shm | Mode::ShmFrames | Mode::HubTcp => {
+                let addr = if mode == Mode::HubTcp {
                     &t.hub.tcp
+                } else {
+                    &t.hub.unix
                 };
-                let rig =
-                    flow_rig::connect(addr, &t.hub.token, t.name, t.subscribers, tally.clone())
-                        .await?;
+                let ring = mode != Mode::ShmFrames;
+                let rig = flow_rig::connect(
+                    addr,
+                    &t.hub.token,
+                    t.name,
+                    t.subscribers,
+                    ring,
+                    tally.clone(),
+                )
+                .await?;
                 (Sender::Flow(rig), Some(t.hub.pid))
             }
             Mode::RawTcp => (

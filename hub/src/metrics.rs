@@ -95,6 +95,11 @@ struct TransportLabel {
 }
 
 #[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct ViaLabel {
+    via: &'static str,
+}
+
+#[derive(Debug, Clone, Hash, PartialEq, Eq, EncodeLabelSet)]
 struct CallLabels {
     service: String,
     outcome: &'static str,
@@ -207,6 +212,19 @@ impl Collector for HubCollector {
             None,
             ConstCounter::new(0u64).metric_type(),
         )?)?;
+        {
+            let mut family = encoder.encode_descriptor(
+                "flow_shm_released",
+                "Slots subscribers gave back, by way: a Release frame (frame) or the release ring, with no frame \
+                 (ring)",
+                None,
+                ConstCounter::new(0u64).metric_type(),
+            )?;
+            ConstCounter::new(shm.released_by_frame())
+                .encode(family.encode_family(&ViaLabel { via: "frame" })?)?;
+            ConstCounter::new(shm.released_by_ring())
+                .encode(family.encode_family(&ViaLabel { via: "ring" })?)?;
+        }
         {
             let mut family = encoder.encode_descriptor(
                 "flow_service_calls",

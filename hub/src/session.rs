@@ -247,8 +247,10 @@ impl Session {
                 }
             }
             Command::Release { slots } => {
-                if let Some(peer) = &self.shm {
-                    peer.release(&slots);
+                if let Some(peer) = &self.shm
+                    && let Err(e) = peer.release(&slots)
+                {
+                    return Outcome::Close(e.to_string());
                 }
                 Ok(Reply::Done)
             }

@@ -440,7 +440,7 @@ const COMMAND_OPS: [u8; 25] = [
     op::RELEASE,
 ];
 
-const EVENT_OPS: [u8; 12] = [
+const EVENT_OPS: [u8; 13] = [
     op::REPLY,
     op::CHANNEL_ADDED,
     op::CHANNEL_REMOVED,
@@ -453,6 +453,7 @@ const EVENT_OPS: [u8; 12] = [
     op::GOODBYE,
     op::SEGMENT,
     op::DATA_REF,
+    op::RELEASE_RING,
 ];
 
 #[test]

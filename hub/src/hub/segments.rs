@@ -57,6 +57,8 @@ pub struct ShmStats {
     slots_held: AtomicI64,
     messages: AtomicU64,
     inline: AtomicU64,
+    released_by_frame: AtomicU64,
+    released_by_ring: AtomicU64,
 }
 
 impl ShmStats {
@@ -78,6 +80,23 @@ impl ShmStats {
     }
     pub(crate) fn count_inline(&self) {
         self.inline.fetch_add(1, Ordering::Relaxed);
+    }
+    /// Slots subscribers gave back in `Release` frames.
+    pub fn released_by_frame(&self) -> u64 {
+        self.released_by_frame.load(Ordering::Relaxed)
+    }
+    /// Slots subscribers gave back through their release rings, with no frame.
+    pub fn released_by_ring(&self) -> u64 {
+        self.released_by_ring.load(Ordering::Relaxed)
+    }
+    pub(crate) fn count_released(&self, by_frame: u64, by_ring: u64) {
+        if by_frame > 0 {
+            self.released_by_frame
+                .fetch_add(by_frame, Ordering::Relaxed);
+        }
+        if by_ring > 0 {
+            self.released_by_ring.fetch_add(by_ring, Ordering::Relaxed);
+        }
     }
 }
 
@@ -149,6 +168,11 @@ impl Segments {
 
     pub fn stats(&self) -> &ShmStats {
         &self.stats
+    }
+
+    /// The figures, for a connection's [`super::ShmPeer`] to count into.
+    pub fn shared_stats(&self) -> Arc<ShmStats> {
+        self.stats.clone()
     }
 
     /// A new segment for `conn`'s channel `chan` with slots of at least `slot_size` bytes. The caller checked that

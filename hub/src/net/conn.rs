@@ -75,8 +75,12 @@ pub async fn serve_connection<T: Transport>(
     let mut shutdown = shared.shutdown.subscribe();
     // Shared memory is offered only where a segment's descriptor can be handed over: the Unix socket.
     let segments = shared.hub.segments();
-    let shm_peer = (transport.passes_fds() && segments.settings().enabled)
-        .then(|| Arc::new(ShmPeer::new(segments.settings().held)));
+    let shm_peer = (transport.passes_fds() && segments.settings().enabled).then(|| {
+        Arc::new(ShmPeer::new(
+            segments.settings().held,
+            segments.shared_stats(),
+        ))
+    });
     let shm_writer = shm_peer
         .clone()
         .map(|peer| ShmWriter::new(peer, segments.clone()));
@@ -230,7 +234,17 @@ async fn write_loop<W: TransportWrite>(
 ) -> WriterEnd {
     let mut batch = Vec::new();
     loop {
+        if let Some(shm) = &shm
+            && outbox.is_drained()
+            && let Err(e) = shm.idle()
+        {
+            outbox.close(e.to_string());
+            return WriterEnd::Failed(e.to_string());
+        }
         outbox.ready().await;
+        if let Some(shm) = &shm {
+            shm.busy();
+        }
         outbox.pop_batch(&mut batch, WRITE_BATCH);
         if batch.is_empty() {
             if outbox.closed().is_some() {

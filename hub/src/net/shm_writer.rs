@@ -8,7 +8,9 @@ use std::sync::Arc;
 
 use flow::connection::FrameWriter;
 use flow::protocol::{ErrorCode, ErrorReply, Event, Reply};
+use flow::shm::ring::{self, Overrun, RingReader};
 use flow::transport::TransportWrite;
+use tracing::warn;
 
 use crate::hub::{Segments, ShmPeer};
 
@@ -18,6 +20,13 @@ pub struct ShmWriter {
     peer: Arc<ShmPeer>,
     segments: Arc<Segments>,
     known: HashSet<u32>,
+    /// The release ring was sent (or could not be made): once per connection.
+    ring_offered: bool,
+}
+
+/// A subscriber that broke its release ring loses its connection, with the reason.
+fn ring_broken(e: Overrun) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidData, e.to_string())
 }
 
 impl ShmWriter {
@@ -26,7 +35,42 @@ impl ShmWriter {
             peer,
             segments,
             known: HashSet::new(),
+            ring_offered: false,
         }
+    }
+
+    /// The outbox is empty: the subscriber rings for its next release from now on (see `hub/shm_peer.rs`).
+    pub fn idle(&self) -> io::Result<()> {
+        self.peer.writer_idle().map_err(ring_broken)
+    }
+
+    /// Work came: the writer reads the ring itself before each message by reference.
+    pub fn busy(&self) {
+        self.peer.writer_busy();
+    }
+
+    /// Sends this subscriber its release ring, before its first segment. A ring that cannot be made leaves it
+    /// giving slots back in frames, as before rings.
+    async fn offer_ring<W: TransportWrite>(
+        &mut self,
+        writer: &mut FrameWriter<W>,
+    ) -> io::Result<()> {
+        self.ring_offered = true;
+        let capacity = ring::capacity_for(self.peer.max_held());
+        let ring = match RingReader::create(capacity) {
+            Ok(ring) => ring,
+            Err(e) => {
+                warn!(
+                    "no release ring for a shared-memory subscriber, it gives slots back in frames: {e}"
+                );
+                return Ok(());
+            }
+        };
+        writer
+            .send_event_with_fd(&Event::ReleaseRing { capacity }, ring.fd())
+            .await?;
+        self.peer.set_ring(ring);
+        Ok(())
     }
 
     /// Queues `event` on `writer`, by reference where it can; flushes before a frame that carries a descriptor.
@@ -46,13 +90,15 @@ impl ShmWriter {
             {
                 // A subscriber that keeps many messages (a ring of recent frames) gets the rest as bytes (counted):
                 // its writer never waits on it, so its other channels and its queue go on as for any subscriber.
-                let by_reference = self.segments.locate(&payload).filter(|_| {
-                    let room = self.peer.held() < self.peer.max_held();
-                    if !room {
+                let mut by_reference = self.segments.locate(&payload);
+                if by_reference.is_some() {
+                    // What the subscriber put in its ring since the last look comes back first.
+                    let held = self.peer.reclaim().map_err(ring_broken)?;
+                    if held >= self.peer.max_held() {
                         self.segments.stats().count_inline();
+                        by_reference = None;
                     }
-                    room
-                });
+                }
                 let Some((segment, slot)) = by_reference else {
                     writer.queue_event(&Event::Data {
                         chan,
@@ -62,6 +108,9 @@ impl ShmWriter {
                     });
                     return Ok(());
                 };
+                if !self.ring_offered {
+                    self.offer_ring(writer).await?;
+                }
                 if !self.known.contains(&slot.segment) {
                     let fd = segment.mapping().read_only_fd()?;
                     writer

@@ -26,6 +26,10 @@ pub struct ConnectOptions {
     /// Over a Unix socket, move large payloads through shared memory when the hub offers it (docs/protocol.md,
     /// "Shared memory"). On by default; the environment variable `FLOW_SHM=0` turns it off for a whole process.
     pub shm: bool,
+    /// Give slots received by reference back through the hub's release ring, with no frame each (on by default).
+    /// `FLOW_SHM_RING=0` (or false here) sends each batch in a `Release` frame instead, as clients did before the
+    /// ring: how shm-bench measures what the ring saves, side by side.
+    pub release_ring: bool,
 }
 
 impl ConnectOptions {
@@ -39,6 +43,7 @@ impl ConnectOptions {
             queue: 64,
             request_timeout: Duration::from_secs(10),
             shm: std::env::var("FLOW_SHM").map_or(true, |v| v != "0"),
+            release_ring: std::env::var("FLOW_SHM_RING").map_or(true, |v| v != "0"),
         }
     }
 }

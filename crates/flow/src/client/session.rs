@@ -62,6 +62,7 @@ pub(super) async fn establish(inner: &Arc<Inner>, link: Link) -> Result<Establis
                 shm = Some(Arc::new(ShmSession::new(
                     threshold,
                     inner.shm_spilled.clone(),
+                    inner.opts.release_ring,
                 )));
             }
             Ok(_) => return Err(FlowError::UnexpectedReply("shared memory")),
@@ -229,6 +230,8 @@ async fn run(
     };
     let releases = shm.as_ref().map(|shm| shm.releases().clone());
     let write_loop = async {
+        // When an idle hub is rung for releases written into its ring (`shm.rs`), if it has not woken by then.
+        let mut ring_at: Option<tokio::time::Instant> = None;
         loop {
             tokio::select! {
                 first = out_rx.recv() => {
@@ -248,8 +251,18 @@ async fn run(
                         None => std::future::pending().await,
                     }
                 } => {}
+                () = async {
+                    match ring_at {
+                        Some(at) => tokio::time::sleep_until(at).await,
+                        None => std::future::pending().await,
+                    }
+                } => {}
             }
-            if let Some(release) = shm.as_ref().and_then(|shm| shm.take_releases()) {
+            let now = tokio::time::Instant::now();
+            if let Some(release) = shm
+                .as_ref()
+                .and_then(|shm| shm.take_releases(now, &mut ring_at))
+            {
                 release.queue_on(&mut writer);
             }
             if let Err(e) = writer.flush().await {
@@ -395,7 +408,7 @@ fn dispatch(inner: &Arc<Inner>, event: Event) -> Option<String> {
             return Some(format!("hub said goodbye: {reason}"));
         }
         // `shm.rs` turns these into data and mappings before dispatch; a session without shared memory never asked.
-        Event::Segment(_) | Event::DataRef { .. } => {
+        Event::Segment(_) | Event::DataRef { .. } | Event::ReleaseRing { .. } => {
             return Some("the hub sent shared memory this session did not ask for".into());
         }
     }

@@ -9,11 +9,15 @@ use std::os::fd::OwnedFd;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
+use std::time::Duration;
+
 use tokio::sync::Notify;
+use tokio::time::Instant;
 
 use super::frame::{OutFrame, encode};
 use crate::protocol::{ChanId, Command, Event, Reply, SegmentInfo, SlotRef};
 use crate::queue::lock;
+use crate::shm::ring::{Pushed, RingWriter};
 use crate::shm::{Mapping, SlotMut, SlotOwner, layout, slot_bytes};
 
 /// The shared memory of one session.
@@ -28,6 +32,8 @@ pub(super) struct ShmSession {
     releases: Arc<Releases>,
     /// Large messages that went inline because every slot of their segment was held.
     spilled: Arc<AtomicU64>,
+    /// Map the release ring the hub offers (`ConnectOptions::release_ring`).
+    use_ring: bool,
 }
 
 #[derive(Debug)]
@@ -48,13 +54,29 @@ struct Publishing {
     refused: bool,
 }
 
-/// Slots dropped by their last holder and not yet given back; the writer sends them as one `Release`. Its length is
-/// bounded by the slots the hub lets this client hold at once.
+/// Slots dropped by their last holder and not yet given back. With the hub's release ring they go there, and the
+/// writer sends an empty `Release` only when the hub asks to be rung; without it (or when it is full) the writer
+/// sends them as one `Release`. Bounded by the slots the hub lets this client hold at once.
 #[derive(Debug, Default)]
 pub(super) struct Releases {
-    slots: Mutex<Vec<SlotRef>>,
+    pending: Mutex<Pending>,
     pub(super) wake: Notify,
 }
+
+#[derive(Debug, Default)]
+struct Pending {
+    /// Slots for the next `Release` frame.
+    slots: Vec<SlotRef>,
+    /// The ring the hub made for this session, once it sent it.
+    ring: Option<RingWriter>,
+    /// A release went into the ring while the hub was idle: ring it after [`RING_DELAY`] unless it woke meanwhile.
+    ring_wanted: bool,
+}
+
+/// How long a release written while the hub is idle waits before the hub is rung. A stream of a few hundred
+/// messages a second or more never rings: the hub wakes for the next message first and takes the releases itself.
+/// Slower streams ring once per quiet spell, as they sent one `Release` frame per message before the ring.
+pub(super) const RING_DELAY: Duration = Duration::from_millis(5);
 
 /// Gives a received segment's slots back through [`Releases`].
 #[derive(Debug)]
@@ -65,23 +87,37 @@ struct GiveBack {
 
 impl SlotOwner for GiveBack {
     fn release(&self, slot: u32) {
-        lock(&self.releases.slots).push(SlotRef {
-            segment: self.segment,
-            slot,
-            len: 0,
-        });
+        let mut pending = lock(&self.releases.pending);
+        let pushed = match pending.ring.as_mut() {
+            Some(ring) => ring.push(self.segment, slot),
+            None => Pushed::Full,
+        };
+        match pushed {
+            // The hub takes it from the ring on its own: no frame, no wake-up of the writer.
+            Pushed::Quiet => return,
+            // The writer rings after a while (and is woken now only to set its timer).
+            Pushed::Ring if pending.ring_wanted => return,
+            Pushed::Ring => pending.ring_wanted = true,
+            Pushed::Full => pending.slots.push(SlotRef {
+                segment: self.segment,
+                slot,
+                len: 0,
+            }),
+        }
+        drop(pending);
         self.releases.wake.notify_one();
     }
 }
 
 impl ShmSession {
-    pub(super) fn new(threshold: u32, spilled: Arc<AtomicU64>) -> Self {
+    pub(super) fn new(threshold: u32, spilled: Arc<AtomicU64>, use_ring: bool) -> Self {
         ShmSession {
             threshold: (threshold as usize).max(crate::connection::ZERO_COPY_MIN),
             received: Mutex::new(HashMap::new()),
             publishing: Mutex::new(HashMap::new()),
             releases: Arc::new(Releases::default()),
             spilled,
+            use_ring,
         }
     }
 
@@ -89,10 +125,32 @@ impl ShmSession {
         &self.releases
     }
 
-    /// The `Release` command for the slots given back since the last one, if any.
-    pub(super) fn take_releases(&self) -> Option<OutFrame> {
-        let slots = std::mem::take(&mut *lock(&self.releases.slots));
-        (!slots.is_empty()).then(|| encode(0, Command::Release { slots }))
+    /// The `Release` command to send now, if any: the slots given back in frames since the last one, or an empty
+    /// one that rings an idle hub once `ring_at` (set here when a ring is wanted) has come.
+    pub(super) fn take_releases(
+        &self,
+        now: Instant,
+        ring_at: &mut Option<Instant>,
+    ) -> Option<OutFrame> {
+        let mut pending = lock(&self.releases.pending);
+        let slots = std::mem::take(&mut pending.slots);
+        let ring = if !slots.is_empty() {
+            // Any `Release` makes the hub read the ring.
+            true
+        } else if !pending.ring_wanted {
+            false
+        } else if let Some(at) = *ring_at
+            && at <= now
+        {
+            // The hub that woke since takes the ring at its next idle look: then no frame is needed.
+            pending.ring.as_ref().is_some_and(RingWriter::hub_idle)
+        } else {
+            ring_at.get_or_insert(now + RING_DELAY);
+            return None;
+        };
+        pending.ring_wanted = false;
+        *ring_at = None;
+        ring.then(|| encode(0, Command::Release { slots }))
     }
 
     /// Turns what the hub sent into what the rest of the client handles: a segment is mapped and kept (`None`), a
@@ -111,6 +169,17 @@ impl ShmSession {
                     releases: self.releases.clone(),
                 });
                 lock(&self.received).insert(info.id, Received { info, map, owner });
+                Ok(None)
+            }
+            Event::ReleaseRing { capacity } => {
+                let fd = take_fd().ok_or("the release ring came without its descriptor")?;
+                if !self.use_ring {
+                    // Declined: the descriptor closes here, and slots go back in frames.
+                    return Ok(None);
+                }
+                let ring =
+                    RingWriter::open(fd, capacity).map_err(|e| format!("the release ring: {e}"))?;
+                lock(&self.releases.pending).ring = Some(ring);
                 Ok(None)
             }
             Event::Reply {

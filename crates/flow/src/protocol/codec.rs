@@ -196,6 +196,10 @@ pub fn encode_event(event: &Event, out: &mut BytesMut) {
             body.slot(slot);
             (op::DATA_REF, 0)
         }
+        Event::ReleaseRing { capacity } => {
+            body.u32(*capacity);
+            (op::RELEASE_RING, 0)
+        }
     };
     body.finish(op, req);
 }
@@ -523,6 +527,9 @@ pub fn decode_event(frame: RawFrame) -> Result<Event, DecodeError> {
             seq: r.u64("seq")?,
             ts_us: r.u64("timestamp")?,
             slot: r.slot()?,
+        },
+        op::RELEASE_RING => Event::ReleaseRing {
+            capacity: r.u32("capacity")?,
         },
         other => return Err(DecodeError::UnknownOp(other)),
     };

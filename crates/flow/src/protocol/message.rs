@@ -180,7 +180,9 @@ pub enum Command {
     ShmOpen { chan: ChanId, slot_size: u32 },
     /// [0x1a] `chan:i16 | slot-ref`. Publishes the message the owner wrote into a slot of its segment on `chan`.
     PublishRef { chan: ChanId, slot: SlotRef },
-    /// [0x1b] `count:u16 | slot-ref * count`. Gives back slots received by reference ([`Event::DataRef`]).
+    /// [0x1b] `count:u16 | slot-ref * count`. Gives back slots received by reference ([`Event::DataRef`]). With a
+    /// release ring ([`Event::ReleaseRing`]) the slots go there instead, and an empty `Release` rings the hub: look
+    /// at the ring now.
     Release { slots: Vec<SlotRef> },
 }
 
@@ -389,6 +391,10 @@ pub enum Event {
         ts_us: u64,
         slot: SlotRef,
     },
+    /// [0x8c] `capacity:u32`. The ring where this subscriber may give slots back without a frame each
+    /// ([`crate::shm::ring`]); its read-write descriptor travels beside the frame. Sent once per connection, before
+    /// its first [`Event::Segment`]. A client that never maps it gives slots back with [`Command::Release`] as before.
+    ReleaseRing { capacity: u32 },
 }
 
 /// Opcodes, shared by the encoder and decoder.
@@ -431,6 +437,7 @@ pub mod op {
     pub const GOODBYE: u8 = 0x89;
     pub const SEGMENT: u8 = 0x8a;
     pub const DATA_REF: u8 = 0x8b;
+    pub const RELEASE_RING: u8 = 0x8c;
 }
 
 /// FNV-1a 64-bit hash of a channel name: stable across processes and versions.

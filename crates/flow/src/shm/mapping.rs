@@ -154,6 +154,17 @@ impl Mapping {
         true
     }
 
+    /// The 32-bit word at `offset`, to be touched only atomically (a release ring's counters and entries), or `None`
+    /// when it is not inside the mapping or not 4-byte aligned.
+    pub fn word(&self, offset: usize) -> Option<&AtomicU32> {
+        if !offset.is_multiple_of(4) || offset.checked_add(4)? > self.len {
+            return None;
+        }
+        // SAFETY: the word lies inside the mapping, which lives as long as `self`, and is 4-byte aligned (the mapping
+        // starts on a page and `offset` is a multiple of 4). Every process touches it only atomically.
+        Some(unsafe { AtomicU32::from_ptr(self.ptr.as_ptr().add(offset).cast::<u32>()) })
+    }
+
     /// The state word of `slot` (see [`layout`]), or `None` outside the states.
     pub fn state(&self, slots: u32, slot: u32) -> Option<&AtomicU32> {
         if slot >= slots || layout::data_offset(slots) > self.len {

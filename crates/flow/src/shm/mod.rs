@@ -4,7 +4,8 @@
 //! - `layout.rs`: where the slot states and the slots lie in a segment (pure arithmetic, the one place that knows);
 //! - `mapping.rs`: the `memfd` and its mapping, the only `unsafe` of the crate's shared memory;
 //! - `fdpass.rs`: sending and receiving a descriptor beside the bytes of a Unix stream;
-//! - `view.rs`: a slot as a [`bytes::Bytes`] that gives the slot back when its last clone is dropped.
+//! - `view.rs`: a slot as a [`bytes::Bytes`] that gives the slot back when its last clone is dropped;
+//! - `ring.rs`: the release ring, where a subscriber gives slots back without a frame each.
 //!
 //! The protocol (`docs/protocol.md`, "Shared memory"): a client on the Unix socket sends `ShmAccept` after login;
 //! from then on a payload at or above the hub's threshold may reach it as `DataRef`, into a segment introduced once by
@@ -16,6 +17,7 @@
 pub mod fdpass;
 pub mod layout;
 mod mapping;
+pub mod ring;
 mod view;
 
 pub use mapping::{Mapping, SlotMut};

@@ -16,7 +16,7 @@ use rand::rngs::StdRng;
 /// Number of `Command` variants; `command` picks one of them by index.
 pub const COMMAND_VARIANTS: usize = 25;
 /// Number of `Event` variants plus reply kinds, so every reply shape is drawn often.
-pub const EVENT_VARIANTS: usize = 23;
+pub const EVENT_VARIANTS: usize = 24;
 
 /// A string of up to `max` characters mixing ASCII, accented letters, CJK and emoji.
 pub fn string(rng: &mut StdRng, max: usize) -> String {
@@ -256,6 +256,9 @@ pub fn event(rng: &mut StdRng, variant: usize) -> Event {
             seq: rng.random(),
             ts_us: rng.random(),
             slot: slot_ref(rng),
+        },
+        23 => Event::ReleaseRing {
+            capacity: rng.random(),
         },
         v @ 0..=7 => Event::Reply {
             req: rng.random(),
