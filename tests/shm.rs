@@ -111,30 +111,30 @@ fn hub_memfds(agent: &Agent) -> anyhow::Result<Memfds> {
         .lines()
         .filter(|l| l.contains(MEMFD))
         .count();
+    Ok(Memfds {
+        maps,
+        fds: hub_fds(agent, MEMFD)?,
+    })
+}
+
+/// The hub's open descriptors whose target names `what`.
+fn hub_fds(agent: &Agent, what: &str) -> anyhow::Result<usize> {
+    let pid = agent.pid().context("the hub has exited")?;
     let mut fds = 0;
     for entry in std::fs::read_dir(format!("/proc/{pid}/fd"))? {
         // A descriptor closed between the listing and the look is gone: not counted.
         if let Ok(target) = std::fs::read_link(entry?.path())
-            && target.to_string_lossy().contains(MEMFD)
+            && target.to_string_lossy().contains(what)
         {
             fds += 1;
         }
     }
-    Ok(Memfds { maps, fds })
+    Ok(fds)
 }
 
 /// The hub's release rings (one per shared-memory subscriber) as open descriptors.
 fn hub_rings(agent: &Agent) -> anyhow::Result<usize> {
-    let pid = agent.pid().context("the hub has exited")?;
-    let mut rings = 0;
-    for entry in std::fs::read_dir(format!("/proc/{pid}/fd"))? {
-        if let Ok(target) = std::fs::read_link(entry?.path())
-            && target.to_string_lossy().contains(RING_MEMFD)
-        {
-            rings += 1;
-        }
-    }
-    Ok(rings)
+    hub_fds(agent, RING_MEMFD)
 }
 
 /// Polls the hub's release rings until there are `expected`.

@@ -59,19 +59,20 @@ impl Books {
         Ok(taken)
     }
 
-    /// While the writer is idle and slots are out, the subscriber rings for its next release; the look after arming
-    /// takes what came before it.
-    fn arm_if_waiting(&mut self, freed: &mut Vec<Bytes>) -> Result<u64, Overrun> {
+    /// Takes what the ring holds; then, while the writer is idle and slots are out, asks the subscriber to ring for
+    /// its next release and takes once more (what came before the bell was set).
+    fn look(&mut self, freed: &mut Vec<Bytes>) -> Result<u64, Overrun> {
+        let taken = self.take_ring(freed)?;
         let waiting = self.writer_idle && !self.held.is_empty();
         match &self.ring {
             Some(ring) if waiting => ring.arm(),
             Some(ring) => {
                 ring.disarm();
-                return Ok(0);
+                return Ok(taken);
             }
-            None => return Ok(0),
+            None => return Ok(taken),
         }
-        self.take_ring(freed)
+        Ok(taken + self.take_ring(freed)?)
     }
 }
 
@@ -110,9 +111,7 @@ impl ShmPeer {
                 .filter_map(|s| books.held.remove(&(s.segment, s.slot))),
         );
         let by_frame = freed.len() as u64;
-        let by_ring = books
-            .take_ring(&mut freed)
-            .and_then(|a| Ok(a + books.arm_if_waiting(&mut freed)?));
+        let by_ring = books.look(&mut freed);
         self.settle(books, freed, by_frame, by_ring).map(|_| ())
     }
 
@@ -130,9 +129,7 @@ impl ShmPeer {
         let mut freed = Vec::new();
         let mut books = lock(&self.books);
         books.writer_idle = true;
-        let by_ring = books
-            .take_ring(&mut freed)
-            .and_then(|a| Ok(a + books.arm_if_waiting(&mut freed)?));
+        let by_ring = books.look(&mut freed);
         self.settle(books, freed, 0, by_ring).map(|_| ())
     }
 
