@@ -100,13 +100,14 @@ bench: deps model-release model-face model-voice model-llm llm-server build
 	$(TARGET_DIR)/release/bench-summary --logs $(BENCH_LOGS) --doc docs/benchmarks.md
 
 ## The soak (not part of the tests): the whole agent with a browser, two satellites and the recorder for MINUTES
-## (default 30) or HOURS, sampled every minute; writes docs/soak.md, its CSV and docs/soak.png.
+## (default 30) or HOURS, sampled every minute, with the models `make run` provisions; writes docs/soak.md, its CSV
+## and docs/soak.png.
 ifdef HOURS
 MINUTES := $(shell echo $$(( $(HOURS) * 60 )))
 endif
 MINUTES ?= 30
 soak: .SHELLFLAGS := -o pipefail -c
-soak: deps model-release model-face build
+soak: deps model-release model-face model-voice model-llm build
 	test -x bench/soak/.venv/bin/python || (python3 -m venv bench/soak/.venv && bench/soak/.venv/bin/pip install -q 'matplotlib==3.11.2')
 	mkdir -p $(BENCH_LOGS)
 	AGENT_BIN_DIR=$(TARGET_DIR)/release $(TARGET_DIR)/release/soak --minutes $(MINUTES) --write docs/soak.md | tee $(BENCH_LOGS)/soak.log
