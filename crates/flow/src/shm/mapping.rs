@@ -170,10 +170,8 @@ impl Mapping {
         if slot >= slots || layout::data_offset(slots) > self.len {
             return None;
         }
-        let offset = layout::state_offset(slot);
-        // SAFETY: the word lies inside the mapping (the states end before slot 0 begins) and is 4-byte aligned (the
-        // mapping starts on a page, the states at 64 + 4 * slot). Every process touches it only atomically.
-        Some(unsafe { AtomicU32::from_ptr(self.ptr.as_ptr().add(offset).cast::<u32>()) })
+        // The states end before slot 0 begins, at 64 + 4 * slot: `word` checks the bounds and the alignment again.
+        self.word(layout::state_offset(slot))
     }
 }
 
