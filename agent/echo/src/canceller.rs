@@ -93,6 +93,8 @@ pub struct CancellerStats {
     pub frames_held: u64,
     /// How much of the agent's speech the current stream had heard when AEC3 first found the echo (ms).
     pub echo_found_after_ms: Option<u64>,
+    /// The agent's frame levels the residual gate keeps now: a window's worth, echo or not.
+    pub residual_levels: usize,
 }
 
 /// What a frame's output is.
@@ -278,6 +280,7 @@ impl Canceller {
             delay_ms: aec.delay_ms,
             residue_gain_db: self.residual.as_ref().map_or(0.0, ResidualGate::gain_db),
             echo_found_after_ms: self.found_after.map(|frames| frames * 10),
+            residual_levels: self.residual.as_ref().map_or(0, ResidualGate::levels_kept),
             ..self.stats.clone()
         }
     }
@@ -345,6 +348,7 @@ impl Canceller {
         };
         if let Some(gate) = &mut self.residual {
             gate.reference(self.pending_us + lead, render_db);
+            gate.advance(self.pending_us);
             if route == Route::Cancelled
                 && gate.is_echo(self.pending_us, raw_db, level_dbfs(cleaned))
             {

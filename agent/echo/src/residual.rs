@@ -102,13 +102,25 @@ impl ResidualGate {
         sorted[(sorted.len() * 19 / 20).min(sorted.len() - 1)]
     }
 
-    /// The loudest reference level within the window before `at_us`.
-    fn loudest(&mut self, at_us: u64) -> Option<f32> {
+    /// The microphone has reached `at_us`: forgets the levels older than the window before it, which no later
+    /// frame looks at (the microphone's time only moves forward). Called for every frame, echo or not: the gate is
+    /// asked about a frame only once AEC3 has found an echo, and with none to find (headphones) the levels of
+    /// everything the agent said would otherwise pile up (the soak's heap profile found them).
+    pub fn advance(&mut self, at_us: u64) {
         let oldest = at_us.saturating_sub(self.cfg.window_us);
-        // Older levels never matter again: the microphone's time only moves forward.
         while self.levels.front().is_some_and(|(t, _)| *t < oldest) {
             self.levels.pop_front();
         }
+    }
+
+    /// Reference levels kept now: at most a window's worth (and the lead's) once [`ResidualGate::advance`] runs.
+    pub fn levels_kept(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// The loudest reference level within the window before `at_us`.
+    fn loudest(&mut self, at_us: u64) -> Option<f32> {
+        self.advance(at_us);
         self.levels
             .iter()
             .take_while(|(t, _)| *t <= at_us)

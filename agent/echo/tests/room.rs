@@ -228,6 +228,22 @@ fn without_an_echo_the_hold_ends_and_a_user_over_the_reply_passes_through() {
     assert_eq!(&cleaned[user_at + late..], &user[..user.len() - late]);
 }
 
+/// With no echo (headphones) the residual gate, asked about frames only once AEC3 has found an echo, still keeps
+/// no more than a window of the agent's levels: a 9.7 s reply leaves under a second's worth behind, not all of it.
+#[test]
+fn without_an_echo_the_residual_gate_keeps_only_a_window_of_the_agents_levels() {
+    let reply = fixture("audio/LJ001-0001.wav");
+    let mic = vec![0.0; reply.len()];
+    let (_, stats) = cancel_with_stats(CancellerConfig::default(), &reply, &mic);
+    assert_eq!(stats.echo_found_after_ms, None, "{stats:?}");
+    assert!(
+        stats.frames_with_speech > 800,
+        "the reply did not play: {stats:?}"
+    );
+    // 700 ms of window, 60 ms of lead and the frame itself: 77 frames of 10 ms (913 before the fix).
+    assert!(stats.residual_levels <= 77, "{stats:?}");
+}
+
 /// The levels of 10 ms frames of `x` (dBFS).
 fn frame_levels(x: &[f32]) -> Vec<f32> {
     x.chunks(RATE as usize / 100)
